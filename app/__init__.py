@@ -1,0 +1,1 @@
+"""Desktop viewer for texvocab avatars (moderngl + imgui-bundle)."""

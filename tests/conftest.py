@@ -1,0 +1,48 @@
+"""Shared fixtures. PyOpenGL binds its platform at first import: choose OSMesa here,
+before any test module imports pyrender/OpenGL (one platform per process)."""
+import os
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from texvocab.body.parts import SMPL_PARENTS  # noqa: E402
+
+SMPL_ROOT_SENTINEL = 4294967295  # what kintree_table[0, 0] holds in the official files
+
+
+def toy_smpl_arrays(seed: int = 0, num_betas: int = 10) -> dict:
+    """Arrays in the official SMPL key layout for a tiny body: 24 joints, a tetrahedron of
+    4 vertices around each joint (V = 96, F = 96). Not SMPL data: random, seeded."""
+    rng = np.random.default_rng(seed)
+    parents = np.array(SMPL_PARENTS)
+    joints = np.zeros((24, 3))
+    for j in range(1, 24):
+        joints[j] = joints[parents[j]] + rng.normal(0, 0.15, 3)
+    tet = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) * 0.03
+    v = (joints[:, None] + tet[None]).reshape(-1, 3)
+    faces = np.concatenate([np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]) + 4 * j
+                            for j in range(24)])
+    weights = np.zeros((96, 24))
+    for j in range(24):
+        weights[4 * j:4 * j + 4, j] = 0.8 if j else 1.0
+        if j:
+            weights[4 * j:4 * j + 4, parents[j]] = 0.2
+    J_regressor = np.zeros((24, 96))
+    for j in range(24):
+        J_regressor[j, 4 * j:4 * j + 4] = 0.25
+    kintree = np.stack([parents, np.arange(24)]).astype(np.int64)
+    kintree[0, 0] = SMPL_ROOT_SENTINEL
+    return {
+        "v_template": v, "f": faces.astype(np.uint32), "weights": weights,
+        "J_regressor": J_regressor, "kintree_table": kintree,
+        "shapedirs": rng.normal(0, 0.01, (96, 3, num_betas)),
+        "posedirs": rng.normal(0, 0.001, (96, 3, 207)),
+        "J": joints, "bs_style": "lbs", "bs_type": "lrotmin",
+    }
+
+
+@pytest.fixture
+def toy_arrays():
+    return toy_smpl_arrays()

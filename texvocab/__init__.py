@@ -1,0 +1,1 @@
+"""TexVocab: pose-driven avatars from multi-view video (CVPR 2024)."""

@@ -1,0 +1,14 @@
+"""Body model: arrays -> posed vertices/joints (LBS), SMPL loader, default body, parts."""
+from texvocab.body.default import default_body
+from texvocab.body.model import BodyModel, BodyOutput
+from texvocab.body.parts import BODY_PARTS, JOINT_NAMES, body_parts, part_attention
+from texvocab.body.smpl_io import load_smpl
+
+
+def load_body(smpl: str | None = None) -> BodyModel:
+    """The user's SMPL model when ``smpl`` (file or folder) is given, else the default body."""
+    return default_body() if smpl is None else load_smpl(smpl)
+
+
+__all__ = ["BODY_PARTS", "JOINT_NAMES", "BodyModel", "BodyOutput", "body_parts",
+           "default_body", "load_body", "load_smpl", "part_attention"]

@@ -1,0 +1,48 @@
+"""``texvocab demo``: what exists so far — the body (default or the user's SMPL) in six
+poses, rendered offscreen front and side, written as PNGs."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from texvocab.body import load_body
+from texvocab.body.poses import preset
+
+DEMO_POSES = ("t_pose", "arms_down", "walk", "squat", "arms_up", "kick")
+
+
+def render_pose_sheet(body, size: int = 320, poses=DEMO_POSES) -> tuple[np.ndarray, dict]:
+    """Contact sheet (uint8) with one row per view (front, side) and one column per pose.
+
+    Returns the sheet and the individual renders {(pose, view): rgb float (H, W, 3)}.
+    """
+    from texvocab.imageio import contact_sheet
+    from texvocab.render_mesh import MeshRenderer, intrinsics, look_at
+
+    K = intrinsics(size, size, fov_y_deg=40.0)
+    views = {"front": look_at((0, -0.25, 3.6), (0, -0.25, 0)),
+             "side": look_at((3.6, -0.25, 0), (0, -0.25, 0))}
+    renders: dict[tuple[str, str], np.ndarray] = {}
+    with MeshRenderer(size, size) as renderer:
+        for name in poses:
+            pose, trans = preset(name)
+            out = body.forward(pose[None], trans[None])
+            verts = out.vertices[0].numpy()
+            for view, (R, t) in views.items():
+                renders[(name, view)], _ = renderer.render(verts, body.faces.numpy(), K, R, t)
+    rows = [[renders[(p, v)] for p in poses] for v in views]
+    return contact_sheet(rows, row_labels=list(views), col_labels=list(poses)), renders
+
+
+def run_demo(out_dir: str | Path, smpl: str | None = None, size: int = 320) -> list[Path]:
+    """Write the demo PNGs under ``out_dir``; return their paths."""
+    from texvocab.imageio import save_png
+
+    out_dir = Path(out_dir)
+    body = load_body(smpl)
+    sheet, renders = render_pose_sheet(body, size)
+    written = [save_png(out_dir / "poses.png", sheet)]
+    for (pose, view), rgb in renders.items():
+        written.append(save_png(out_dir / "poses" / f"{pose}_{view}.png", rgb))
+    return written

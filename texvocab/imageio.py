@@ -1,0 +1,62 @@
+"""PNG writing (atomic) and contact sheets."""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """float [0, 1] (H, W[, C]) -> uint8; uint8 passes through."""
+    if image.dtype == np.uint8:
+        return image
+    return (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def atomic_write_bytes(path: str | Path, write) -> Path:
+    """Call ``write(tmp_path)`` then rename onto ``path``: never a half-written file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def save_png(path: str | Path, image: np.ndarray) -> Path:
+    """Write an RGB/grey image (float [0, 1] or uint8) as PNG, atomically."""
+    img = Image.fromarray(to_uint8(image))
+    return atomic_write_bytes(path, lambda tmp: img.save(tmp, format="PNG"))
+
+
+def contact_sheet(rows: list[list[np.ndarray]], row_labels=None, col_labels=None,
+                  pad: int = 4, label_h: int = 16) -> np.ndarray:
+    """Grid of equally sized images with optional labels; returns uint8 (H, W, 3)."""
+    h, w = rows[0][0].shape[:2]
+    n_rows, n_cols = len(rows), max(len(r) for r in rows)
+    left = 90 if row_labels else 0
+    top = label_h if col_labels else 0
+    sheet = Image.new("RGB", (left + n_cols * (w + pad) + pad, top + n_rows * (h + pad) + pad),
+                      (255, 255, 255))
+    draw = ImageDraw.Draw(sheet)
+    for r, row in enumerate(rows):
+        y = top + pad + r * (h + pad)
+        if row_labels:
+            draw.text((4, y + h // 2), row_labels[r], fill=(0, 0, 0))
+        for c, img in enumerate(row):
+            x = left + pad + c * (w + pad)
+            tile = to_uint8(img)
+            tile = np.repeat(tile[..., None], 3, -1) if tile.ndim == 2 else tile[..., :3]
+            sheet.paste(Image.fromarray(tile), (x, y))
+    if col_labels:
+        for c, label in enumerate(col_labels):
+            draw.text((left + pad + c * (w + pad) + 4, 2), label, fill=(0, 0, 0))
+    return np.asarray(sheet)
