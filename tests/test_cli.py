@@ -1,0 +1,66 @@
+"""The console script: --help everywhere, check-assets verdicts, one-line errors."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from smpl_files import write_official_pickle
+from texvocab.cli import build_parser
+
+TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
+
+
+def run(*args, check_rc=None):
+    proc = subprocess.run([TEXVOCAB, *args], capture_output=True, text=True, timeout=120)
+    if check_rc is not None:
+        assert proc.returncode == check_rc, proc.stdout + proc.stderr
+    return proc
+
+
+def _subcommands():
+    parser = build_parser()
+    action = next(a for a in parser._actions if a.dest == "command")
+    return sorted(action.choices)
+
+
+def test_help_on_every_subcommand():
+    out = run("--help", check_rc=0).stdout
+    for cmd in _subcommands():
+        assert cmd in out
+        sub = run(cmd, "--help", check_rc=0).stdout
+        assert sub.startswith("usage: texvocab " + cmd)
+
+
+def test_check_assets_ok_and_wrong_shape(tmp_path, toy_arrays, monkeypatch):
+    good = tmp_path / "good" / "SMPL_NEUTRAL.pkl"
+    good.parent.mkdir()
+    write_official_pickle(good, toy_arrays, monkeypatch)
+    out = run("check-assets", str(good), check_rc=0).stdout
+    assert out.startswith("OK") and "valid smpl model" in out
+
+    toy_arrays["posedirs"] = toy_arrays["posedirs"][..., :200]
+    bad = tmp_path / "bad" / "SMPL_NEUTRAL.pkl"
+    bad.parent.mkdir()
+    write_official_pickle(bad, toy_arrays, monkeypatch)
+    out = run("check-assets", str(bad.parent), check_rc=1).stdout
+    assert "FAIL" in out and "'posedirs' has shape (96, 3, 200), expected (96, 3, 207)" in out
+
+
+def test_missing_smpl_is_one_error_line(tmp_path):
+    missing = tmp_path / "nowhere" / "SMPL_NEUTRAL.pkl"
+    proc = run("demo", "--smpl", str(missing), "--out", str(tmp_path / "o"), check_rc=2)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: SMPL model file not found")
+    assert str(missing) in lines[0] and "assets_spec/smpl_model.json" in lines[0]
+    assert not (tmp_path / "o").exists()  # nothing written
+
+
+def test_check_assets_missing_path(tmp_path):
+    proc = run("check-assets", str(tmp_path / "nope"), check_rc=2)
+    assert "no such file or folder" in proc.stderr
+
+
+@pytest.mark.parametrize("args", [["frobnicate"], []])
+def test_unknown_command_is_usage_error(args):
+    assert run(*args).returncode == 2
