@@ -21,7 +21,7 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
     z = target - eye
     z /= np.linalg.norm(z)
-    x = np.cross(z, -up)  # +y points down in OpenCV, so "right" = forward x down
+    x = np.cross(-up, z)  # OpenCV: x = y × z with y pointing down
     if np.linalg.norm(x) < 1e-9:
         raise ValueError("look_at: viewing direction is parallel to up")
     x /= np.linalg.norm(x)
@@ -34,6 +34,11 @@ def intrinsics(width: int, height: int, fov_y_deg: float) -> np.ndarray:
     """Pinhole K (3, 3) with the principal point at the image centre."""
     f = 0.5 * height / np.tan(np.radians(fov_y_deg) / 2)
     return np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], dtype=np.float64)
+
+
+def gl_principal_point(K: np.ndarray) -> tuple[float, float]:
+    """pyrender's (cx, cy) for an OpenCV K: GL puts pixel centres at i + 0.5, OpenCV at i."""
+    return float(K[0, 2]) + 0.5, float(K[1, 2]) + 0.5
 
 
 def gl_camera_pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -77,7 +82,8 @@ class MeshRenderer:
         scene = pyrender.Scene(bg_color=self.background, ambient_light=[0.35, 0.35, 0.35])
         scene.add(pyrender.Mesh.from_trimesh(
             mesh, material=None if vertex_colors is not None else material, smooth=True))
-        cam = pyrender.IntrinsicsCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], znear=0.05, zfar=100.0)
+        cam = pyrender.IntrinsicsCamera(K[0, 0], K[1, 1], *gl_principal_point(K), znear=0.05,
+                                       zfar=100.0)
         pose = gl_camera_pose(R, t)
         scene.add(cam, pose=pose)
         scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=pose)

@@ -1,0 +1,28 @@
+"""`texvocab demo` (current stage): the body in six poses, rendered offscreen (OSMesa)."""
+import numpy as np
+from PIL import Image
+
+from texvocab.demo import DEMO_POSES, run_demo
+
+
+def _body_fraction(rgb):
+    return float((np.asarray(rgb, dtype=np.float32)[..., :3].min(-1) < 0.97).mean())
+
+
+def test_demo_writes_a_sheet_of_six_poses(tmp_path):
+    paths = run_demo(tmp_path, size=96)
+    sheet = np.asarray(Image.open(paths[0]))
+    assert paths[0].name == "poses.png" and sheet.ndim == 3
+    assert len(paths) == 1 + 2 * len(DEMO_POSES)
+    tiles = {p.stem: np.asarray(Image.open(p)) / 255.0 for p in paths[1:]}
+    for name, tile in tiles.items():
+        assert tile.shape == (96, 96, 3)
+        assert 0.03 < _body_fraction(tile) < 0.6, name  # the body is there, not a blank frame
+    # different poses and views give different pictures
+    assert np.abs(tiles["t_pose_front"] - tiles["squat_front"]).mean() > 0.02
+    assert np.abs(tiles["t_pose_front"] - tiles["t_pose_side"]).mean() > 0.02
+    # a T-pose seen from the front is wider than tall-thin side view
+    def width(t):
+        cols = np.where((t.min(-1) < 0.97).any(0))[0]
+        return cols.max() - cols.min()
+    assert width(tiles["t_pose_front"]) > 2 * width(tiles["t_pose_side"])
