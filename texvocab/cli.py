@@ -48,11 +48,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_smpl(p)
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("check-assets", help="check SMPL model / UV files against assets_spec/",
-                       description="Say exactly what is wrong with an SMPL model file, UV file "
-                                   "or a folder of them, or that all is well.")
-    p.add_argument("path", help="a .pkl/.npz model, a smpl_uv.obj, or a folder")
+    p = sub.add_parser("check-assets", help="check SMPL files or a capture against assets_spec/",
+                       description="Say exactly what is wrong with an SMPL model file, UV file, "
+                                   "a folder of them, or a capture folder (ZJU-MoCap / "
+                                   "THUman4.0), or that all is well.")
+    p.add_argument("path", help="a .pkl/.npz model, a smpl_uv.obj, a folder of them, or a "
+                                "capture folder")
     p.set_defaults(func=cmd_check_assets)
+
+    from texvocab.cli_capture import add_synth_parser
+
+    add_synth_parser(sub, _add_smpl)
     return parser
 
 

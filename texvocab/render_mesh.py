@@ -61,7 +61,7 @@ class MeshRenderer:
         self.background = np.asarray([*background, 0.0], dtype=np.float32)
         self._renderer = pyrender.OffscreenRenderer(width, height)
 
-    def render(self, vertices, faces, K, R, t, vertex_colors=None, color=(0.72, 0.72, 0.78),
+    def render(self, vertices, faces, K, R, t, vertex_colors=None, color=(0.62, 0.64, 0.72),
                flat: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Render a triangle mesh.
 

@@ -1,0 +1,68 @@
+"""Camera: projection, pixel rays, scaling, undistortion."""
+import numpy as np
+import pytest
+
+from texvocab.capture.camera import Camera
+from texvocab.errors import AssetError
+from texvocab.render_mesh import intrinsics, look_at
+
+
+@pytest.fixture
+def cam():
+    R, t = look_at((1.0, 0.5, 3.0), (0.0, -0.2, 0.0))
+    return Camera(intrinsics(160, 120, 40.0), R, t, 160, 120, name="c0")
+
+
+def test_look_at_puts_world_up_at_image_top(cam):
+    (top, bottom), _ = cam.project(np.array([[0.0, 0.3, 0.0], [0.0, -0.7, 0.0]]))[0:1][0], None
+    assert top[1] < bottom[1]
+    (left, right), _ = cam.project(np.array([[-0.5, -0.2, 0.0], [0.5, -0.2, 0.0]]))[0], None
+    assert left[0] < right[0]  # camera in front (+z) sees world +x on the right
+
+
+def test_rays_pass_through_projected_points(cam):
+    pts = np.random.default_rng(0).uniform(-0.5, 0.5, (50, 3))
+    pix, depth = cam.project(pts)
+    o, d = cam.pixel_rays(pix, dtype=__import__("torch").float64)
+    back = o.numpy() + d.numpy() * np.linalg.norm(pts - cam.center, axis=1)[:, None]
+    np.testing.assert_allclose(back, pts, atol=1e-9)
+    assert (depth > 0).all()
+
+
+def test_scaled_camera_keeps_pixel_centres(cam):
+    half = cam.scaled(0.5)
+    pts = np.array([[0.1, 0.2, 0.0]])
+    p_full, _ = cam.project(pts)
+    p_half, _ = half.project(pts)
+    np.testing.assert_allclose((p_full + 0.5) * 0.5 - 0.5, p_half, atol=1e-9)
+    assert (half.width, half.height) == (80, 60)
+
+
+def test_undistort_recovers_the_ideal_image(cam):
+    cam.dist = np.array([-0.25, 0.08, 0.001, -0.002, 0.0])
+    ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(float)
+
+    def pattern(x, y):  # smooth analytic image in ideal normalised coordinates
+        return 0.5 + 0.5 * np.sin(9 * x) * np.cos(7 * y)
+
+    # distorted image: the pixel at distorted position shows the ideal pattern
+    ideal_xy = np.stack([(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0],
+                         (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1)
+    # sample the distorted image densely by inverting with fixed-point iterations
+    und = ideal_xy.copy()
+    for _ in range(30):
+        und = und + (ideal_xy - cam.distort_normalized(und))
+    distorted = pattern(und[:, 0], und[:, 1]).reshape(cam.height, cam.width).astype(np.float32)
+    restored = cam.undistort_image(distorted)
+    truth = pattern(ideal_xy[:, 0], ideal_xy[:, 1]).reshape(cam.height, cam.width)
+    inner = np.s_[10:-10, 10:-10]
+    err_restored = np.abs(restored[inner] - truth[inner]).mean()
+    err_distorted = np.abs(distorted[inner] - truth[inner]).mean()
+    assert err_restored < 0.005 and err_distorted > 4 * err_restored
+
+
+@pytest.mark.parametrize("field", ["K", "R", "t"])
+def test_non_finite_calibration_is_named(cam, field):
+    getattr(cam, field).flat[0] = np.nan
+    with pytest.raises(AssetError, match=rf"calib\.json: camera 'c0' has non-finite {field}"):
+        cam.validate("calib.json")

@@ -1,0 +1,53 @@
+"""Multi-view captures: cameras, the Capture container, ZJU-MoCap / THUman4.0 readers and
+writers, and synthetic captures with ground truth at any pose."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from texvocab.capture.camera import Camera
+from texvocab.capture.capture import Capture
+from texvocab.errors import AssetError
+
+
+def detect_layout(path: str | Path) -> str:
+    """``zju`` or ``thuman`` for a capture folder; raises AssetError naming what is missing."""
+    from texvocab.capture.thuman import is_thuman
+    from texvocab.capture.zju import is_zju
+
+    root = Path(path)
+    if not root.is_dir():
+        raise AssetError(f"capture folder not found: {root}")
+    if is_zju(root):
+        return "zju"
+    if is_thuman(root):
+        return "thuman"
+    raise AssetError(f"{root}: not a capture folder: expected annots.npy (ZJU-MoCap) or "
+                     "calibration.json (THUman4.0); see assets_spec/captures.md")
+
+
+def open(path: str | Path, body=None, num_train: int | None = None) -> Capture:  # noqa: A001
+    """Open a capture folder, choosing the reader from its layout.
+
+    Args:
+        path: a ZJU-MoCap or THUman4.0-style folder (or one written by ``texvocab synth``).
+        body: the body model its poses drive; default: the embedded default body.
+        num_train: number of leading training frames; default: the synthetic capture's
+            recorded split, else 70 % of the frames.
+    """
+    import json
+
+    from texvocab.body import load_body
+    from texvocab.capture.capture import SYNTH_META
+    from texvocab.capture.thuman import read_thuman
+    from texvocab.capture.zju import read_zju
+
+    root = Path(path)
+    layout = detect_layout(root)
+    if num_train is None and (root / SYNTH_META).is_file():
+        num_train = json.loads((root / SYNTH_META).read_text()).get("num_train")
+    body = body if body is not None else load_body(None)
+    reader = read_zju if layout == "zju" else read_thuman
+    return reader(root, body, num_train)
+
+
+__all__ = ["Camera", "Capture", "detect_layout", "open"]

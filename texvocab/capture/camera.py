@@ -1,0 +1,139 @@
+"""Pinhole camera in the OpenCV convention: ``x_cam = R @ x_world + t``, +z forward,
++y down, intrinsics ``K`` in pixels, optional distortion (k1, k2, p1, p2[, k3])."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from texvocab.errors import AssetError
+
+
+@dataclass
+class Camera:
+    """One calibrated view.
+
+    Attributes:
+        K: (3, 3) intrinsics; R: (3, 3) rotation world->camera; t: (3,) translation, metres.
+        width, height: image size in pixels.
+        dist: (5,) OpenCV distortion (k1, k2, p1, p2, k3); zeros for an undistorted image.
+        name: the view's name in its capture (e.g. ``Camera_B1``, ``cam00``).
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    name: str = ""
+
+    def __post_init__(self):
+        self.K = np.asarray(self.K, dtype=np.float64).reshape(3, 3)
+        self.R = np.asarray(self.R, dtype=np.float64).reshape(3, 3)
+        self.t = np.asarray(self.t, dtype=np.float64).reshape(3)
+        d = np.asarray(self.dist, dtype=np.float64).reshape(-1)
+        self.dist = np.concatenate([d, np.zeros(5 - len(d))]) if len(d) < 5 else d[:5]
+        self.width, self.height = int(self.width), int(self.height)
+
+    def validate(self, source: str) -> "Camera":
+        """Raise :class:`AssetError` naming ``source`` if the calibration is unusable."""
+        for key in ("K", "R", "t", "dist"):
+            if not np.isfinite(getattr(self, key)).all():
+                raise AssetError(f"{source}: camera {self.name!r} has non-finite {key}")
+        if abs(np.linalg.det(self.R) - 1) > 1e-3 or np.abs(self.R @ self.R.T - np.eye(3)).max() > 1e-3:
+            raise AssetError(f"{source}: camera {self.name!r} R is not a rotation matrix")
+        if self.K[0, 0] <= 0 or self.K[1, 1] <= 0 or self.width <= 0 or self.height <= 0:
+            raise AssetError(f"{source}: camera {self.name!r} needs positive focal lengths and "
+                             f"image size, got K={self.K.tolist()}, size={self.width}x{self.height}")
+        return self
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates."""
+        return -self.R.T @ self.t
+
+    def scaled(self, factor: float) -> "Camera":
+        """The same camera for an image resized by ``factor`` (pixel centres kept aligned)."""
+        K = self.K.copy()
+        K[:2] *= factor
+        K[:2, 2] += 0.5 * factor - 0.5
+        return Camera(K, self.R, self.t, round(self.width * factor), round(self.height * factor),
+                      self.dist, self.name)
+
+    def project(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (N, 2) and depths (N,) of world points (N, 3); ignores distortion
+        (images are undistorted on load)."""
+        cam = np.asarray(points, dtype=np.float64) @ self.R.T + self.t
+        z = cam[:, 2]
+        uv = cam @ self.K.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return uv[:, :2] / uv[:, 2:3], z
+
+    def pixel_rays(self, pixels=None, dtype=torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
+        """World-space ray origins and unit directions through pixel centres.
+
+        Args:
+            pixels: (N, 2) pixel coordinates (x, y); None for every pixel, row-major.
+
+        Returns:
+            origins (N, 3), directions (N, 3).
+        """
+        if pixels is None:
+            ys, xs = np.mgrid[0:self.height, 0:self.width]
+            pixels = np.stack([xs.ravel(), ys.ravel()], -1)
+        pix = np.asarray(pixels, dtype=np.float64)
+        homo = np.concatenate([pix, np.ones((len(pix), 1))], 1)
+        dirs = homo @ np.linalg.inv(self.K).T @ self.R  # (R^T d_cam)^T
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        origins = np.broadcast_to(self.center, dirs.shape)
+        return torch.as_tensor(origins.copy(), dtype=dtype), torch.as_tensor(dirs, dtype=dtype)
+
+    def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """Apply the distortion model to normalised image coordinates (N, 2)."""
+        k1, k2, p1, p2, k3 = self.dist
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.stack([xd, yd], -1)
+
+    def undistort_image(self, image: np.ndarray, nearest: bool = False) -> np.ndarray:
+        """Resample a distorted image (H, W[, C]) onto the ideal pinhole grid of this camera."""
+        if not np.any(self.dist):
+            return image
+        ys, xs = np.mgrid[0:self.height, 0:self.width].astype(np.float64)
+        xy = np.stack([(xs.ravel() - self.K[0, 2]) / self.K[0, 0],
+                       (ys.ravel() - self.K[1, 2]) / self.K[1, 1]], -1)
+        d = self.distort_normalized(xy)
+        src_x = d[:, 0] * self.K[0, 0] + self.K[0, 2]
+        src_y = d[:, 1] * self.K[1, 1] + self.K[1, 2]
+        return sample_image(image, src_x, src_y, nearest).reshape(image.shape)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "K": self.K.tolist(), "R": self.R.tolist(),
+                "t": self.t.tolist(), "width": self.width, "height": self.height,
+                "dist": self.dist.tolist()}
+
+
+def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, nearest: bool = False) -> np.ndarray:
+    """Sample an image (H, W[, C]) at float pixel positions (N,), zero outside."""
+    h, w = image.shape[:2]
+    img = image.reshape(h, w, -1).astype(np.float32)
+    if nearest:
+        xi, yi = np.rint(x).astype(int), np.rint(y).astype(int)
+        ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        out = np.zeros((len(x), img.shape[2]), np.float32)
+        out[ok] = img[yi[ok], xi[ok]]
+        return out.astype(image.dtype)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    out = np.zeros((len(x), img.shape[2]), np.float32)
+    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                        (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        xi, yi = x0 + dx, y0 + dy
+        ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        out[ok] += wgt[ok] * img[yi[ok], xi[ok]]
+    return out.astype(image.dtype) if image.dtype.kind == "f" else np.clip(out + 0.5, 0, 255).astype(image.dtype)

@@ -1,0 +1,123 @@
+"""Capture: calibrated views × frames of one person, with per-frame SMPL poses.
+
+Images and masks load lazily from disk (undistorted with each camera's distortion); the
+training / novel-pose split is by frame, as in the paper (first frames train).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+
+from texvocab.capture.camera import Camera
+from texvocab.errors import AssetError
+
+SYNTH_META = "texvocab_synth.json"
+
+
+def read_image(path: Path) -> np.ndarray:
+    """float32 RGB (H, W, 3) in [0, 1]."""
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
+    except FileNotFoundError:
+        raise AssetError(f"image not found: {path}") from None
+    except OSError as exc:
+        raise AssetError(f"{path}: not a readable image ({exc})") from None
+
+
+def read_mask(path: Path) -> np.ndarray:
+    """bool (H, W): foreground where the (possibly JPEG-compressed) mask is > 0.5."""
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("L"), dtype=np.uint8) > 127
+    except FileNotFoundError:
+        raise AssetError(f"mask not found: {path}") from None
+    except OSError as exc:
+        raise AssetError(f"{path}: not a readable mask ({exc})") from None
+
+
+@dataclass
+class Capture:
+    """A multi-view capture.
+
+    Attributes:
+        root: folder on disk; layout: ``zju`` or ``thuman``.
+        cameras: one :class:`Camera` per view.
+        poses: (T, 24, 3) axis-angle per frame (SMPL order, root orientation at joint 0).
+        trans: (T, 3) root translation in the project's convention (body.forward's trans).
+        image_paths, mask_paths: [frame][view] files.
+        frame_ids: the frame numbers used by the source layout.
+        num_train: frames [0, num_train) are training poses, the rest novel poses.
+        body: the :class:`~texvocab.body.BodyModel` the poses drive.
+        betas: (S,) shape coefficients for SMPL bodies, or None.
+    """
+
+    root: Path
+    layout: str
+    cameras: list[Camera]
+    poses: np.ndarray
+    trans: np.ndarray
+    image_paths: list[list[Path]]
+    mask_paths: list[list[Path]]
+    frame_ids: list[int]
+    num_train: int
+    body: object
+    betas: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        t = len(self.image_paths)
+        if self.poses.shape != (t, 24, 3) or self.trans.shape != (t, 3):
+            raise AssetError(f"{self.root}: {t} frames of images but poses {self.poses.shape} "
+                             f"and trans {self.trans.shape}")
+        if not np.isfinite(self.poses).all() or not np.isfinite(self.trans).all():
+            f = int(np.nonzero(~(np.isfinite(self.poses).all((1, 2)) &
+                                 np.isfinite(self.trans).all(1)))[0][0])
+            raise AssetError(f"{self.root}: non-finite pose or translation at frame "
+                             f"{self.frame_ids[f]}")
+        self.num_train = int(min(max(self.num_train, 1), t))
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.image_paths)
+
+    @property
+    def num_views(self) -> int:
+        return len(self.cameras)
+
+    @property
+    def train_frames(self) -> range:
+        return range(self.num_train)
+
+    @property
+    def novel_frames(self) -> range:
+        return range(self.num_train, self.num_frames)
+
+    def image(self, view: int, frame: int) -> np.ndarray:
+        """(H, W, 3) float32 RGB, undistorted."""
+        return self.cameras[view].undistort_image(read_image(self.image_paths[frame][view]))
+
+    def mask(self, view: int, frame: int) -> np.ndarray:
+        """(H, W) bool foreground, undistorted."""
+        m = read_mask(self.mask_paths[frame][view])
+        return self.cameras[view].undistort_image(m.astype(np.uint8), nearest=True) > 0
+
+    def posed_body(self, frame: int):
+        """:class:`~texvocab.body.BodyOutput` of one frame (batch of 1)."""
+        betas = None
+        if self.betas is not None and self.body.num_betas:
+            n = min(len(self.betas), self.body.num_betas)
+            betas = torch.as_tensor(self.betas[:n])[None]
+        return self.body.forward(torch.as_tensor(self.poses[frame])[None],
+                                 torch.as_tensor(self.trans[frame])[None], betas)
+
+    @property
+    def synthetic(self) -> dict | None:
+        """The generator settings when this capture was made by ``texvocab synth``."""
+        path = self.root / SYNTH_META
+        return json.loads(path.read_text()) if path.is_file() else None

@@ -1,0 +1,213 @@
+"""Procedural clothing for synthetic captures: a detailed garment albedo in UV space plus
+pose-dependent folds whose position, shape and strength follow the joint rotations.
+
+Everything is defined on the body's rest surface (each texel knows its rest 3D point and
+skinning weights), so patterns are continuous across UV seams and folds sit at the right
+place on the body: elbow flexion creases the inner elbow, knee flexion the back of the
+knee, hip flexion the groin, shoulder raises the armpit, torso twist and bend make
+diagonal folds on the shirt.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from texvocab.body.poses import J
+from texvocab.raster import rasterize
+from texvocab.rotations import quat_to_rotmat, rotvec_to_quat, quat_multiply
+from texvocab.uv import uv_to_pixel
+
+SKIN = np.array([0.86, 0.66, 0.53])
+HAIR = np.array([0.16, 0.10, 0.07])
+SHIRT = np.array([0.10, 0.45, 0.55])
+SHIRT_LINE = np.array([0.95, 0.92, 0.80])
+LOGO = np.array([0.85, 0.25, 0.15])
+PANTS = np.array([0.16, 0.20, 0.38])
+PANTS_LINE = np.array([0.70, 0.62, 0.30])
+SHOE = np.array([0.08, 0.08, 0.09])
+SOLE = np.array([0.92, 0.92, 0.92])
+
+
+@dataclass
+class FoldSource:
+    """Creases caused by one joint (or a chain of joints) bending and twisting.
+
+    ``joints`` are composed in order (the torso uses the three spine joints); the bone runs
+    from ``joints[0]`` towards ``child``; creases appear within ``reach`` metres of
+    ``joints[-1]`` along the bone, ``offset`` metres from it.
+    """
+
+    name: str
+    joints: tuple[int, ...]
+    child: int
+    reach: float
+    offset: float = 0.0
+    spacing: float = 0.05
+
+
+FOLD_SOURCES = (
+    FoldSource("left_elbow", (J["left_elbow"],), J["left_wrist"], 0.11),
+    FoldSource("right_elbow", (J["right_elbow"],), J["right_wrist"], 0.11),
+    FoldSource("left_knee", (J["left_knee"],), J["left_ankle"], 0.10),
+    FoldSource("right_knee", (J["right_knee"],), J["right_ankle"], 0.10),
+    FoldSource("left_hip", (J["left_hip"],), J["left_knee"], 0.10, 0.06),
+    FoldSource("right_hip", (J["right_hip"],), J["right_knee"], 0.10, 0.06),
+    FoldSource("left_shoulder", (J["left_shoulder"],), J["left_elbow"], 0.09, 0.04),
+    FoldSource("right_shoulder", (J["right_shoulder"],), J["right_elbow"], 0.09, 0.04),
+    FoldSource("torso", (J["spine1"], J["spine2"], J["spine3"]), J["neck"], 0.22, 0.18, 0.07),
+)
+
+
+def _crease(x: np.ndarray, sharpness: int = 3) -> np.ndarray:
+    """Thin periodic lines: 1 on the crease, 0 between (period 1)."""
+    return np.maximum(0.0, np.cos(2 * np.pi * x)) ** sharpness
+
+
+class Garment:
+    """Texture generator for one body.
+
+    Args:
+        body: a :class:`~texvocab.body.BodyModel` with UVs (``vt``, ``ft``).
+        size: texture size in pixels (square).
+    """
+
+    def __init__(self, body, size: int = 1024):
+        if body.vt is None:
+            raise ValueError(f"{body.name} has no UVs; synthetic clothing needs vt/ft")
+        self.size = size
+        self.joints = body.rest_joints.double().numpy()
+        pix = uv_to_pixel(body.vt.double(), size, size)
+        r = rasterize(pix, torch.ones(len(pix), dtype=torch.float64), body.ft, size, size)
+        face = r.face.numpy()
+        self.covered = face >= 0
+        f, bary = face[self.covered], r.bary.double().numpy()[self.covered]
+        corners = body.faces.numpy()[f]
+        self.points = np.einsum("nk,nkc->nc", bary, body.v_template.double().numpy()[corners])
+        self.weights = np.einsum("nk,nkj->nj", bary, body.weights.double().numpy()[corners])
+        # Uncovered texels copy their nearest covered texel so bilinear lookups at UV seams
+        # never blend in a background colour.
+        _, (iy, ix) = ndimage.distance_transform_edt(~self.covered, return_indices=True)
+        self._fill = (iy, ix)
+        self.albedo = self._paint_albedo()
+        self._local = {s.name: self._locality(s) for s in FOLD_SOURCES}
+
+    # -- static albedo -------------------------------------------------------------------
+    def _to_image(self, values: np.ndarray, fill: float | np.ndarray = 0.0) -> np.ndarray:
+        img = np.zeros((self.size, self.size) + values.shape[1:], dtype=np.float64)
+        img[self.covered] = values
+        return img[self._fill]
+
+    def _regions(self) -> np.ndarray:
+        """Per texel: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""
+        p, jnt = self.points, self.joints
+        dom = self.weights.argmax(1)
+        region = np.full(len(p), 2)
+        legs = np.isin(dom, [J["left_hip"], J["right_hip"], J["left_knee"], J["right_knee"],
+                             J["left_ankle"], J["right_ankle"]])
+        region[legs | (p[:, 1] < jnt[J["pelvis"], 1] + 0.04)] = 3
+        ankle_y = jnt[J["left_ankle"], 1]
+        region[np.isin(dom, [J["left_foot"], J["right_foot"]]) | (p[:, 1] < ankle_y + 0.03)] = 4
+        wrist_x = abs(jnt[J["left_wrist"], 0])  # long sleeves: folds form on fabric
+        arm_skin = (np.abs(p[:, 0]) > wrist_x - 0.03) & (p[:, 1] > jnt[J["pelvis"], 1])
+        region[arm_skin] = 0
+        head = np.isin(dom, [J["head"], J["neck"]]) & (p[:, 1] > jnt[J["neck"], 1] - 0.02)
+        region[head] = 0
+        hair = head & ((p[:, 1] > jnt[J["head"], 1] + 0.06) |
+                       ((p[:, 2] < jnt[J["head"], 2] - 0.02) & (p[:, 1] > jnt[J["head"], 1] - 0.04)))
+        region[hair] = 1
+        return region
+
+    def _paint_albedo(self) -> np.ndarray:
+        p, jnt = self.points, self.joints
+        region = self._regions()
+        col = np.zeros((len(p), 3))
+        x, y, z = p.T
+        # skin with faint mottling; hair with strands
+        col[region == 0] = SKIN * (0.97 + 0.03 * np.sin(40 * x + 23 * y + 31 * z))[region == 0, None]
+        strands = 0.8 + 0.4 * _crease(x / 0.006 + 3 * z, 2)
+        col[region == 1] = HAIR * strands[region == 1, None]
+        # shirt: sharp horizontal stripes, fine vertical pinstripes, a chest checker logo
+        shirt = region == 2
+        stripes = (np.mod(y / 0.045, 1.0) < 0.18).astype(float)
+        azim = np.arctan2(z - jnt[J["spine2"], 2], x)
+        pins = (np.mod(azim / (2 * np.pi) * 90, 1.0) < 0.12).astype(float) * (np.abs(x) < 0.25)
+        c = SHIRT * (1 - 0.25 * pins)[:, None]
+        c = c * (1 - stripes[:, None]) + SHIRT_LINE * stripes[:, None]
+        chest = (z > jnt[J["spine3"], 2]) & (np.abs(x - 0.08) < 0.06) & \
+                (np.abs(y - jnt[J["spine3"], 1]) < 0.06)
+        checker = (np.floor((x - 0.02) / 0.015) + np.floor(y / 0.015)) % 2 == 0
+        c[chest & checker] = LOGO
+        col[shirt] = c[shirt]
+        # pants: plaid lines in height and around each leg, a bright seam stripe
+        pants = region == 3
+        leg_x = np.where(x > 0, jnt[J["left_knee"], 0], jnt[J["right_knee"], 0])
+        around = np.arctan2(z - jnt[J["left_knee"], 2], x - leg_x) / (2 * np.pi)
+        plaid = np.maximum(np.mod(y / 0.05, 1.0) < 0.1, np.mod(around * 16, 1.0) < 0.1)
+        seam = np.abs(np.abs(around) - 0.5) < 0.02
+        pc = PANTS * (1 + 0.12 * _crease((x + y) / 0.01, 2))[:, None]
+        pc[plaid] = 0.5 * PANTS + 0.5 * PANTS_LINE
+        pc[seam] = PANTS_LINE
+        col[pants] = pc[pants]
+        shoe = region == 4
+        sole = y < y.min() + 0.025
+        col[shoe] = SHOE
+        col[shoe & sole] = SOLE
+        return self._to_image(np.clip(col, 0, 1)).astype(np.float32)
+
+    # -- pose-dependent folds ----------------------------------------------------------
+    def _locality(self, s: FoldSource):
+        pivot = self.joints[s.joints[-1]]
+        bone = self.joints[s.child] - self.joints[s.joints[0]]
+        bone /= np.linalg.norm(bone)
+        rel = self.points - pivot
+        along = rel @ bone - s.offset
+        radial = rel - np.outer(rel @ bone + 0.0, bone)
+        dist = np.linalg.norm(radial, axis=1)
+        near = np.nonzero((np.abs(along) < 2.0 * s.reach) & (dist < 0.2))[0]
+        ref = np.cross(bone, [0.0, 0.0, 1.0] if abs(bone[2]) < 0.9 else [1.0, 0.0, 0.0])
+        ref /= np.linalg.norm(ref)
+        rad = radial[near] / np.maximum(dist[near], 1e-9)[:, None]
+        azim = np.arctan2(rad @ np.cross(bone, ref), rad @ ref)
+        return near, bone, along[near], rad, azim
+
+    def fold_map(self, pose) -> np.ndarray:
+        """(size, size) crease intensity in [0, 1] for a pose (24, 3) axis-angle."""
+        pose = torch.as_tensor(np.asarray(pose, dtype=np.float64))
+        total = np.zeros(len(self.points))
+        for s in FOLD_SOURCES:
+            near, bone, along, rad, azim = self._local[s.name]
+            q = rotvec_to_quat(pose[list(s.joints)])
+            qc = q[0]
+            for k in range(1, len(q)):
+                qc = quat_multiply(qc, q[k])
+            R = quat_to_rotmat(qc).numpy()
+            moved = R @ bone
+            cos_b = float(np.clip(moved @ bone, -1, 1))
+            bend = np.arccos(cos_b)
+            twist = 2 * np.arctan2(float(qc[1:].numpy() @ bone), float(qc[0]))
+            twist = (twist + np.pi) % (2 * np.pi) - np.pi
+            fold = np.zeros(len(near))
+            if bend > 1e-3:
+                n = moved - cos_b * bone
+                n /= np.linalg.norm(n)
+                inner = 0.3 + 0.7 * np.clip(rad @ n, 0, 1)  # sleeves bunch all round, most inside
+                spacing = s.spacing * (1.0 - 0.35 * min(bend / np.pi, 1.0))
+                centre = 0.25 * s.reach * np.sin(bend)  # creases gather toward the bend
+                env = np.exp(-0.5 * ((along - centre) / s.reach) ** 2)
+                strength = np.clip(bend / (np.pi / 2), 0, 1.2)
+                wave = _crease(along / spacing + 0.15 * np.sin(azim * 2 + bend))
+                fold += strength * env * inner * wave
+            if abs(twist) > 1e-3:
+                env = np.exp(-0.5 * (along / (1.3 * s.reach)) ** 2)
+                helix = _crease(along / (1.4 * s.spacing) + np.sign(twist) * 2 * azim / (2 * np.pi))
+                fold += np.clip(abs(twist) / (np.pi / 6), 0, 1) * env * helix * 0.8
+            total[near] = np.maximum(total[near], fold)
+        return self._to_image(np.clip(total, 0, 1)).astype(np.float32)
+
+    def texture(self, pose) -> np.ndarray:
+        """(size, size, 3) float32 albedo with the pose's folds (row 0 = v = 1)."""
+        folds = self.fold_map(pose)[..., None]
+        return np.clip(self.albedo * (1.0 - 0.75 * folds), 0, 1)

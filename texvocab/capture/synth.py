@@ -1,0 +1,253 @@
+"""Synthetic multi-view captures with ground truth at any pose (``texvocab synth``).
+
+The body wears procedural clothing (:mod:`texvocab.capture.garment`) whose folds follow
+the joint rotations; pyrender draws it offscreen (OSMesa/EGL) under fixed world lights
+from a ring of cameras plus raised ones.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from texvocab.capture.camera import Camera
+from texvocab.capture.capture import SYNTH_META
+from texvocab.errors import AssetError
+
+LAYOUTS = ("zju", "thuman")
+
+
+@dataclass
+class SynthSettings:
+    """Generator knobs. ``size`` is the image side in pixels; ``texture_size`` the
+    clothing texture's; cameras sit on a ring of ``radius`` metres around the body."""
+
+    ring_views: int = 8
+    raised_views: int = 2
+    size: int = 256
+    radius: float = 3.2
+    fov_deg: float = 38.0
+    texture_size: int = 1024
+    seed: int = 0
+    target_y: float = -0.3
+
+
+def default_cameras(s: SynthSettings) -> list[Camera]:
+    """``ring_views`` cameras at chest height on a ring, ``raised_views`` higher up."""
+    from texvocab.render_mesh import intrinsics, look_at
+
+    K = intrinsics(s.size, s.size, s.fov_deg)
+    target = np.array([0.0, s.target_y, 0.0])
+    cams = []
+    for v in range(s.ring_views + s.raised_views):
+        raised = v >= s.ring_views
+        n = s.raised_views if raised else s.ring_views
+        k = v - s.ring_views if raised else v
+        az = 2 * np.pi * k / n + (np.pi / 4 if raised else 0.0)
+        height = 1.3 if raised else 0.1
+        eye = target + np.array([s.radius * np.sin(az), height, s.radius * np.cos(az)])
+        R, t = look_at(eye, target)
+        cams.append(Camera(K, R, t, s.size, s.size, name=f"view{v}"))
+    return cams
+
+
+def _split_seams(faces: np.ndarray, ft: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Render-mesh vertices = unique (vertex, uv) pairs. Returns vertex index (R,),
+    uv index (R,) and faces (F, 3) into the render vertices."""
+    pairs = np.stack([faces.reshape(-1), ft.reshape(-1)], 1)
+    uniq, inverse = np.unique(pairs, axis=0, return_inverse=True)
+    return uniq[:, 0], uniq[:, 1], inverse.reshape(-1, 3)
+
+
+class SynthRenderer:
+    """Renders the clothed body at any pose from any camera (ground truth for evaluation)."""
+
+    def __init__(self, body, settings: SynthSettings | None = None):
+        from texvocab.capture.garment import Garment
+        from texvocab.gl_platform import ensure_offscreen
+
+        ensure_offscreen()
+        import pyrender
+
+        self._pr = pyrender
+        self.body = body
+        self.settings = settings or SynthSettings()
+        self.garment = Garment(body, self.settings.texture_size)
+        self.vidx, uvidx, self.rfaces = _split_seams(body.faces.numpy(), body.ft.numpy())
+        self.uv = body.vt.numpy()[uvidx]
+        self._renderer = None
+        self._size = None
+
+    def _ensure_renderer(self, w: int, h: int):
+        if self._size != (w, h):
+            if self._renderer is not None:
+                self._renderer.delete()
+            self._renderer = self._pr.OffscreenRenderer(w, h)
+            self._size = (w, h)
+        return self._renderer
+
+    def render(self, pose, trans, cameras: list[Camera],
+               texture_pose=None) -> list[tuple[np.ndarray, np.ndarray]]:
+        """[(rgb (H, W, 3) float32, mask (H, W) bool)] per camera for one pose (24, 3).
+
+        ``texture_pose`` (tests, inspection): take the clothing's folds from another pose
+        while keeping this pose's geometry.
+        """
+        import trimesh
+
+        pr = self._pr
+        out = self.body.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
+        verts = out.vertices[0].double().numpy()
+        normals = trimesh.Trimesh(verts, self.body.faces.numpy(), process=False).vertex_normals
+        tex = self.garment.texture(pose if texture_pose is None else texture_pose)
+        # pyrender samples row 0 at v = 1, the project's convention (texvocab.uv).
+        texture = pr.Texture(source=(tex * 255 + 0.5).astype(np.uint8), source_channels="RGB")
+        material = pr.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0,
+                                                roughnessFactor=0.9)
+        prim = pr.Primitive(positions=verts[self.vidx], normals=normals[self.vidx],
+                            texcoord_0=self.uv, indices=self.rfaces, material=material)
+        scene = pr.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.32, 0.32, 0.32])
+        scene.add(pr.Mesh([prim]))
+        for direction, intensity in (((-0.4, -0.6, -0.7), 2.6), ((0.6, -0.3, 0.75), 1.2)):
+            d = np.asarray(direction) / np.linalg.norm(direction)
+            light_pose = np.eye(4)
+            z = -d
+            x = np.cross([0.0, 1.0, 0.0], z)
+            x /= np.linalg.norm(x)
+            light_pose[:3, :3] = np.stack([x, np.cross(z, x), z], 1)
+            scene.add(pr.DirectionalLight(color=np.ones(3), intensity=intensity), pose=light_pose)
+        from texvocab.render_mesh import gl_camera_pose, gl_principal_point
+
+        results = []
+        cam_node = None
+        for cam in cameras:
+            renderer = self._ensure_renderer(cam.width, cam.height)
+            if cam_node is not None:
+                scene.remove_node(cam_node)
+            gl_cam = pr.IntrinsicsCamera(cam.K[0, 0], cam.K[1, 1], *gl_principal_point(cam.K),
+                                         znear=0.05, zfar=100.0)
+            cam_node = scene.add(gl_cam, pose=gl_camera_pose(cam.R, cam.t))
+            rgb, depth = renderer.render(scene)
+            mask = depth > 0
+            rgb = rgb.astype(np.float32) / 255.0
+            rgb[~mask] = 0.0
+            results.append((rgb, mask))
+        return results
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.delete()
+            self._renderer = None
+
+
+def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train: int, body,
+               settings: SynthSettings | None = None, layout: str = "zju",
+               cameras: list[Camera] | None = None, overwrite: bool = False,
+               progress: bool = True, body_source: str = "default") -> Path:
+    """Render a capture and write it in ``layout``; the folder appears only when complete.
+
+    Args:
+        out: capture folder to create.
+        poses: (T, 24, 3) axis-angle; trans: (T, 3).
+        num_train: frames [0, num_train) are training frames (recorded in the metadata).
+    """
+    from texvocab.capture.thuman import ThumanWriter
+    from texvocab.capture.zju import ZjuWriter
+
+    settings = settings or SynthSettings()
+    out = Path(out)
+    if layout not in LAYOUTS:
+        raise AssetError(f"unknown capture layout {layout!r}; expected one of {LAYOUTS}")
+    poses = np.asarray(poses, np.float32)
+    trans = np.asarray(trans, np.float32)
+    if poses.ndim != 3 or poses.shape[1:] != (24, 3) or trans.shape != (len(poses), 3):
+        raise AssetError(f"poses must be (T, 24, 3) and trans (T, 3), got {poses.shape} and "
+                         f"{trans.shape}")
+    body.check_pose(torch.as_tensor(poses), torch.as_tensor(trans))
+    if out.exists() and not overwrite:
+        raise AssetError(f"{out} already exists (pass --overwrite to replace it)")
+    cameras = cameras or default_cameras(settings)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    renderer = SynthRenderer(body, settings)
+    try:
+        writer = (ZjuWriter if layout == "zju" else ThumanWriter)(tmp, cameras, body)
+        frames = range(len(poses))
+        if progress:
+            from tqdm import tqdm
+
+            frames = tqdm(frames, desc=f"synth {out.name}", unit="frame")
+        for t in frames:
+            writer.add_frame(t, poses[t], trans[t], renderer.render(poses[t], trans[t], cameras))
+        writer.finish()
+        meta = {"generator": "texvocab synth", "layout": layout, "num_train": int(num_train),
+                "num_frames": len(poses), "body": body_source, "settings": asdict(settings),
+                "cameras": [c.to_dict() for c in cameras]}
+        (tmp / SYNTH_META).write_text(json.dumps(meta, indent=1))
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    finally:
+        renderer.close()
+    return out
+
+
+def settings_of(capture) -> tuple[SynthSettings, list[Camera]]:
+    """The generator settings and cameras recorded in a synthetic capture."""
+    meta = capture.synthetic if hasattr(capture, "synthetic") else capture
+    if not meta:
+        raise AssetError(f"{getattr(capture, 'root', capture)} was not made by texvocab synth: "
+                         "no ground truth can be rendered for new poses")
+    cams = [Camera(c["K"], c["R"], c["t"], c["width"], c["height"], c["dist"], c["name"])
+            for c in meta["cameras"]]
+    return SynthSettings(**meta["settings"]), cams
+
+
+def ground_truth_renderer(capture) -> tuple[SynthRenderer, list[Camera]]:
+    """A renderer that reproduces ``capture`` at any pose, and the capture's cameras.
+
+    Novel-pose metrics compare against these true images, not guesses.
+    """
+    settings, cams = settings_of(capture)
+    return SynthRenderer(capture.body, settings), cams
+
+
+def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Poses (T, 24, 3) and trans (T, 3) from an .npz with ``poses`` ((T, 24, 3) or
+    (T, 72)) and optional ``trans`` (T, 3)."""
+    path = Path(path)
+    if not path.is_file():
+        raise AssetError(f"pose file not found: {path}; expected an .npz with 'poses' (T, 24, 3)")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except Exception as exc:
+        raise AssetError(f"{path}: not a readable .npz ({exc})") from None
+    if "poses" not in data:
+        raise AssetError(f"{path}: missing key 'poses' (T, 24, 3) axis-angle")
+    poses = data["poses"].astype(np.float32)
+    if poses.ndim == 2 and poses.shape[1] == 72:
+        poses = poses.reshape(-1, 24, 3)
+    if poses.ndim != 3 or poses.shape[1:] != (24, 3):
+        raise AssetError(f"{path}: 'poses' has shape {data['poses'].shape}, expected (T, 24, 3) "
+                         "or (T, 72)")
+    trans = data.get("trans", np.zeros((len(poses), 3))).astype(np.float32)
+    if trans.shape != (len(poses), 3):
+        raise AssetError(f"{path}: 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
+    bad = ~np.isfinite(poses).all(-1)
+    if bad.any():
+        from texvocab.body.parts import JOINT_NAMES
+
+        t, j = (int(i) for i in np.argwhere(bad)[0])
+        raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) is not finite")
+    if not np.isfinite(trans).all():
+        raise AssetError(f"{path}: 'trans' is not finite")
+    return poses, trans
