@@ -4,8 +4,8 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from smpl_files import write_official_pickle
+
 from texvocab.cli import build_parser
 
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
@@ -64,3 +64,30 @@ def test_check_assets_missing_path(tmp_path):
 @pytest.mark.parametrize("args", [["frobnicate"], []])
 def test_unknown_command_is_usage_error(args):
     assert run(*args).returncode == 2
+
+
+def test_synth_contact_sheet_and_check_assets(tmp_path):
+    cap = tmp_path / "cap"
+    out = run("synth", str(cap), "--frames", "3", "--train-frames", "2", "--size", "64",
+              "--ring-views", "2", "--raised-views", "1", "--texture-size", "256", check_rc=0)
+    assert "3 frames x 3 views (zju layout, 2 training frames)" in out.stdout
+    assert "synth cap" in out.stderr  # progress bar
+    assert run("check-assets", str(cap), check_rc=0).stdout.startswith("OK")
+    sheet = tmp_path / "sheet.png"
+    run("contact-sheet", str(cap), "--out", str(sheet), check_rc=0)
+    from PIL import Image
+
+    assert Image.open(sheet).size[0] > 3 * 64
+    # refusing to overwrite, and a pose file with NaN, each a single error line; nothing written
+    assert "already exists" in run("synth", str(cap), "--frames", "1", check_rc=2).stderr
+    import numpy as np
+
+    bad = tmp_path / "bad.npz"
+    poses = np.zeros((2, 24, 3))
+    poses[1, 5, 2] = np.inf
+    np.savez(bad, poses=poses)
+    proc = run("synth", str(tmp_path / "novel"), "--poses", str(bad), "--like", str(cap), check_rc=2)
+    assert proc.stderr.strip().count("\n") == 0
+    assert "bad.npz: 'poses' frame 1 joint 5 (right_knee) is not finite" in proc.stderr
+    assert not (tmp_path / "novel").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.npz", "cap", "sheet.png"]

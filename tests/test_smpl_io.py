@@ -6,8 +6,8 @@ import pickle
 import numpy as np
 import pytest
 import torch
-
 from smpl_files import write_official_pickle
+
 from texvocab.body.smpl_io import load_smpl, read_model_arrays, read_uv_obj
 from texvocab.errors import AssetError
 
@@ -16,7 +16,7 @@ def _write_uv(path, faces, seed=0):
     rng = np.random.default_rng(seed)
     ft = np.arange(faces.size).reshape(-1, 3)
     vt = rng.random((faces.size, 2))
-    lines = [f"v 0 0 0" for _ in range(int(faces.max()) + 1)]
+    lines = ["v 0 0 0" for _ in range(int(faces.max()) + 1)]
     lines += [f"vt {u:.6f} {v:.6f}" for u, v in vt]
     lines += ["f " + " ".join(f"{a + 1}/{b + 1}" for a, b in zip(fr, tr)) for fr, tr in zip(faces, ft)]
     path.write_text("\n".join(lines) + "\n")

@@ -56,9 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
                                 "capture folder")
     p.set_defaults(func=cmd_check_assets)
 
-    from texvocab.cli_capture import add_synth_parser
+    from texvocab.cli_capture import add_sheet_parser, add_synth_parser
 
     add_synth_parser(sub, _add_smpl)
+    add_sheet_parser(sub)
     return parser
 
 

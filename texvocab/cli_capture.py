@@ -25,7 +25,8 @@ def add_synth_parser(sub, add_smpl) -> None:
                    help="use only the first N frames of the motion")
     p.add_argument("--train-frames", type=int, default=None,
                    help="leading frames used for training (default: the motion's training "
-                        "part, or all frames with --poses)")
+                        "part; with --poses: all frames, or none with --like, i.e. a "
+                        "novel-pose ground-truth set)")
     p.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
     p.add_argument("--ring-views", type=int, default=8)
     p.add_argument("--raised-views", type=int, default=2)
@@ -52,12 +53,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
                                  size=args.size, texture_size=args.texture_size, seed=args.seed)
     if args.poses:
         poses, trans = load_pose_file(args.poses)
-        num_train = len(poses)
+        num_train = 0 if args.like else len(poses)
     else:
         poses, trans, num_train = default_motion(args.seed)
     if args.frames:
         poses, trans = poses[: args.frames], trans[: args.frames]
-    num_train = min(args.train_frames or num_train, len(poses))
+    if args.train_frames is not None:
+        num_train = args.train_frames
+    num_train = min(num_train, len(poses))
     t0 = time.perf_counter()
     out = synthesize(args.out, poses, trans, num_train, body, settings, args.layout, cameras,
                      overwrite=args.overwrite, body_source=args.smpl or "default")
@@ -65,4 +68,41 @@ def cmd_synth(args: argparse.Namespace) -> int:
     print(f"wrote {len(poses)} frames x {n_views} views ({args.layout} layout, "
           f"{num_train} training frames) to {Path(out).resolve()} in "
           f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def add_sheet_parser(sub) -> None:
+    p = sub.add_parser("contact-sheet", help="write a views x frames PNG of a capture",
+                       description="Tile a capture's images (rows: views, columns: frames) "
+                                   "into one PNG to look at.")
+    p.add_argument("capture", help="capture folder (ZJU-MoCap or THUman4.0 layout)")
+    p.add_argument("--out", default=None, help="PNG path (default: CAPTURE/contact_sheet.png)")
+    p.add_argument("--frames", default=None,
+                   help="comma-separated frame indices (default: 8 spread over the sequence)")
+    p.add_argument("--masks", action="store_true", help="tile the masks instead of images")
+    p.set_defaults(func=cmd_sheet)
+
+
+def cmd_sheet(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from texvocab.capture import open as open_capture
+    from texvocab.imageio import contact_sheet, save_png
+
+    cap = open_capture(args.capture)
+    if args.frames:
+        frames = [int(f) for f in args.frames.split(",")]
+    else:
+        frames = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
+    bad = [f for f in frames if not 0 <= f < cap.num_frames]
+    if bad:
+        from texvocab.errors import TexvocabError
+
+        raise TexvocabError(f"--frames {bad}: the capture has frames 0..{cap.num_frames - 1}")
+    get = (lambda v, t: cap.mask(v, t).astype(np.float32)) if args.masks else cap.image
+    rows = [[get(v, t) for t in frames] for v in range(cap.num_views)]
+    labels = [f"{'train' if t < cap.num_train else 'novel'} {t}" for t in frames]
+    out = Path(args.out) if args.out else Path(args.capture) / "contact_sheet.png"
+    save_png(out, contact_sheet(rows, [c.name for c in cap.cameras], labels))
+    print(f"contact sheet ({cap.num_views} views x {len(frames)} frames): {out.resolve()}")
     return 0

@@ -11,6 +11,7 @@ from texvocab.assets import load_spec, name_is_accepted, require_valid, spec_ref
 from texvocab.errors import AssetError
 from texvocab.safe_pickle import read_pickle
 
+
 def read_model_arrays(path: str | Path) -> dict:
     """Arrays of an SMPL model file (.pkl or .npz), not yet validated."""
     path = Path(path)

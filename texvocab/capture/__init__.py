@@ -43,7 +43,7 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
 
     root = Path(path)
     layout = detect_layout(root)
-    if num_train is None and (root / SYNTH_META).is_file():
+    if num_train is None and (root / SYNTH_META).is_file():  # the generator's split
         num_train = json.loads((root / SYNTH_META).read_text()).get("num_train")
     body = body if body is not None else load_body(None)
     reader = read_zju if layout == "zju" else read_thuman

@@ -136,4 +136,6 @@ def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, nearest: bool 
         xi, yi = x0 + dx, y0 + dy
         ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
         out[ok] += wgt[ok] * img[yi[ok], xi[ok]]
-    return out.astype(image.dtype) if image.dtype.kind == "f" else np.clip(out + 0.5, 0, 255).astype(image.dtype)
+    if image.dtype.kind == "f":
+        return out.astype(image.dtype)
+    return np.clip(out + 0.5, 0, 255).astype(image.dtype)

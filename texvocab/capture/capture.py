@@ -80,7 +80,7 @@ class Capture:
                                  np.isfinite(self.trans).all(1)))[0][0])
             raise AssetError(f"{self.root}: non-finite pose or translation at frame "
                              f"{self.frame_ids[f]}")
-        self.num_train = int(min(max(self.num_train, 1), t))
+        self.num_train = int(min(max(self.num_train, 0), t))  # 0: every frame is a novel pose
 
     @property
     def num_frames(self) -> int:

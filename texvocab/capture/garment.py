@@ -17,7 +17,7 @@ from scipy import ndimage
 
 from texvocab.body.poses import J
 from texvocab.raster import rasterize
-from texvocab.rotations import quat_to_rotmat, rotvec_to_quat, quat_multiply
+from texvocab.rotations import quat_multiply, quat_to_rotmat, rotvec_to_quat
 from texvocab.uv import uv_to_pixel
 
 SKIN = np.array([0.86, 0.66, 0.53])

@@ -31,7 +31,7 @@ class SynthSettings:
     raised_views: int = 2
     size: int = 256
     radius: float = 3.2
-    fov_deg: float = 38.0
+    fov_deg: float = 40.0
     texture_size: int = 1024
     seed: int = 0
     target_y: float = -0.3

@@ -94,7 +94,8 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
                    trans=p["transl"][idx].astype(np.float32),
                    image_paths=[list(r) for r in zip(*image_paths)],
                    mask_paths=[list(r) for r in zip(*mask_paths)], frame_ids=frames,
-                   num_train=num_train or max(1, int(0.7 * n)), body=body, betas=betas)
+                   num_train=max(1, int(0.7 * n)) if num_train is None else num_train,
+                   body=body, betas=betas)
 
 
 class ThumanWriter:

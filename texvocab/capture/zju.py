@@ -115,7 +115,8 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
                    trans=np.asarray(trans, np.float32),
                    image_paths=[[root / p for p in row] for row in ims], mask_paths=masks,
                    frame_ids=list(range(offset, offset + len(ims))),
-                   num_train=num_train or max(1, int(0.7 * len(ims))), body=body, betas=betas)
+                   num_train=max(1, int(0.7 * len(ims))) if num_train is None else num_train,
+                   body=body, betas=betas)
 
 
 class ZjuWriter:
