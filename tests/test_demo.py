@@ -32,3 +32,13 @@ def test_demo_writes_a_sheet_of_six_poses(tmp_path):
         cols = np.where((t.min(-1) < 0.97).any(0))[0]
         return cols.max() - cols.min()
     assert width(tiles["t_pose_front"]) > 2 * width(tiles["t_pose_side"])
+
+
+def test_demo_capture_is_reused(tmp_path):
+    from texvocab.demo import demo_capture
+
+    root, sheet = demo_capture(tmp_path, frames=2)
+    assert (root / "annots.npy").is_file() and sheet.is_file()
+    stamp = (root / "annots.npy").stat().st_mtime_ns
+    demo_capture(tmp_path, frames=2)
+    assert (root / "annots.npy").stat().st_mtime_ns == stamp  # second run renders nothing

@@ -16,13 +16,18 @@ def _add_smpl(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_demo(args) -> int:
-    from texvocab.demo import run_demo
+    from texvocab.demo import demo_capture, run_demo
 
     t0 = time.perf_counter()
     paths = run_demo(args.out, smpl=args.smpl, size=args.size)
     print(f"rendered the body in {len(paths) - 1} pose views in {time.perf_counter() - t0:.1f} s")
-    print(f"contact sheet: {paths[0].resolve()}")
-    print(f"single views:  {paths[1].parent.resolve()}/")
+    print(f"  body poses sheet: {paths[0].resolve()}")
+    print(f"  single views:     {paths[1].parent.resolve()}/")
+    t0 = time.perf_counter()
+    root, sheet = demo_capture(args.out, smpl=args.smpl, frames=args.frames)
+    print(f"synthetic capture ready in {time.perf_counter() - t0:.1f} s")
+    print(f"  capture (ZJU-MoCap layout): {root.resolve()}")
+    print(f"  views x frames sheet:       {sheet.resolve()}")
     return 0
 
 
@@ -40,11 +45,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="TexVocab: pose-driven avatars from multi-view video (CVPR 2024).")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("demo", help="render what exists: the body in six poses, as PNGs",
+    p = sub.add_parser("demo", help="render what exists: body poses and a synthetic capture",
                        description="Render the body (default, or --smpl) in six poses, front "
-                                   "and side, offscreen; write PNGs and print where they are.")
+                                   "and side, offscreen; synthesise the default multi-view "
+                                   "capture (reused if present); write PNGs and print where "
+                                   "they are.")
     p.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     p.add_argument("--size", type=int, default=320, help="tile size in pixels (default: 320)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="synthesise only the first N frames of the default capture")
     _add_smpl(p)
     p.set_defaults(func=cmd_demo)
 

@@ -1,5 +1,6 @@
 """``texvocab demo``: what exists so far — the body (default or the user's SMPL) in six
-poses, rendered offscreen front and side, written as PNGs."""
+poses, rendered offscreen front and side, and the default synthetic capture (views ×
+frames contact sheet), written as PNGs."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,7 +37,7 @@ def render_pose_sheet(body, size: int = 320, poses=DEMO_POSES) -> tuple[np.ndarr
 
 
 def run_demo(out_dir: str | Path, smpl: str | None = None, size: int = 320) -> list[Path]:
-    """Write the demo PNGs under ``out_dir``; return their paths."""
+    """Write the body-pose PNGs under ``out_dir``; return their paths (sheet first)."""
     from texvocab.imageio import save_png
 
     out_dir = Path(out_dir)
@@ -46,3 +47,29 @@ def run_demo(out_dir: str | Path, smpl: str | None = None, size: int = 320) -> l
     for (pose, view), rgb in renders.items():
         written.append(save_png(out_dir / "poses" / f"{pose}_{view}.png", rgb))
     return written
+
+
+def demo_capture(out_dir: str | Path, smpl: str | None = None,
+                 frames: int | None = None) -> tuple[Path, Path]:
+    """Synthesise the default capture under ``out_dir/capture`` (reused when present) and
+    write its contact sheet; returns (capture folder, sheet path)."""
+    from texvocab.capture import open as open_capture
+    from texvocab.capture.motion import default_motion
+    from texvocab.capture.synth import synthesize
+    from texvocab.imageio import contact_sheet, save_png
+
+    out_dir = Path(out_dir)
+    root = out_dir / "capture"
+    body = load_body(smpl)
+    if not root.exists():
+        poses, trans, num_train = default_motion(0)
+        if frames:
+            poses, trans, num_train = poses[:frames], trans[:frames], min(num_train, frames)
+        synthesize(root, poses, trans, num_train, body, body_source=smpl or "default")
+    cap = open_capture(root, body=body)
+    picks = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
+    rows = [[cap.image(v, t) for t in picks] for v in range(cap.num_views)]
+    labels = [f"{'train' if t < cap.num_train else 'novel'} {t}" for t in picks]
+    sheet = save_png(out_dir / "capture_sheet.png",
+                     contact_sheet(rows, [c.name for c in cap.cameras], labels))
+    return root, sheet
