@@ -91,3 +91,17 @@ def test_synth_contact_sheet_and_check_assets(tmp_path):
     assert "bad.npz: 'poses' frame 1 joint 5 (right_knee) is not finite" in proc.stderr
     assert not (tmp_path / "novel").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.npz", "cap", "sheet.png"]
+
+
+def test_prepare_and_vocab_commands(tmp_path):
+    cap = tmp_path / "cap"
+    run("synth", str(cap), "--frames", "4", "--train-frames", "3", "--size", "64",
+        "--ring-views", "2", "--raised-views", "0", "--texture-size", "128", check_rc=0)
+    out = run("prepare", str(cap), "--texture-size", "32", check_rc=0).stdout
+    assert out.startswith("3 texture maps (32² texels)")
+    assert len(list((cap / "texvocab_cache" / "texmaps_32").glob("frame_*.npz"))) == 3
+    out = run("vocab", str(cap), "--pose", "frame:3", "-k", "2", "--keys", "3", check_rc=0).stdout
+    lines = out.strip().splitlines()
+    assert "strategy=part, M=3 keys/part, K=2" in lines[1] and len(lines) == 3 + 5
+    err = run("vocab", str(cap), "--pose", "frame:9", check_rc=2).stderr
+    assert "the capture has frames 0..3" in err

@@ -13,12 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy import ndimage
 
 from texvocab.body.poses import J
-from texvocab.raster import rasterize
 from texvocab.rotations import quat_multiply, quat_to_rotmat, rotvec_to_quat
-from texvocab.uv import uv_to_pixel
+from texvocab.uvmap import texel_map
 
 SKIN = np.array([0.86, 0.66, 0.53])
 HAIR = np.array([0.16, 0.10, 0.07])
@@ -79,26 +77,19 @@ class Garment:
             raise ValueError(f"{body.name} has no UVs; synthetic clothing needs vt/ft")
         self.size = size
         self.joints = body.rest_joints.double().numpy()
-        pix = uv_to_pixel(body.vt.double(), size, size)
-        r = rasterize(pix, torch.ones(len(pix), dtype=torch.float64), body.ft, size, size)
-        face = r.face.numpy()
-        self.covered = face >= 0
-        f, bary = face[self.covered], r.bary.double().numpy()[self.covered]
-        corners = body.faces.numpy()[f]
-        self.points = np.einsum("nk,nkc->nc", bary, body.v_template.double().numpy()[corners])
-        self.weights = np.einsum("nk,nkj->nj", bary, body.weights.double().numpy()[corners])
-        # Uncovered texels copy their nearest covered texel so bilinear lookups at UV seams
-        # never blend in a background colour.
-        _, (iy, ix) = ndimage.distance_transform_edt(~self.covered, return_indices=True)
-        self._fill = (iy, ix)
+        self.texels = texel_map(body, size)
+        self.covered = self.texels.covered
+        faces = body.faces.numpy()
+        self.points = self.texels.points(body.v_template.double().numpy(), faces)
+        self.weights = self.texels.interpolate(body.weights.double().numpy(), faces)
         self.albedo = self._paint_albedo()
         self._local = {s.name: self._locality(s) for s in FOLD_SOURCES}
 
     # -- static albedo -------------------------------------------------------------------
-    def _to_image(self, values: np.ndarray, fill: float | np.ndarray = 0.0) -> np.ndarray:
-        img = np.zeros((self.size, self.size) + values.shape[1:], dtype=np.float64)
-        img[self.covered] = values
-        return img[self._fill]
+    def _to_image(self, values: np.ndarray) -> np.ndarray:
+        # Uncovered texels copy their nearest covered texel so bilinear lookups at UV seams
+        # never blend in a background colour.
+        return self.texels.to_image(values.astype(np.float64))
 
     def _regions(self) -> np.ndarray:
         """Per texel: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""

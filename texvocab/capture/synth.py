@@ -35,6 +35,7 @@ class SynthSettings:
     texture_size: int = 1024
     seed: int = 0
     target_y: float = -0.3
+    lighting: bool = True  # False: unlit albedo (tests compare texture maps to it)
 
 
 def default_cameras(s: SynthSettings) -> list[Camera]:
@@ -132,7 +133,8 @@ class SynthRenderer:
             gl_cam = pr.IntrinsicsCamera(cam.K[0, 0], cam.K[1, 1], *gl_principal_point(cam.K),
                                          znear=0.05, zfar=100.0)
             cam_node = scene.add(gl_cam, pose=gl_camera_pose(cam.R, cam.t))
-            rgb, depth = renderer.render(scene)
+            flags = pr.RenderFlags.NONE if self.settings.lighting else pr.RenderFlags.FLAT
+            rgb, depth = renderer.render(scene, flags=flags)
             mask = depth > 0
             rgb = rgb.astype(np.float32) / 255.0
             rgb[~mask] = 0.0
