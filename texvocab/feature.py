@@ -47,6 +47,7 @@ class PoseContext:
 
     pose: torch.Tensor  # (24, 3)
     vertices: torch.Tensor  # (V, 3) posed
+    transforms: torch.Tensor  # (J, 4, 4) rest -> posed per joint (inverse LBS uses them)
     index: SurfaceIndex
     frames: torch.Tensor  # (U,) training frames the pose's keys point to
     part_coef: torch.Tensor  # (P, U) Σ_k ŵ_{p,k} over keys of part p pointing to frame u
@@ -60,6 +61,7 @@ class FeatureOutput:
     uv: torch.Tensor  # (N, 2)
     skin_weights: torch.Tensor  # (N, J) of the closest surface point
     distance: torch.Tensor  # (N,) signed distance to the posed body (negative inside)
+    closest: torch.Tensor  # (N, 3) closest point on the posed body
     valid: torch.Tensor  # (N,) bool: within max_distance of the body
 
 
@@ -105,7 +107,8 @@ class PoseFeature(nn.Module):
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float32).reshape(24, 3)
         trans = torch.zeros(3) if trans is None else torch.as_tensor(np.asarray(trans),
                                                                      dtype=torch.float32)
-        verts = self.body.forward(pose[None], trans.reshape(1, 3)).vertices[0]
+        posed = self.body.forward(pose[None], trans.reshape(1, 3))
+        verts = posed.vertices[0]
         index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy())
         part_frames, part_weights, _ = self.vocab.query_tensors(pose.double())
         all_frames = torch.cat([f[0] for f in part_frames])
@@ -116,7 +119,8 @@ class PoseFeature(nn.Module):
             k = w.shape[-1]
             coef[p].index_add_(0, inverse[start:start + k], w[0])
             start += k
-        return PoseContext(pose, verts, index, frames, coef.float(), self.feature_maps(frames))
+        return PoseContext(pose, verts, posed.transforms[0], index, frames, coef.float(),
+                           self.feature_maps(frames))
 
     def forward(self, ctx: PoseContext, points: torch.Tensor,
                 max_distance: float | None = None) -> FeatureOutput:
@@ -131,6 +135,8 @@ class PoseFeature(nn.Module):
         uv[valid] = torch.as_tensor(proj.uv[valid], dtype=points.dtype)
         skin[valid] = torch.as_tensor(proj.weights[valid], dtype=points.dtype)
         dist = torch.as_tensor(proj.distance, dtype=points.dtype)
+        closest = torch.zeros(n, 3, dtype=points.dtype)
+        closest[valid] = torch.as_tensor(proj.closest[valid], dtype=points.dtype)
         total = skin.sum(-1, keepdim=True)
         omega = (skin @ self.membership.to(skin)) / torch.where(total > 0, total,
                                                                 torch.ones_like(total))
@@ -145,7 +151,7 @@ class PoseFeature(nn.Module):
             feats = feats.index_add(0, idx, h * coef[idx, u, None].to(h))
             sampled += idx.numel()
         ctx.stats = {"frames": int(coef.shape[1]), "samples": sampled, "points": n}
-        return FeatureOutput(feats.to(points.dtype), uv, skin, dist, valid)
+        return FeatureOutput(feats.to(points.dtype), uv, skin, dist, closest, valid)
 
 
 def naive_pose_feature(model: PoseFeature, ctx: PoseContext, points: torch.Tensor) -> torch.Tensor:
