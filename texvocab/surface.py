@@ -1,26 +1,27 @@
 """Exact closest point on a posed triangle mesh: face, barycentrics, UV, skinning weights.
 
-Implements the projection of TexVocab Sec. 3.4, "Texture Map Sampling" (Eq. 5 of
-shared/paper/texvocab.tex):
+Implements the projection of TexVocab Sec. 3.4, "Texture Map Sampling" (Eq. 7, label
+eqNA1 in shared/paper/texvocab.tex):
 
     (u*, v*, f*) = argmin_{u, v, f} || x - B_{u,v}(V_t[F(f)]) ||²
 
 i.e. the closest point of the whole surface (not the nearest vertex), found exactly.
 
-Acceleration (:class:`SurfaceIndex`, built once per posed mesh): every face is cut into
-n² congruent sub-triangles (n = ceil(face radius / ``sample_radius``)); their centroids
-("samples") go into a k-d tree. Every surface point lies within r_s (its sub-triangle's
-radius) of a sample of its own face, so for a query x with a known upper bound d_up on
-the distance (here: distance to the face of the nearest sample) the closest face is the
-face of some sample s with |x - s| - r_s <= d_up. The k nearest samples are fetched,
-candidates are pruned with that bound, and rows whose k-th sample is still inside the
-bound are re-queried with a larger k, so the pruning is provably exact. Point-triangle
-tests are Ericson's region tests (Real-Time Collision Detection, 5.1.5), batched in
-float64 numpy; chunks run on a thread pool (numpy releases the GIL).
+Method. :class:`SurfaceIndex` is built once per posed mesh: the faces are laid out in 2^k
+slots by a top-down median split, which makes an implicit hierarchy of axis-aligned boxes
+(``_LEAF`` faces per leaf, ``_FAN`` children per node), plus a k-d tree of the vertices.
+A query point x starts with the upper bound d_up = |x - nearest vertex| (a vertex is a
+surface point), then descends the hierarchy level by level for a whole chunk of points at
+once (numpy arrays of (point, node) pairs), dropping a node whenever the distance from x
+to its box exceeds d_up. A box contains every face below it, so no face that could be the
+closest is ever dropped: the search is exact (not a nearest-vertex approximation). Box
+tests run in float32 on outward-rounded boxes with a slack; the surviving faces get
+Ericson's closest-point region tests (Real-Time Collision Detection, 5.1.5) in float64.
+Chunks run on a thread pool (numpy releases the GIL).
 
-Sign: the angle-weighted pseudo-normal of the closest feature (face, edge or vertex;
-Baerentzen & Aanaes 2005), used only when the mesh is closed and consistently oriented;
-negative inside.
+Sign. Angle-weighted pseudo-normal of the closest feature (face, edge or vertex;
+Baerentzen & Aanaes 2005), used when the mesh is closed (every edge shared by exactly two
+faces) and consistently oriented; negative inside, whichever way the faces wind.
 """
 from __future__ import annotations
 
@@ -32,19 +33,20 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-_CHUNK = 8192  # points per work item
-_K0 = 16  # samples fetched first per point
-_FEATURE_EPS = 1e-12  # barycentric below this counts as zero when choosing the feature
+_LEAF, _FAN = 4, 4  # faces per leaf box, children per inner box
+_CHUNK = 2048  # points per work item
+_DEGENERATE = 1e-10  # sin² of a face's angle at corner a below which it counts as a segment
+_FEATURE_EPS = 1e-12  # a barycentric at or below this counts as zero when picking the feature
 
 
 @dataclass
 class SurfaceProjection:
     """Closest surface points of N queries. Invalid rows (farther than ``max_distance``)
-    have ``face == -1``, ``distance == inf`` and NaN elsewhere.
+    have ``face == -1``, ``distance == inf`` and NaN in the other fields.
 
-    face: (N,) int64 · bary: (N, 3) · closest: (N, 3) · distance: (N,), signed (negative
-    inside) when ``signed`` · uv: (N, 2) or None · weights: (N, J) or None.
-    Arrays are numpy, or torch tensors when the query points were a tensor.
+    face: (N,) int64 · bary: (N, 3), weights of the face's corners · closest: (N, 3) ·
+    distance: (N,), signed (negative inside) when ``signed`` · uv: (N, 2) or None ·
+    weights: (N, J) or None. numpy arrays, or torch tensors when the points were a tensor.
     """
 
     face: np.ndarray | torch.Tensor
@@ -67,32 +69,27 @@ def _numpy(x, dtype) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(x), dtype=dtype)
 
 
-def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
-                         ) -> np.ndarray:
-    """Barycentrics (P, 3) of the closest point to p (P, 3) on triangles (a, b, c) (P, 3).
-
-    Ericson's Voronoi-region tests; zero-area triangles fall back to their three edges.
-    """
+def _face_table(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(13, F) per-face rows: a (3), ab (3), ac (3), ab·ab, ab·ac, ac·ac, degenerate flag."""
     ab, ac = b - a, c - a
     e00, e01, e11 = (ab * ab).sum(1), (ab * ac).sum(1), (ac * ac).sum(1)
-    vw = _ericson(p - a, ab, ac, e00, e01, e11)
-    bad = np.cross(ab, ac).__pow__(2).sum(1) <= 1e-24 * np.maximum(e00, e11) ** 2
-    if bad.any():
-        vw[bad] = _closest_on_edges(p[bad] - a[bad], ab[bad], ac[bad], e00[bad], e01[bad],
-                                    e11[bad])
-    return np.column_stack([1.0 - vw[:, 0] - vw[:, 1], vw[:, 0], vw[:, 1]])
+    degenerate = e00 * e11 - e01 * e01 <= _DEGENERATE * e00 * e11
+    return np.ascontiguousarray(np.column_stack([a, ab, ac, e00, e01, e11, degenerate]).T)
 
 
-def _ericson(ap, ab, ac, e00, e01, e11) -> np.ndarray:
-    """(v, w) (P, 2) with closest = a + v ab + w ac; inputs (P, 3) and per-pair dots (P,)."""
-    d1, d2 = (ab * ap).sum(1), (ac * ap).sum(1)
+def _closest_vw(x: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closest point a + v ab + w ac of points x (3, P) on faces g (13, P) (see
+    :func:`_face_table`): Ericson's Voronoi-region tests; zero-area faces use their edges."""
+    ap = x - g[0:3]
+    ab, ac, e00, e01, e11 = g[3:6], g[6:9], g[9], g[10], g[11]
+    d1, d2 = (ab * ap).sum(0), (ac * ap).sum(0)
     d3, d4, d5, d6 = d1 - e00, d2 - e01, d1 - e01, d2 - e11
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
     with np.errstate(divide="ignore", invalid="ignore"):
         den = va + vb + vc
-        v, w = vb / den, vc / den  # face interior; regions below override it
-        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        v, w = vb / den, vc / den  # face interior; the regions below override it
         m = (va <= 0) & (d4 >= d3) & (d5 >= d6)  # edge BC
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
         v, w = np.where(m, 1.0 - t, v), np.where(m, t, w)
         m = (vb <= 0) & (d2 >= 0) & (d6 <= 0)  # edge AC
         v, w = np.where(m, 0.0, v), np.where(m, d2 / (d2 - d6), w)
@@ -104,24 +101,60 @@ def _ericson(ap, ab, ac, e00, e01, e11) -> np.ndarray:
         v, w = np.where(m, 1.0, v), np.where(m, 0.0, w)
         m = (d1 <= 0) & (d2 <= 0)  # vertex A
         v, w = np.where(m, 0.0, v), np.where(m, 0.0, w)
-    return np.column_stack([v, w])
+    bad = g[12] > 0
+    if bad.any():
+        v[bad], w[bad] = _closest_on_edges(ap[:, bad], ab[:, bad], ac[:, bad])
+    return v, w
 
 
-def _closest_on_edges(ap, ab, ac, e00, e01, e11) -> np.ndarray:
-    """(v, w) (P, 2) of the closest point on the three edges (for zero-area triangles)."""
-    bc, bp = ac - ab, ap - ab
-    ebc = e11 - 2 * e01 + e00
+def _closest_on_edges(ap, ab, ac) -> tuple[np.ndarray, np.ndarray]:
+    """(v, w) of the closest point on the three edges; inputs (3, P) relative to corner a."""
+    v, w, best = np.zeros(ap.shape[1]), np.zeros(ap.shape[1]), np.full(ap.shape[1], np.inf)
+    for start, edge, to_vw in ((0, ab, lambda t: (t, 0 * t)), (0, ac, lambda t: (0 * t, t)),
+                               (1, ac - ab, lambda t: (1 - t, t))):
+        rel = ap - ab * start
+        len2 = (edge * edge).sum(0)
+        t = np.clip(np.divide((rel * edge).sum(0), len2, out=np.zeros_like(len2),
+                              where=len2 > 0), 0.0, 1.0)
+        d2 = ((rel - t * edge) ** 2).sum(0)
+        tv, tw = to_vw(t)
+        closer = d2 < best
+        v, w, best = np.where(closer, tv, v), np.where(closer, tw, w), np.minimum(d2, best)
+    return v, w
 
-    def param(num, den):
-        return np.clip(np.divide(num, den, out=np.zeros_like(num), where=den > 0), 0.0, 1.0)
 
-    t_ab, t_ac, t_bc = param((ap * ab).sum(1), e00), param((ap * ac).sum(1), e11), \
-        param((bp * bc).sum(1), ebc)
-    cand = np.stack([np.column_stack([t_ab, 0 * t_ab]), np.column_stack([0 * t_ac, t_ac]),
-                     np.column_stack([1 - t_bc, t_bc])])  # (3, P, 2)
-    res = ap[None] - cand[..., :1] * ab[None] - cand[..., 1:] * ac[None]
-    best = (res ** 2).sum(-1).argmin(0)
-    return cand[best, np.arange(len(ap))]
+def closest_on_triangles(points, a, b, c) -> np.ndarray:
+    """Barycentrics (P, 3) of the closest point to points (P, 3) on triangles (a, b, c),
+    each (P, 3) or (3,). Zero-area triangles are handled as segments/points."""
+    p, a, b, c = (np.broadcast_to(_numpy(t, np.float64), np.broadcast_shapes(
+        np.shape(points), np.shape(a), np.shape(b), np.shape(c))) for t in (points, a, b, c))
+    v, w = _closest_vw(np.ascontiguousarray(p.T), _face_table(a, b, c))
+    return np.column_stack([1.0 - v - w, v, w])
+
+
+def _slot_layout(centroids: np.ndarray) -> np.ndarray:
+    """(S,) face in each of S = 2^k >= F slots, -1 for empty slots: a top-down median split
+    (each segment sorted along its longest axis, its first half left) in slot space, so
+    every implicit node of the hierarchy holds a spatially tight group of faces."""
+    n = len(centroids)
+    size = 1 << max(int(np.ceil(np.log2(max(n, _LEAF)))), 2)
+    order, seg, cap = np.arange(n), np.zeros(n, np.int64), size
+    while True:
+        counts = np.bincount(seg, minlength=size // cap)
+        starts = np.cumsum(counts) - counts
+        rank = np.arange(n) - starts[seg]
+        if cap == _LEAF:
+            slot_face = np.full(size, -1)
+            slot_face[seg * _LEAF + rank] = order
+            return slot_face
+        c = centroids[order]
+        used = starts[counts > 0]
+        axis = np.zeros(len(counts), np.int64)
+        axis[counts > 0] = (np.maximum.reduceat(c, used) - np.minimum.reduceat(c, used)).argmax(1)
+        perm = np.lexsort((c[np.arange(n), axis[seg]], seg))
+        order, seg = order[perm], seg[perm]
+        seg = 2 * seg + (rank >= (counts[seg] + 1) // 2)
+        cap //= 2
 
 
 class SurfaceIndex:
@@ -129,32 +162,44 @@ class SurfaceIndex:
 
     Args:
         vertices: (V, 3) posed vertices (metres). faces: (F, 3) vertex indices.
-        sample_radius: target sub-triangle radius (metres); default half the median
-            face radius. Smaller means more samples and fewer candidate faces per point.
         workers: threads for queries (default: the CPUs this process may use).
     """
 
-    def __init__(self, vertices, faces, sample_radius: float | None = None,
-                 workers: int | None = None):
+    def __init__(self, vertices, faces, workers: int | None = None):
         self.vertices = _numpy(vertices, np.float64)
-        self.faces = _numpy(faces, np.int64)
-        self.workers = workers or len(os.sched_getaffinity(0))
+        self.faces = _numpy(faces, np.int64).reshape(-1, 3)
+        if not len(self.faces):
+            raise ValueError("SurfaceIndex needs at least one face")
+        self.workers = workers or (len(os.sched_getaffinity(0))
+                                   if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
         tri = self.vertices[self.faces]  # (F, 3, 3)
-        self._a, self._b, self._c = (np.ascontiguousarray(tri[:, i]) for i in range(3))
-        centroid = tri.mean(1)
-        radius = np.sqrt(((tri - centroid[:, None]) ** 2).sum(-1).max(1))  # (F,)
-        target = sample_radius or max(0.5 * float(np.median(radius)), 1e-9)
-        n_sub = np.clip(np.ceil(radius / target), 1, 64).astype(np.int64)
-        samples, owner = [], []
-        for n in np.unique(n_sub):
-            fid = np.flatnonzero(n_sub == n)
-            samples.append(np.einsum("sk,fkd->fsd", _sub_centroids(int(n)), tri[fid]))
-            owner.append(np.repeat(fid, samples[-1].shape[1]))
-        self._sample_face = np.concatenate(owner)
-        self._sample_radius = (radius / n_sub)[self._sample_face]
-        self._max_radius = float(self._sample_radius.max()) * (1 + 1e-9) + 1e-12
-        self._tree = cKDTree(np.concatenate([s.reshape(-1, 3) for s in samples]))
+        self._slot_face = _slot_layout(tri.mean(1))
+        slot_tri = tri[np.maximum(self._slot_face, 0)]
+        self._table = _face_table(*(slot_tri[:, k] for k in range(3)))
+        corners = tri.reshape(-1, 3)
+        self._center = (corners.min(0) + corners.max(0)) / 2
+        self._radius = float(np.abs(corners - self._center).max())
+        empty = (self._slot_face < 0)[:, None]
+        self._levels = self._build_boxes(
+            np.where(empty, np.inf, slot_tri.min(1) - self._center),
+            np.where(empty, -np.inf, slot_tri.max(1) - self._center))
+        # surface points for the first upper bound on the distance: the used vertices
+        self._tree = cKDTree(self.vertices[np.unique(self.faces)])
+        self._max_edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=-1).max())
         self._pseudo_normals(tri)
+
+    @staticmethod
+    def _build_boxes(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Box levels (lo (3, n), hi (3, n)) in float32 rounded outwards, finest (one per
+        slot) first; node i of level l + 1 holds nodes i*fan .. i*fan+fan-1 of level l."""
+        levels, fan = [], _LEAF
+        while True:
+            levels.append((np.nextafter(lo.T.astype(np.float32), np.float32(-np.inf)),
+                           np.nextafter(hi.T.astype(np.float32), np.float32(np.inf))))
+            if len(lo) <= _FAN:
+                return levels
+            lo, hi = lo.reshape(-1, fan, 3).min(1), hi.reshape(-1, fan, 3).max(1)
+            fan = _FAN
 
     def _pseudo_normals(self, tri: np.ndarray) -> None:
         """Angle-weighted pseudo-normals of faces, edges and vertices; closedness test."""
@@ -175,14 +220,15 @@ class SurfaceIndex:
         np.add.at(edge_sum, inverse, np.repeat(self._face_normal, 3, axis=0))
         self._edge_normal = edge_sum[inverse].reshape(-1, 3, 3)  # (F, 3 edges, 3)
         directed_key = directed[:, 0] * len(self.vertices) + directed[:, 1]
-        self.closed = bool(len(f)) and bool((count == 2).all()) and \
+        self.closed = bool((count == 2).all()) and \
             len(np.unique(directed_key)) == len(directed_key)
-        volume = (tri[:, 0] * np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0
+        t = tri - self._center
+        volume = (t[:, 0] * np.cross(t[:, 1], t[:, 2])).sum() / 6.0
         self._orientation = -1.0 if volume < 0 else 1.0
 
     def project(self, points, vt=None, ft=None, weights=None,
                 max_distance: float | None = None) -> SurfaceProjection:
-        """Closest surface point of each of ``points`` (N, 3) (Eq. 5).
+        """Closest surface point of each of ``points`` (N, 3) (Eq. 7).
 
         vt (T, 2) with ft (F, 3) add ``uv`` (N, 2); weights (V, J) add ``weights`` (N, J).
         Points farther than ``max_distance`` are marked invalid (face -1).
@@ -195,73 +241,70 @@ class SurfaceIndex:
                 parts = list(pool.map(lambda s: self._nearest(x[s:s + _CHUNK], bound), starts))
         else:
             parts = [self._nearest(x[s:s + _CHUNK], bound) for s in starts]
-        face = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
-        bary = np.concatenate([p[1] for p in parts]) if parts else np.zeros((0, 3))
+        face = np.concatenate([p[0] for p in parts]) if parts else np.full(len(x), -1)
+        bary = np.concatenate([p[1] for p in parts]) if parts else np.full((len(x), 3), np.nan)
         return self._finish(points, x, face, bary, vt, ft, weights)
 
     def _nearest(self, x: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """(face (M,), bary (M, 3)) for one chunk x (M, 3); face -1 beyond ``bound``."""
         face = np.full(len(x), -1, np.int64)
         bary = np.full((len(x), 3), np.nan)
-        dist, idx = self._tree.query(x, k=1, distance_upper_bound=bound + self._max_radius)
-        rows = np.flatnonzero(np.isfinite(dist))
-        if not len(rows):
-            return face, bary
-        f0 = self._sample_face[idx[rows]]  # the nearest sample's face gives d_up
-        b0 = closest_on_triangles(x[rows], self._a[f0], self._b[f0], self._c[f0])
-        d_up = np.sqrt(((x[rows] - self._point(f0, b0)) ** 2).sum(1))
-        k = _K0
-        while len(rows):
-            fk, bk, dk, done = self._refine(x[rows], d_up, k)
-            better = dk < d_up
-            f0[better], b0[better], d_up[better] = fk[better], bk[better], dk[better]
-            ok = done & (d_up <= bound)
-            face[rows[ok]], bary[rows[ok]] = f0[ok], b0[ok]
-            keep = ~done
-            rows, f0, b0, d_up, k = rows[keep], f0[keep], b0[keep], d_up[keep], k * 4
+        # every surface point lies within an edge length of a vertex: beyond, d > bound
+        d_up, _ = self._tree.query(x, distance_upper_bound=bound + self._max_edge)
+        rows = np.flatnonzero(np.isfinite(d_up))
+        xt = np.ascontiguousarray(x[rows].T)
+        pt, node = self._candidates(xt, np.minimum(d_up[rows], bound))
+        g = np.empty((len(self._table), len(node)))
+        for i, row in enumerate(self._table):
+            row.take(node, out=g[i])
+        xp = xt.take(pt, axis=1)
+        v, w = _closest_vw(xp, g)
+        d2 = ((xp - g[0:3] - v * g[3:6] - w * g[6:9]) ** 2).sum(0)
+        best = np.full(len(rows), np.inf)
+        np.minimum.at(best, pt, d2)
+        winner = np.full(len(rows), -1)
+        hit = np.flatnonzero(d2 == best.take(pt))
+        winner[pt[hit]] = hit
+        ok = (winner >= 0) & (best <= bound * bound)
+        sel = winner[ok]
+        face[rows[ok]] = self._slot_face[node[sel]]
+        bary[rows[ok]] = np.column_stack([1.0 - v[sel] - w[sel], v[sel], w[sel]])
         return face, bary
 
-    def _refine(self, x: np.ndarray, d_up: np.ndarray, k: int):
-        """Test the faces of the k nearest samples that pass the exact bound.
+    def _candidates(self, xt: np.ndarray, d_up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point, slot) pairs whose face box lies within d_up (M,) of xt (3, M).
 
-        Returns best face (M,), bary (M, 3), distance (M,) (inf without candidates) and
-        done (M,): True where no sample beyond the k fetched could hold a closer face.
-        """
-        k = min(k, self._tree.n)
-        dist, idx = self._tree.query(x, k=k)
-        dist, idx = dist.reshape(len(x), k), idx.reshape(len(x), k)
-        slack = 1e-12 + 1e-9 * d_up[:, None]
-        done = (k == self._tree.n) | (dist[:, -1] - self._max_radius > d_up + slack[:, 0])
-        cand = np.where(dist - self._sample_radius[idx] <= d_up[:, None] + slack,
-                        self._sample_face[idx], -1)
-        cand.sort(axis=1)
-        cand[:, 1:][cand[:, 1:] == cand[:, :-1]] = -1  # each face once per row
-        r, c = np.nonzero(cand >= 0)
-        fid = cand[r, c]
-        b = closest_on_triangles(x[r], self._a[fid], self._b[fid], self._c[fid])
-        d2 = np.full(cand.shape, np.inf)
-        d2[r, c] = ((x[r] - self._point(fid, b)) ** 2).sum(1)
-        best = d2.argmin(1)
-        pair = np.full(cand.shape, -1)
-        pair[r, c] = np.arange(len(r))
-        pick = pair[np.arange(len(x)), best]
-        has = pick >= 0
-        out_b = np.zeros((len(x), 3))
-        out_b[has] = b[pick[has]]
-        return (np.where(has, fid[pick], -1), out_b,
-                np.sqrt(d2[np.arange(len(x)), best]), done)
-
-    def _point(self, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
-        """(M, 3) surface points from face (M,) and bary (M, 3)."""
-        return (bary[:, :1] * self._a[face] + bary[:, 1:2] * self._b[face]
-                + bary[:, 2:] * self._c[face])
+        Pairs travel as one key point * n + node (n, the level's size, is a power of two).
+        Boxes are tested in float32, rounded outwards, against d_up plus a slack well above
+        float32 rounding, so the pruning stays conservative (exact results)."""
+        x32 = (xt - self._center[:, None]).astype(np.float32)
+        reach = d_up + 1e-6 * (d_up + np.abs(x32).max(0) + self._radius) + 1e-9
+        ub2 = np.nextafter((reach * reach).astype(np.float32), np.float32(np.inf))
+        top = self._levels[-1][0].shape[1]
+        key = np.arange(len(d_up) * top)
+        for level in range(len(self._levels) - 1, -1, -1):
+            lo, hi = self._levels[level]
+            shift = lo.shape[1].bit_length() - 1
+            pt, node = key >> shift, key & (lo.shape[1] - 1)
+            lb2 = np.zeros(len(key), np.float32)
+            for axis in range(3):
+                xa = x32[axis].take(pt)
+                gap = np.minimum(np.maximum(xa, lo[axis].take(node)), hi[axis].take(node)) - xa
+                with np.errstate(over="ignore", invalid="ignore"):  # empty boxes: infinite
+                    lb2 += gap * gap
+            key = np.compress(lb2 <= ub2.take(pt), key)  # (faster than boolean indexing)
+            if level:
+                fan = _LEAF if level == 1 else _FAN
+                key = ((key << (fan.bit_length() - 1)) + np.arange(fan)[:, None]).ravel()
+        shift = self._levels[0][0].shape[1].bit_length() - 1
+        return key >> shift, key & ((1 << shift) - 1)
 
     def _finish(self, points, x, face, bary, vt, ft, weights) -> SurfaceProjection:
-        """Closest points, (signed) distances, UV and weights from face/bary."""
+        """Closest points, (signed) distances, UV and weights from face (N,), bary (N, 3)."""
         ok = face >= 0
         f, b = face[ok], bary[ok]
         closest = np.full_like(x, np.nan)
-        closest[ok] = self._point(f, b)
+        closest[ok] = np.einsum("nk,nkd->nd", b, self.vertices[self.faces[f]])
         distance = np.full(len(x), np.inf)
         diff = x[ok] - closest[ok]
         distance[ok] = np.sqrt((diff ** 2).sum(1))
@@ -272,8 +315,8 @@ class SurfaceIndex:
             uv = _interpolate(_numpy(vt, np.float64), _numpy(ft, np.int64), face, bary)
         if weights is not None:
             wts = _interpolate(_numpy(weights, np.float64), self.faces, face, bary)
-        out = SurfaceProjection(face, bary, closest, distance, uv, wts, self.closed)
-        return _like(points, out)
+        return _like(points, SurfaceProjection(face, bary, closest, distance, uv, wts,
+                                               self.closed))
 
     def _feature_normal(self, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """(M, 3) pseudo-normal of the face, edge or vertex holding each closest point."""
@@ -289,23 +332,12 @@ class SurfaceIndex:
         return normal * self._orientation
 
 
-def _sub_centroids(n: int) -> np.ndarray:
-    """(n², 3) barycentrics of the centroids of the n² congruent sub-triangles."""
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    up = (i + j <= n - 1)
-    down = (i + j <= n - 2)
-    vw = np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], 1),
-                         np.stack([i[down] + 2 / 3, j[down] + 2 / 3], 1)]) / n
-    return np.column_stack([1 - vw.sum(1), vw])
-
-
 def _interpolate(values: np.ndarray, corners: np.ndarray, face: np.ndarray,
                  bary: np.ndarray) -> np.ndarray:
     """(N, C) barycentric blend of ``values`` (T, C) at corners[face] (N, 3); NaN if face<0."""
     out = np.full((len(face), values.shape[1]), np.nan)
     ok = face >= 0
-    c = corners[face[ok]]
-    out[ok] = np.einsum("nk,nkc->nc", bary[ok], values[c])
+    out[ok] = np.einsum("nk,nkc->nc", bary[ok], values[corners[face[ok]]])
     return out
 
 
@@ -317,9 +349,8 @@ def _like(points, out: SurfaceProjection) -> SurfaceProjection:
     for fld in fields(out):
         value = getattr(out, fld.name)
         if isinstance(value, np.ndarray):
-            t = torch.from_numpy(value)
-            setattr(out, fld.name, t.to(points.device) if fld.name == "face"
-                    else t.to(device=points.device, dtype=dtype))
+            t = torch.from_numpy(value).to(points.device)
+            setattr(out, fld.name, t if fld.name == "face" else t.to(dtype))
     return out
 
 
@@ -328,8 +359,8 @@ def project_to_surface(points, vertices, faces, vt=None, ft=None, weights=None,
                        index: SurfaceIndex | None = None) -> SurfaceProjection:
     """Exact closest point of ``points`` (N, 3) on the mesh (vertices (V, 3), faces (F, 3)).
 
-    TexVocab Eq. 5: (u*, v*, f*) = argmin ||x - B_{u,v}(V[F(f)])||. Pass ``index`` (a
-    :class:`SurfaceIndex` of the same mesh) to reuse the acceleration structure.
+    TexVocab Eq. 7: (u*, v*, f*) = argmin ||x - B_{u,v}(V[F(f)])||. Pass ``index`` (a
+    :class:`SurfaceIndex` of the same posed mesh) to reuse its acceleration structure.
     See :meth:`SurfaceIndex.project` for vt/ft/weights/max_distance.
     """
     if index is None:
@@ -340,26 +371,23 @@ def project_to_surface(points, vertices, faces, vt=None, ft=None, weights=None,
     return index.project(points, vt=vt, ft=ft, weights=weights, max_distance=max_distance)
 
 
-def project_brute_force(points, vertices, faces, chunk: int = 128) -> SurfaceProjection:
-    """Reference: tests every triangle for every point (O(N F); for tests only).
-
-    Same outputs as :func:`project_to_surface` (signed the same way), no uv/weights.
-    """
-    index = SurfaceIndex.__new__(SurfaceIndex)
-    index.vertices, index.faces = _numpy(vertices, np.float64), _numpy(faces, np.int64)
-    tri = index.vertices[index.faces]
-    index._a, index._b, index._c = tri[:, 0], tri[:, 1], tri[:, 2]
-    index._pseudo_normals(tri)
+def project_brute_force(points, vertices, faces, chunk: int = 32) -> SurfaceProjection:
+    """Reference for tests: every triangle for every point, O(N F). Same fields and sign
+    convention as :func:`project_to_surface` (no uv/weights)."""
+    index = SurfaceIndex(vertices, faces, workers=1)
     x = _numpy(points, np.float64).reshape(-1, 3)
+    tri = index.vertices[index.faces]
+    table = _face_table(tri[:, 0], tri[:, 1], tri[:, 2])
     nf = len(index.faces)
-    face = np.zeros(len(x), np.int64)
-    bary = np.zeros((len(x), 3))
+    face, bary = np.zeros(len(x), np.int64), np.zeros((len(x), 3))
     for s in range(0, len(x), chunk):
-        xs = np.repeat(x[s:s + chunk], nf, axis=0)
-        a, b, c = (np.tile(t, (len(xs) // nf, 1)) for t in (index._a, index._b, index._c))
-        bc = closest_on_triangles(xs, a, b, c)
-        d2 = ((xs - (bc[:, :1] * a + bc[:, 1:2] * b + bc[:, 2:] * c)) ** 2).sum(1)
-        best = d2.reshape(-1, nf).argmin(1)
+        xs = x[s:s + chunk]
+        g = np.tile(table, len(xs))
+        xt = np.repeat(xs.T, nf, axis=1)
+        v, w = _closest_vw(xt, g)
+        d2 = ((xt - g[0:3] - v * g[3:6] - w * g[6:9]) ** 2).sum(0).reshape(len(xs), nf)
+        best = d2.argmin(1)
+        pick = np.arange(len(xs)) * nf + best
         face[s:s + chunk] = best
-        bary[s:s + chunk] = bc.reshape(-1, nf, 3)[np.arange(len(best)), best]
+        bary[s:s + chunk] = np.column_stack([1 - v[pick] - w[pick], v[pick], w[pick]])
     return index._finish(points, x, face, bary, None, None, None)

@@ -192,3 +192,15 @@ class Vocabulary:
                              zip(q.key_ids, q.frames, q.weights, strict=True))
             lines.append(f"{q.part:<16}{q.novelty:>9.4f}  {keys}")
         return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """Plain containers and tensors (checkpoint-safe)."""
+        return {"strategy": self.strategy, "part_names": list(self.part_names),
+                "part_joints": [list(j) for j in self.part_joints],
+                "key_quats": list(self.key_quats), "key_frames": list(self.key_frames),
+                "k": self.k, "weighting": self.weighting}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Vocabulary:
+        return cls(d["strategy"], list(d["part_names"]), [tuple(j) for j in d["part_joints"]],
+                   list(d["key_quats"]), list(d["key_frames"]), int(d["k"]), d["weighting"])

@@ -1,0 +1,251 @@
+"""Closest point on the posed mesh (Sec. 3.4, Eq. 7): the accelerated search equals the
+brute-force reference, hand-computed cases, signs, UV/weights interpolation, degenerate
+input."""
+import numpy as np
+import pytest
+import torch
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from texvocab.body import default_body
+from texvocab.body.poses import preset
+from texvocab.surface import SurfaceIndex, closest_on_triangles, project_brute_force, project_to_surface
+
+TRI = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+TET = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+TET_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])  # outward
+
+
+@pytest.fixture(scope="module")
+def body():
+    return default_body()
+
+
+@pytest.fixture(scope="module")
+def posed(body):
+    pose, trans = preset("walk")
+    out = body.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
+    verts = out.vertices[0].double().numpy()
+    faces = body.faces.numpy()
+    return verts, faces, SurfaceIndex(verts, faces)
+
+
+def _surface_samples(verts, faces, n, seed):
+    """n random surface points (n, 3) and their faces' unit normals (n, 3)."""
+    mesh = trimesh.Trimesh(verts, faces, process=False)
+    pts, fid = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    return pts, mesh.face_normals[fid]
+
+
+def _winding_number(points, verts, faces, chunk=64):
+    """Generalised winding number (Van Oosterom & Strackee solid angles): (N,)."""
+    tri = verts[faces]
+    out = np.zeros(len(points))
+    for s in range(0, len(points), chunk):
+        r = tri[None] - points[s:s + chunk, None, None]  # (P, F, 3, 3)
+        a, b, c = r[..., 0, :], r[..., 1, :], r[..., 2, :]
+        la, lb, lc = (np.linalg.norm(t, axis=-1) for t in (a, b, c))
+        det = (a * np.cross(b, c)).sum(-1)
+        den = la * lb * lc + (a * b).sum(-1) * lc + (b * c).sum(-1) * la + (c * a).sum(-1) * lb
+        out[s:s + chunk] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
+    return out
+
+
+def test_matches_brute_force_on_posed_body(posed):
+    verts, faces, index = posed
+    rng = np.random.default_rng(0)
+    on, normal = _surface_samples(verts, faces, 900, seed=1)
+    shell = on[300:800] + normal[300:800] * rng.uniform(-0.05, 0.05, (500, 1))
+    far = on[800:] + rng.normal(size=(100, 3)) * rng.uniform(0.05, 0.3, (100, 1))
+    pts = np.concatenate([on[:300], shell, far, verts[::500]])
+    fast, ref = index.project(pts), project_brute_force(pts, verts, faces)
+    np.testing.assert_allclose(fast.closest, ref.closest, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(fast.distance, ref.distance, atol=1e-6, rtol=0)
+    assert fast.signed and ref.signed
+    assert np.abs(fast.distance[:300]).max() < 1e-9  # sampled on the surface
+    differ = fast.face != ref.face  # only ties: the other face is exactly as close
+    tri = verts[faces[fast.face[differ]]]
+    bary = closest_on_triangles(pts[differ], tri[:, 0], tri[:, 1], tri[:, 2])
+    d_other = np.linalg.norm(pts[differ] - np.einsum("nk,nkd->nd", bary, tri), axis=1)
+    np.testing.assert_allclose(d_other, np.abs(ref.distance[differ]), atol=1e-12)
+    np.testing.assert_allclose(fast.bary.sum(1), 1.0, atol=1e-12)
+
+
+def test_matches_brute_force_on_a_triangle_soup():
+    """Faces from millimetres to metres, far and near points, and an unused vertex next to
+    the queries (it is not on the surface, so it must not bound the search)."""
+    rng = np.random.default_rng(2)
+    centers = rng.uniform(-1, 1, (300, 1, 3))
+    sizes = 10.0 ** rng.uniform(-3, 0.3, (300, 1, 1))
+    verts = (centers + sizes * rng.normal(size=(300, 3, 3))).reshape(-1, 3)
+    faces = np.arange(900).reshape(300, 3)
+    pts = rng.uniform(-2, 2, (400, 3))
+    verts = np.concatenate([verts, pts[:1] + 1e-4])
+    fast, ref = project_to_surface(pts, verts, faces), project_brute_force(pts, verts, faces)
+    np.testing.assert_allclose(fast.closest, ref.closest, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(fast.distance, ref.distance, atol=1e-9, rtol=0)
+    assert not fast.signed and (fast.distance >= 0).all()
+
+
+def test_kernel_agrees_with_trimesh_per_triangle():
+    rng = np.random.default_rng(3)
+    a, b, c = rng.normal(size=(3, 5000, 3))
+    p = rng.normal(size=(5000, 3)) * 2
+    bary = closest_on_triangles(p, a, b, c)
+    ours = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    theirs = trimesh.triangles.closest_point(np.stack([a, b, c], 1), p)
+    np.testing.assert_allclose(np.linalg.norm(p - ours, axis=1),
+                               np.linalg.norm(p - theirs, axis=1), atol=1e-12)
+    assert (bary >= -1e-12).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-2, 2), min_size=12, max_size=12))
+def test_no_point_of_the_triangle_is_closer(coords):
+    a, b, c, p = np.array(coords).reshape(4, 3)
+    bary = closest_on_triangles(p[None], a, b, c)[0]
+    assert np.isfinite(bary).all() and (bary >= -1e-12).all()
+    assert abs(bary.sum() - 1) < 1e-12
+    best = np.linalg.norm(p - bary @ np.stack([a, b, c]))
+    u, v = np.meshgrid(np.linspace(0, 1, 41), np.linspace(0, 1, 41))
+    grid = np.stack([1 - u - v, u, v], -1)[u + v <= 1] @ np.stack([a, b, c])
+    assert best <= np.linalg.norm(grid - p, axis=1).min() + 1e-9
+
+
+@pytest.mark.parametrize("point, closest, bary", [
+    ((-1.0, -1.0, 1.0), (0, 0, 0), (1, 0, 0)),  # vertex regions
+    ((2.0, -0.5, 0.0), (1, 0, 0), (0, 1, 0)),
+    ((-0.5, 2.0, 0.3), (0, 1, 0), (0, 0, 1)),
+    ((0.5, -1.0, 0.5), (0.5, 0, 0), (0.5, 0.5, 0)),  # edge regions
+    ((-1.0, 0.25, 0.0), (0, 0.25, 0), (0.75, 0, 0.25)),
+    ((1.0, 1.0, 0.2), (0.5, 0.5, 0), (0, 0.5, 0.5)),
+    ((0.2, 0.3, 0.7), (0.2, 0.3, 0), (0.5, 0.2, 0.3)),  # face interior
+    ((0.25, 0.25, 0.0), (0.25, 0.25, 0), (0.5, 0.25, 0.25)),  # on the surface
+])
+def test_single_triangle_regions(point, closest, bary):
+    out = project_to_surface(np.array([point]), TRI, np.array([[0, 1, 2]]))
+    np.testing.assert_allclose(out.closest[0], closest, atol=1e-12)
+    np.testing.assert_allclose(out.bary[0], bary, atol=1e-12)
+    np.testing.assert_allclose(out.bary[0] @ TRI, out.closest[0], atol=1e-12)
+    assert out.face[0] == 0 and not out.signed  # an open surface has no inside
+    assert out.distance[0] == pytest.approx(np.linalg.norm(np.subtract(point, closest)))
+
+
+def test_tetrahedron_features_and_sign():
+    pts = np.array([[0.25, 0.25, -0.5],  # below face z=0 -> interior of face 0
+                    [0.5, -1.0, -1.0],  # off edge (0,1) -> its midpoint
+                    [-1.0, -1.0, -1.0],  # off vertex 0
+                    [1.0, 1.0, 1.0],  # off the slanted face, interior -> (1/3, 1/3, 1/3)
+                    [0.1, 0.2, 0.3],  # inside, nearest the face x = 0
+                    [0.0, 0.5, 0.5]])  # on an edge, on the surface
+    out = project_to_surface(pts, TET, TET_FACES)
+    expect = np.array([[0.25, 0.25, 0], [0.5, 0, 0], [0, 0, 0], [1 / 3, 1 / 3, 1 / 3],
+                       [0.0, 0.2, 0.3], [0, 0.5, 0.5]])
+    np.testing.assert_allclose(out.closest, expect, atol=1e-12)
+    np.testing.assert_allclose(out.distance[:4], [0.5, np.sqrt(2), np.sqrt(3),
+                                                  2 / np.sqrt(3)], atol=1e-12)
+    assert out.signed and out.distance[4] == pytest.approx(-0.1) and out.distance[5] == 0
+    flipped = project_to_surface(pts, TET, TET_FACES[:, ::-1])  # inward winding
+    np.testing.assert_allclose(flipped.distance, out.distance, atol=1e-12)
+
+
+def test_sign_on_icosphere():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(-1.3, 1.3, (3000, 3))
+    out = project_to_surface(pts, sphere.vertices, sphere.faces)
+    # convex: inside iff behind every face plane
+    n = sphere.face_normals
+    plane = ((pts[:, None] - sphere.triangles[None, :, 0]) * n[None]).sum(-1)
+    inside = (plane < 0).all(1)
+    sure = np.abs(out.distance) > 1e-9
+    assert out.signed
+    np.testing.assert_array_equal((out.distance < 0)[sure], inside[sure])
+    np.testing.assert_allclose(np.abs(out.distance[inside]), -plane[inside].max(1), atol=1e-12)
+
+
+def test_sign_on_posed_body(posed):
+    verts, faces, index = posed
+    on, normal = _surface_samples(verts, faces, 600, seed=5)
+    assert index.project(on - 1e-3 * normal).distance.max() < 0
+    assert index.project(on + 1e-3 * normal).distance.min() > 0
+    rng = np.random.default_rng(6)
+    lo, hi = verts.min(0), verts.max(0)
+    pts = np.concatenate([rng.uniform(lo, hi, (300, 3)),
+                          on[:300] + rng.normal(0, 0.02, (300, 3))])
+    d = index.project(pts).distance
+    inside = _winding_number(pts, verts, faces) > 0.5
+    sure = np.abs(d) > 1e-6
+    np.testing.assert_array_equal((d < 0)[sure], inside[sure])
+    assert inside.sum() > 100 and (~inside).sum() > 100
+    try:  # trimesh's containment test needs rtree or embree
+        contains = trimesh.Trimesh(verts, faces, process=False).contains(pts)
+    except ImportError:
+        return
+    np.testing.assert_array_equal((d < 0)[sure], contains[sure])
+
+
+def test_uv_and_weights_interpolation(body, posed):
+    verts, faces, index = posed
+    vt, ft, weights = body.vt.numpy(), body.ft.numpy(), body.weights.numpy()
+    # vertices with one UV everywhere (not on a seam) and used by several faces
+    pairs = np.unique(np.stack([faces.ravel(), ft.ravel()], 1), axis=0)
+    single = np.flatnonzero(np.bincount(pairs[:, 0], minlength=len(verts)) == 1)
+    pick = single[:: max(len(single) // 20, 1)]
+    out = index.project(verts[pick], vt, ft, weights)
+    uv_of_vertex = np.zeros((len(verts), 2))
+    uv_of_vertex[faces.ravel()] = vt[ft.ravel()]
+    np.testing.assert_allclose(out.uv, uv_of_vertex[pick], atol=1e-9)
+    np.testing.assert_allclose(out.weights, weights[pick], atol=1e-7)
+    rng = np.random.default_rng(7)
+    on, normal = _surface_samples(verts, faces, 500, seed=8)
+    out = index.project(on + normal * rng.uniform(-0.03, 0.03, (500, 1)), vt, ft, weights)
+    np.testing.assert_allclose(out.weights.sum(1), 1.0, atol=1e-5)
+    assert (out.uv >= 0).all() and (out.uv <= 1).all()
+
+
+def test_degenerate_triangles_and_duplicate_vertices():
+    verts = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [0, 1, 0], [1, 1, 0]])
+    faces = np.array([[0, 1, 2],  # collinear: zero area
+                      [3, 4, 4],  # a point (duplicate vertices)
+                      [1, 3, 5], [1, 4, 5]])  # the same triangle twice via a duplicate
+    rng = np.random.default_rng(9)
+    pts = rng.uniform(-1, 3, (400, 3))
+    out = project_to_surface(pts, verts, faces)
+    ref = project_brute_force(pts, verts, faces)
+    for field in (out.bary, out.closest, out.distance):
+        assert np.isfinite(field).all()
+    np.testing.assert_allclose(out.closest, ref.closest, atol=1e-12)
+    np.testing.assert_allclose(out.distance, ref.distance, atol=1e-12)
+    seg = project_to_surface(np.array([[1.5, -2.0, 0.5]]), verts, faces[:1])
+    np.testing.assert_allclose(seg.closest[0], [1.5, 0, 0], atol=1e-12)
+    assert np.isfinite(closest_on_triangles(np.ones((1, 3)), *np.zeros((3, 1, 3)))).all()
+
+
+def test_max_distance_marks_far_points_invalid(posed):
+    verts, faces, index = posed
+    rng = np.random.default_rng(10)
+    on, normal = _surface_samples(verts, faces, 400, seed=11)
+    pts = on + normal * rng.uniform(-0.2, 0.2, (400, 1))
+    full = index.project(pts)
+    cut = index.project(pts, max_distance=0.05)
+    near = np.abs(full.distance) <= 0.05
+    np.testing.assert_array_equal(cut.valid, near)
+    np.testing.assert_allclose(cut.distance[near], full.distance[near], atol=1e-12)
+    assert np.isinf(cut.distance[~near]).all() and np.isnan(cut.closest[~near]).all()
+    assert (~near).sum() > 50
+
+
+def test_torch_in_torch_out_and_index_reuse(posed):
+    verts, faces, index = posed
+    pts = torch.as_tensor(verts[::700] + 0.01, dtype=torch.float32)
+    out = project_to_surface(pts, verts, faces, index=index)
+    assert isinstance(out.closest, torch.Tensor) and out.closest.dtype == torch.float32
+    assert out.face.dtype == torch.int64
+    ref = index.project(pts.double().numpy())
+    np.testing.assert_allclose(out.closest.double().numpy(), ref.closest, atol=1e-6)
+    with pytest.raises(ValueError):
+        project_to_surface(pts, verts, faces[:10], index=index)
+    empty = index.project(np.zeros((0, 3)))
+    assert empty.face.shape == (0,) and empty.closest.shape == (0, 3)

@@ -1,0 +1,99 @@
+"""One settings object for every knob that trades speed for accuracy (and the rest of a
+training run). Each field has a documented default; the CLI maps ``--set key=value``
+onto it and checkpoints store it as a plain dict.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+
+from texvocab.errors import TexvocabError
+from texvocab.field import FieldSettings
+
+
+@dataclass
+class Settings:
+    """Knobs, grouped. Speed/accuracy trade-offs are marked (S/A)."""
+
+    # data
+    texture_size: int = 256  # (S/A) texels per side of U_t; encoder cost grows with its square
+    train_views: tuple[int, ...] | None = None  # None: every view not in eval_views
+    eval_views: tuple[int, ...] = (1, 5)  # held-out views for evaluation
+    # vocabulary (Sec. 3.3-3.4)
+    strategy: str = "part"  # part | joint | global (the paper's ablation)
+    num_keys: int = 20  # (S/A) M keys per part
+    k: int = 3  # (S/A) K nearest keys blended per part
+    weighting: str = "paper"  # paper (J_p - d) | inverse (1/d)
+    encoder: str = "auto"  # (S/A) auto | resnet34 | resnet34-scratch | small
+    # field
+    field: FieldSettings = field(default_factory=FieldSettings)
+    # rendering (S/A)
+    coarse_samples: int = 24
+    fine_samples: int = 16
+    early_stop_eps: float = 1e-3
+    image_scale: float = 1.0  # render at this fraction of the capture's resolution
+    # training
+    iterations: int = 2000
+    rays_per_batch: int = 1024
+    fg_fraction: float = 0.8  # share of rays drawn inside the mask
+    lr: float = 5e-4
+    lambda_color: float = 1.0
+    lambda_mask: float = 0.1
+    lambda_eikonal: float = 0.05
+    lambda_perceptual: float = 0.05  # used only when LPIPS weights are present
+    patch_size: int = 24  # square patches for the perceptual term
+    checkpoint_every: int = 250
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["train_views"] = None if self.train_views is None else list(self.train_views)
+        d["eval_views"] = list(self.eval_views)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Settings:
+        d = dict(d)
+        d["field"] = FieldSettings(**d.get("field", {}))
+        for key in ("train_views", "eval_views"):
+            if d.get(key) is not None:
+                d[key] = tuple(d[key])
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise TexvocabError(f"unknown settings {sorted(unknown)}")
+        return cls(**d)
+
+    def with_overrides(self, items: list[str]) -> Settings:
+        """Apply ``key=value`` strings (``field.hidden=64`` reaches nested settings)."""
+        d = self.to_dict()
+        for item in items:
+            key, sep, raw = item.partition("=")
+            if not sep:
+                raise TexvocabError(f"--set {item!r}: expected key=value")
+            target, name = d, key
+            if "." in key:
+                head, name = key.split(".", 1)
+                if head not in d or not isinstance(d[head], dict):
+                    raise TexvocabError(f"--set {item!r}: no settings group {head!r}")
+                target = d[head]
+            if name not in target:
+                raise TexvocabError(f"--set {item!r}: unknown setting {key!r}")
+            target[name] = _parse(raw, target[name], key)
+        return Settings.from_dict(d)
+
+
+def _parse(raw: str, current, key: str):
+    try:
+        if isinstance(current, bool):
+            if raw.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(raw)
+            return raw.lower() in ("true", "1")
+        if isinstance(current, int):
+            return int(raw)
+        if isinstance(current, float):
+            return float(raw)
+        if isinstance(current, list) or current is None and "views" in key:
+            return None if raw.lower() == "none" else [int(v) for v in raw.split(",") if v]
+    except ValueError:
+        raise TexvocabError(f"--set {key}={raw}: expected a {type(current).__name__}") from None
+    return raw
