@@ -70,9 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_synth_parser(sub, _add_smpl)
     add_sheet_parser(sub)
 
-    from texvocab.cli_method import add_method_parsers
+    from texvocab.cli_method import add_method_parsers, add_train_parsers
 
     add_method_parsers(sub, _add_smpl)
+    add_train_parsers(sub, _add_smpl)
     return parser
 
 

@@ -45,7 +45,8 @@ def _open(args):
     from texvocab.body import load_body
     from texvocab.capture import open as open_capture
 
-    return open_capture(args.capture, body=load_body(args.smpl), num_train=args.train_frames)
+    return open_capture(args.capture, body=load_body(args.smpl),
+                        num_train=getattr(args, "train_frames", None))
 
 
 def cmd_prepare(args: argparse.Namespace) -> int:
@@ -97,4 +98,89 @@ def cmd_vocab(args: argparse.Namespace) -> int:
                              args.weighting)
     print(f"pose: {args.pose}   training frames: {cap.num_train}")
     print(vocab.format_query(pose))
+    return 0
+
+
+def add_train_parsers(sub, add_smpl) -> None:
+    p = sub.add_parser("train", help="train an avatar on a capture",
+                       description="Fit the TexVocab avatar to a capture's training frames "
+                                   "and views; checkpoints go to OUT/checkpoint.pt (atomic, "
+                                   "at intervals and at the end).")
+    p.add_argument("capture", help="capture folder")
+    p.add_argument("--out", required=True, help="run folder (checkpoint, logs)")
+    p.add_argument("--iterations", type=int, default=None, help="steps (default: settings)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a setting, e.g. --set strategy=joint --set field.hidden=64")
+    p.add_argument("--train-frames", type=int, default=None,
+                   help="leading training frames (default: the capture's split)")
+    add_smpl(p)
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("eval", help="evaluate a checkpoint (PSNR/SSIM/LPIPS/FID, image grid)",
+                       description="Render held-out views on training poses, novel frames and "
+                                   "(synthetic captures) generated novel poses; write "
+                                   "metrics.md, metrics.json and grid PNGs.")
+    p.add_argument("checkpoint", help="checkpoint.pt written by texvocab train")
+    p.add_argument("capture", help="capture folder (the one trained on)")
+    p.add_argument("--out", default=None, help="report folder (default: next to the checkpoint)")
+    p.add_argument("--per-set", type=int, default=4, help="frames per set (default 4)")
+    add_smpl(p)
+    p.set_defaults(func=cmd_eval)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from texvocab.settings import Settings
+    from texvocab.train import Trainer
+
+    settings = Settings().with_overrides(args.overrides)
+    if args.iterations is not None:
+        settings.iterations = args.iterations
+    cap = _open(args)
+    trainer = Trainer(cap, settings, args.out)
+    if args.resume and trainer.resume():
+        print(f"resumed at step {trainer.step} from {trainer.checkpoint_path}")
+    logs = trainer.run()
+    last = logs[-1] if logs else {}
+    print(f"step {trainer.step}: loss {last.get('loss', float('nan')):.4f}, batch PSNR "
+          f"{last.get('psnr', float('nan')):.2f} dB; checkpoint {trainer.checkpoint_path}")
+    return 0
+
+
+def load_model(checkpoint: str, capture, progress: bool = True):
+    """(model, settings, checkpoint dict) rebuilt from a checkpoint and its capture."""
+    from texvocab.checkpoint import load_checkpoint
+    from texvocab.settings import Settings
+    from texvocab.train import build_model, load_textures
+    from texvocab.vocab import Vocabulary
+
+    ck = load_checkpoint(checkpoint)
+    settings = Settings.from_dict(ck["settings"])
+    capture.num_train = int(ck.get("num_train", capture.num_train))
+    textures = load_textures(capture, settings, progress)
+    model = build_model(capture, settings, textures, Vocabulary.from_dict(ck["vocab"]))
+    missing, unexpected = model.load_state_dict(ck["model"], strict=False)
+    if unexpected or [k for k in missing if not k.startswith("pose_feature.textures")]:
+        raise TexvocabError(f"{checkpoint}: weights do not fit this model (missing "
+                            f"{missing[:3]}, unexpected {unexpected[:3]})")
+    model.eval()
+    return model, settings, ck
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from texvocab.evaluate import build_sets, evaluate_sets, write_report
+    from texvocab.train import march_settings
+
+    cap = _open(args)
+    model, settings, ck = load_model(args.checkpoint, cap)
+    sets = build_sets(cap, settings, args.per_set)
+    t0 = time.perf_counter()
+    table, records, grids = evaluate_sets(model, sets, march_settings(settings))
+    out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
+    paths = write_report(out, table, records, grids,
+                         {"checkpoint": str(args.checkpoint), "step": int(ck["step"]),
+                          "capture": str(args.capture), "settings": settings.to_dict()})
+    print(paths[0].read_text())
+    print(f"evaluated {sum(len(v) for v in sets.values())} images in "
+          f"{time.perf_counter() - t0:.1f} s; report in {out.resolve()}")
     return 0

@@ -148,7 +148,7 @@ class PoseFeature(nn.Module):
             if idx.numel() == 0:
                 continue  # no point attends to a part whose keys use this frame
             h = sample_maps(ctx.features[u], uv[idx])
-            feats = feats.index_add(0, idx, h * coef[idx, u, None].to(h))
+            feats.index_add_(0, idx, h * coef[idx, u, None].to(h))
             sampled += idx.numel()
         ctx.stats = {"frames": int(coef.shape[1]), "samples": sampled, "points": n}
         return FeatureOutput(feats.to(points.dtype), uv, skin, dist, closest, valid)

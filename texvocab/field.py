@@ -31,7 +31,7 @@ class FieldSettings:
     hidden: int = 128
     sdf_layers: int = 3
     color_layers: int = 2
-    beta_init: float = 0.02
+    beta_init: float = 0.005
     beta_min: float = 1e-4
     shell_width: float = 0.04  # points farther from the body count as empty space
 
