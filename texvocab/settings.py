@@ -27,8 +27,8 @@ class Settings:
     # field
     field: FieldSettings = field(default_factory=FieldSettings)
     # rendering (S/A)
-    coarse_samples: int = 24
-    fine_samples: int = 16
+    coarse_samples: int = 18  # per 2δ of in-shell path (see MarchSettings)
+    fine_samples: int = 8
     early_stop_eps: float = 1e-3
     image_scale: float = 1.0  # render at this fraction of the capture's resolution
     # training

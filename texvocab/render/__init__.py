@@ -1,0 +1,22 @@
+"""CPU volume renderer: shell bounds around the posed body, coarse-to-fine marcher with
+early termination, progressive levels, and a uniform reference marcher."""
+from texvocab.render.march import Field, Marched, coarse_pass, evaluate_field, march_until_opaque
+from texvocab.render.marcher import (
+    MarchSettings,
+    RayResult,
+    RenderCancelled,
+    RenderResult,
+    RenderStats,
+    render_image,
+    render_rays,
+)
+from texvocab.render.progressive import progressive_render
+from texvocab.render.reference import composite_reference, mesh_bbox, ray_box, render_image_uniform
+from texvocab.render.samples import RaySamples, composite, sample_pdf
+from texvocab.render.shell import ShellBounds, ShellGeometry, ShellPath, shell_bounds, trace_path
+
+__all__ = ["Field", "MarchSettings", "Marched", "RayResult", "RaySamples", "RenderCancelled",
+           "RenderResult", "RenderStats", "ShellBounds", "ShellGeometry", "ShellPath",
+           "coarse_pass", "composite", "composite_reference", "evaluate_field",
+           "march_until_opaque", "mesh_bbox", "progressive_render", "ray_box", "render_image",
+           "render_image_uniform", "render_rays", "sample_pdf", "shell_bounds", "trace_path"]

@@ -1,0 +1,300 @@
+"""The thin shell {x : |d(x)| <= δ} around the posed body, where d is the distance to the
+posed mesh: which rays hit it, where along them, and which samples lie inside it.
+
+Everything here is geometry only (no field evaluations) and conservative by
+construction: a ray that passes within δ of the surface is never culled and no point
+within δ of the surface is ever skipped. Two structures, built once per posed mesh by
+:meth:`ShellGeometry.build`:
+
+* **Bounding balls** for culling and [near, far]. The surface is sampled densely (every
+  surface point lies within ``r0`` of a sample); the samples are binned into cubes of side
+  δ, and each bin becomes a ball at the mean of its samples with radius
+  ``δ + r0 + (farthest sample of the bin)``. Any x with d(x) <= δ lies in some ball
+  (triangle inequality), so the shell is inside the union of balls.
+  :meth:`ShellGeometry.image_bounds` splats the balls into the image (exact ray-sphere
+  intersection for every pixel inside each ball's projected bounding box), giving per
+  pixel ``hit`` and the ray-distance interval [near, far] (``t`` along the unit ray, not
+  camera z). Balls straddling the camera plane (camera inside or next to the shell) are
+  tested against every pixel; near clamps at 0.
+* **Occupancy grid** for sample placement. A path step of length s = h/2 is kept if its
+  midpoint's voxel (side h, default 1 cm) is marked; a voxel is marked if its centre c
+  has d(c) <= δ + s/2 + h√3/2, so every point within δ + s/2 of the surface lies in a
+  marked voxel, and every shell point is within s/2 of a kept step's midpoint. d(c) is
+  bracketed by a Euclidean distance transform of the voxels holding surface samples
+  (error at most h√3/2 + r0); the voxels it cannot decide get the exact distance of
+  their centre (:class:`~texvocab.surface.SurfaceIndex`), or are all marked when
+  ``exact=False``. :func:`trace_path` walks each ray from near to far and returns its
+  *path*: the kept steps, gaps removed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from texvocab.surface import SurfaceIndex
+
+_MAX_PAIRS = 2_000_000  # (ball, pixel) pairs per batch in the splat
+
+
+@dataclass
+class ShellBounds:
+    """Per pixel of one camera: ``hit`` (H, W) bool, ``near``/``far`` (H, W) float32 ray
+    distances (metres along the unit ray from the camera centre), zero where not hit."""
+
+    hit: torch.Tensor
+    near: torch.Tensor
+    far: torch.Tensor
+
+
+def surface_samples(vertices: np.ndarray, faces: np.ndarray,
+                    spacing: float) -> tuple[np.ndarray, float]:
+    """Points (P, 3) on the mesh and r0 such that every surface point is within r0 of
+    one; r0 <= ``spacing`` unless a face is wider than 32 spacings (faces are cut into
+    n² congruent sub-triangles whose centroids are the samples; r0 is the largest
+    sub-triangle's centroid-to-corner distance)."""
+    tri = vertices[faces]  # (F, 3, 3)
+    centroid = tri.mean(1)
+    radius = np.sqrt(((tri - centroid[:, None]) ** 2).sum(-1).max(1))
+    n_sub = np.clip(np.ceil(radius / spacing), 1, 32).astype(np.int64)
+    points = []
+    for n in np.unique(n_sub):
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        up, down = i + j <= n - 1, i + j <= n - 2
+        vw = np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], 1),
+                             np.stack([i[down] + 2 / 3, j[down] + 2 / 3], 1)]) / n
+        bary = np.column_stack([1 - vw.sum(1), vw])
+        points.append(np.einsum("sk,fkd->fsd", bary, tri[n_sub == n]).reshape(-1, 3))
+    return np.concatenate(points), float((radius / n_sub).max(initial=0.0))
+
+
+@dataclass
+class ShellGeometry:
+    """Bounding balls and occupancy grid of the δ-shell of one posed mesh (see module doc).
+
+    width: δ (metres). voxel: h. step: s = h/2, the path resolution of :func:`trace_path`.
+    centers: (B, 3) float64 ball centres, radii: (B,) float64.
+    origin: (3,) grid corner (world); occupied: (X, Y, Z) bool voxels.
+    """
+
+    width: float
+    voxel: float
+    step: float
+    centers: np.ndarray
+    radii: np.ndarray
+    origin: np.ndarray
+    occupied: torch.Tensor
+
+    @classmethod
+    def build(cls, vertices, faces, width: float = 0.04, voxel: float = 0.01,
+              exact: bool = True, index: SurfaceIndex | None = None) -> "ShellGeometry":
+        """From posed vertices (V, 3) and faces (F, 3) (tensors or arrays), shell width δ
+        and voxel size h (smaller is tighter but costs a bigger grid).
+
+        ``exact``: voxels the distance transform cannot decide get the exact distance of
+        their centre (``index``, a :class:`SurfaceIndex` of this mesh, is built if not
+        given); False keeps them all (faster build, looser shell)."""
+        v = np.asarray(torch.as_tensor(vertices).detach().cpu(), dtype=np.float64)
+        f = np.asarray(torch.as_tensor(faces).cpu(), dtype=np.int64)
+        h = float(voxel)
+        samples, r0 = surface_samples(v, f, h / 2)
+        key = np.floor((samples - samples.min(0)) / width).astype(np.int64)
+        span = key.max(0) + 1
+        _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2],
+                               return_inverse=True)
+        count = np.bincount(inverse)
+        centers = np.stack([np.bincount(inverse, samples[:, k]) for k in range(3)], 1)
+        centers /= count[:, None]
+        spread = np.zeros(len(count))
+        np.maximum.at(spread, inverse, np.linalg.norm(samples - centers[inverse], axis=1))
+        radii = spread + r0 + width
+        step = h / 2
+        reach = width + step / 2 + h * np.sqrt(3) / 2  # centre distance that must be kept
+        slack = h * np.sqrt(3) / 2
+        origin = v.min(0) - reach - slack - r0 - 2 * h
+        shape = np.ceil((v.max(0) + reach + slack + r0 + 2 * h - origin) / h).astype(np.int64)
+        surface = np.ones(tuple(shape), bool)
+        ijk = np.floor((samples - origin) / h).astype(np.int64)
+        surface[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = False
+        near_voxel = ndimage.distance_transform_edt(surface) * h  # d(c) within ±(slack + r0)
+        occupied = near_voxel <= reach - slack
+        unsure = np.argwhere(~occupied & (near_voxel <= reach + slack + r0))
+        if exact and len(unsure):
+            index = index or SurfaceIndex(v, f)
+            dist = np.asarray(index.project(origin + (unsure + 0.5) * h,
+                                            max_distance=reach).distance)
+            keep = unsure[np.abs(dist) <= reach]
+        else:
+            keep = unsure
+        occupied[keep[:, 0], keep[:, 1], keep[:, 2]] = True
+        return cls(float(width), h, step, centers, radii, origin, torch.from_numpy(occupied))
+
+    def contains(self, points: torch.Tensor) -> torch.Tensor:
+        """(N,) bool: points (N, 3) whose voxel is occupied (True for every point within
+        δ + step/2 of the surface; also for some points a little farther)."""
+        origin = torch.as_tensor(self.origin, dtype=points.dtype)
+        ijk = torch.floor((points - origin) / self.voxel).long()
+        shape = torch.tensor(self.occupied.shape)
+        inside = ((ijk >= 0) & (ijk < shape)).all(1)
+        flat = (ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2]
+        out = torch.zeros(len(points), dtype=torch.bool)
+        out[inside] = self.occupied.view(-1)[flat[inside]]
+        return out
+
+    def ray_bounds(self, origins: torch.Tensor, dirs: torch.Tensor,
+                   chunk: int = 1024) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Brute force over all balls for arbitrary rays (training batches; the reference
+        for :meth:`image_bounds`). origins, dirs (R, 3), dirs unit.
+
+        Returns hit (R,) bool, near (R,), far (R,) float32 ray distances (0 if no hit).
+        """
+        c = torch.from_numpy(self.centers)
+        r2 = torch.from_numpy(self.radii) ** 2
+        near, far = [], []
+        for s in range(0, len(origins), chunk):
+            rel = c[None] - origins[s:s + chunk, None].double()
+            m = (rel * dirs[s:s + chunk, None].double()).sum(-1)
+            h2 = r2 - ((rel * rel).sum(-1) - m * m)
+            root = h2.clamp(min=0).sqrt()
+            ok = (h2 >= 0) & (m + root > 0)
+            near.append(torch.where(ok, m - root, torch.inf).amin(1))
+            far.append(torch.where(ok, m + root, -torch.inf).amax(1))
+        return _finish(torch.cat(near), torch.cat(far))
+
+    def image_bounds(self, camera) -> ShellBounds:
+        """Per-pixel hit and [near, far] for a :class:`~texvocab.capture.Camera` (pixel
+        centres, as :meth:`Camera.pixel_rays`), by splatting the bounding balls."""
+        H, W = camera.height, camera.width
+        p = self.centers @ camera.R.T + camera.t  # (B, 3) camera frame
+        rho = self.radii
+        ys, xs = np.mgrid[0:H, 0:W]
+        d = np.stack([xs.ravel(), ys.ravel(), np.ones(H * W)], 1) @ np.linalg.inv(camera.K).T
+        d = torch.from_numpy(d / np.linalg.norm(d, axis=1, keepdims=True))
+        near = torch.full((H * W,), torch.inf, dtype=torch.float64)
+        far = torch.full((H * W,), -torch.inf, dtype=torch.float64)
+        front = p[:, 2] > rho * (1 + 1e-9)
+        for b, pix in _splat_pairs(p[front], rho[front], camera.K, W, H):
+            _reduce(near, far, d[pix], torch.from_numpy(p[front][b]),
+                    torch.from_numpy(rho[front][b]), pix)
+        near_plane = np.flatnonzero(~front & (p[:, 2] >= -rho))
+        everything = torch.arange(H * W).repeat(8)
+        for k in range(0, len(near_plane), 8):  # rare: camera inside or next to the shell
+            b = torch.from_numpy(near_plane[k:k + 8]).repeat_interleave(H * W)
+            _reduce(near, far, d.repeat(8, 1)[:len(b)], torch.from_numpy(p)[b],
+                    torch.from_numpy(rho)[b], everything[:len(b)])
+        hit, n, f = _finish(near, far)
+        return ShellBounds(hit.view(H, W), n.view(H, W), f.view(H, W))
+
+
+def shell_bounds(vertices, faces, camera, width: float = 0.04) -> ShellBounds:
+    """Per-pixel hit and [near, far] ray distances of the δ-shell of a posed mesh seen by
+    ``camera`` (builds a :class:`ShellGeometry`; keep one to reuse it across views)."""
+    return ShellGeometry.build(vertices, faces, width).image_bounds(camera)
+
+
+def _reduce(near: torch.Tensor, far: torch.Tensor, d: torch.Tensor, p: torch.Tensor,
+            rho: torch.Tensor, pix: torch.Tensor) -> None:
+    """Ray-sphere entry/exit of rays d (P, 3) from the origin with spheres (p (P, 3),
+    rho (P,)); min/max them into near/far (H*W,) at pixel indices pix (P,)."""
+    m = (d * p).sum(1)
+    h2 = rho * rho - ((p * p).sum(1) - m * m)
+    root = h2.clamp(min=0).sqrt()
+    ok = (h2 >= 0) & (m + root > 0)
+    near.scatter_reduce_(0, pix[ok], (m - root)[ok], reduce="amin")
+    far.scatter_reduce_(0, pix[ok], (m + root)[ok], reduce="amax")
+
+
+def _finish(near: torch.Tensor, far: torch.Tensor):
+    """(hit, near clamped at 0, far) float32, zeros where not hit."""
+    hit = far > near.clamp(min=0)
+    zero = torch.zeros_like(near)
+    return (hit, torch.where(hit, near.clamp(min=0), zero).float(),
+            torch.where(hit, far, zero).float())
+
+
+def _splat_pairs(p: np.ndarray, rho: np.ndarray, K: np.ndarray, width: int, height: int):
+    """Yield (ball ids, pixel ids) for every pixel centre inside each ball's projected
+    bounding box; balls p (B, 3) in the camera frame, strictly in front (z > rho)."""
+    lo_x, hi_x = _tangent_range(p[:, 0], p[:, 2], rho)
+    lo_y, hi_y = _tangent_range(p[:, 1], p[:, 2], rho)
+    skew = K[0, 1]
+    sk_lo, sk_hi = np.minimum(skew * lo_y, skew * hi_y), np.maximum(skew * lo_y, skew * hi_y)
+    x0 = np.ceil(K[0, 0] * lo_x + sk_lo + K[0, 2] - 1e-6)
+    x1 = np.floor(K[0, 0] * hi_x + sk_hi + K[0, 2] + 1e-6)
+    y0 = np.ceil(K[1, 1] * lo_y + K[1, 2] - 1e-6)
+    y1 = np.floor(K[1, 1] * hi_y + K[1, 2] + 1e-6)
+    x0, y0 = np.clip(x0, 0, width), np.clip(y0, 0, height)
+    x1, y1 = np.clip(x1, -1, width - 1), np.clip(y1, -1, height - 1)
+    bw = torch.from_numpy((x1 - x0 + 1).clip(min=0)).long()
+    bh = torch.from_numpy((y1 - y0 + 1).clip(min=0)).long()
+    x0, y0 = torch.from_numpy(x0).long(), torch.from_numpy(y0).long()
+    count = bw * bh
+    ids = torch.nonzero(count > 0).squeeze(1)
+    cum = torch.cumsum(count[ids], 0)
+    start = 0
+    while start < len(ids):
+        base = int(cum[start - 1]) if start else 0
+        stop = max(int(torch.searchsorted(cum, base + _MAX_PAIRS, right=True)), start + 1)
+        batch = ids[start:stop]
+        n = count[batch]
+        b = torch.repeat_interleave(batch, n)
+        k = torch.arange(len(b)) - torch.repeat_interleave(torch.cumsum(n, 0) - n, n)
+        px, py = x0[b] + k % bw[b], y0[b] + k // bw[b]
+        yield b.numpy(), py * width + px
+        start = stop
+
+
+def _tangent_range(a: np.ndarray, z: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Range of a/z over balls (centre (a, z) in a plane through the camera, radius rho,
+    z > rho): tan(atan2(a, z) -/+ asin(rho / |(a, z)|))."""
+    angle = np.arctan2(a, z)
+    half = np.arcsin(np.clip(rho / np.hypot(a, z), 0, 1))
+    return np.tan(angle - half), np.tan(angle + half)
+
+
+@dataclass
+class ShellPath:
+    """The part of each ray that lies in the shell, as a map from the path coordinate u
+    (metres of in-shell ray, gaps removed) to the ray distance t.
+
+    near: (R,) where the walk starts. cell: (R,) step length. u_end: (R, M) path length
+    up to the end of each step (steps outside the shell add nothing).
+    """
+
+    near: torch.Tensor
+    cell: torch.Tensor
+    u_end: torch.Tensor
+
+    @property
+    def length(self) -> torch.Tensor:
+        """(R,) in-shell path length of each ray."""
+        return self.u_end[:, -1]
+
+    def rows(self, index: torch.Tensor) -> "ShellPath":
+        """The paths of rays ``index`` (K,)."""
+        return ShellPath(self.near[index], self.cell[index], self.u_end[index])
+
+    def to_t(self, u: torch.Tensor) -> torch.Tensor:
+        """Ray distances (R, K) of path positions u (R, K) in [0, length]."""
+        j = torch.searchsorted(self.u_end, u.contiguous()).clamp(max=self.u_end.shape[1] - 1)
+        cell_end = self.near[:, None] + (j + 1).to(u.dtype) * self.cell[:, None]
+        return cell_end - (self.u_end.gather(1, j) - u)
+
+
+def trace_path(shell: ShellGeometry | None, origins: torch.Tensor, dirs: torch.Tensor,
+               near: torch.Tensor, far: torch.Tensor) -> ShellPath:
+    """Walk rays (origins, dirs (R, 3)) from near to far (R,) and keep the steps inside
+    the shell's occupancy grid. ``shell=None`` keeps all of [near, far] (one step)."""
+    span = (far - near).clamp(min=0)
+    if shell is None:
+        return ShellPath(near, span, span[:, None])
+    s = shell.step
+    m = torch.ceil(span / s).long()
+    j = torch.arange(max(int(m.max()) if len(m) else 0, 1))
+    rows, cols = torch.nonzero(j < m[:, None], as_tuple=True)
+    t = near[rows] + (cols.to(near.dtype) + 0.5) * s
+    occ = torch.zeros((len(near), len(j)), dtype=near.dtype)
+    occ[rows, cols] = shell.contains(origins[rows] + t[:, None] * dirs[rows]).to(near.dtype)
+    return ShellPath(near, torch.full_like(near, s), torch.cumsum(occ * s, 1))
