@@ -42,6 +42,7 @@ class Settings:
     lambda_perceptual: float = 0.05  # used only when LPIPS weights are present
     patch_size: int = 24  # square patches for the perceptual term
     checkpoint_every: int = 250
+    max_minutes: float | None = None  # stop (with a checkpoint) after this much training time
     seed: int = 0
 
     def to_dict(self) -> dict:
@@ -92,8 +93,12 @@ def _parse(raw: str, current, key: str):
             return int(raw)
         if isinstance(current, float):
             return float(raw)
-        if isinstance(current, list) or current is None and "views" in key:
-            return None if raw.lower() == "none" else [int(v) for v in raw.split(",") if v]
+        if raw.lower() == "none" and (current is None or key.endswith("views")):
+            return None
+        if isinstance(current, list) or "views" in key:
+            return [int(v) for v in raw.split(",") if v]
+        if current is None:
+            return float(raw)
     except ValueError:
         raise TexvocabError(f"--set {key}={raw}: expected a {type(current).__name__}") from None
     return raw

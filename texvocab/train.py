@@ -223,7 +223,12 @@ class Trainer:
 
             bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
         t0 = time.perf_counter()
+        budget = None if self.s.max_minutes is None else 60.0 * self.s.max_minutes
         while self.step < end:
+            if budget is not None and time.perf_counter() - t0 > budget:
+                log.info("time budget of %.1f min reached at step %d", self.s.max_minutes,
+                         self.step)
+                break
             rec = self.train_step()
             logs.append(rec)
             if bar is not None:
@@ -234,8 +239,8 @@ class Trainer:
                 self.save()
         if bar is not None:
             bar.close()
-        if self.step == end and not self.checkpoint_path.is_file():
-            self.save()
+        if logs and self.step % self.s.checkpoint_every:
+            self.save()  # stopped by the time budget, or at an end between intervals
         if logs:
             log.info("trained %d steps in %.1f s", len(logs), time.perf_counter() - t0)
         return logs
