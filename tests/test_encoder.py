@@ -126,15 +126,28 @@ def test_old_checkpoint_explicit_path_and_name_preference(tmp_path, standin_stat
     assert find_resnet34_weights() == newer
 
 
-def test_auto_falls_back_to_small_with_one_log_line_and_trains(empty_home, caplog):
+def test_auto_falls_back_to_pyramid_with_one_log_line(empty_home, caplog):
     with caplog.at_level(logging.INFO, logger="texvocab"):
         e = build_encoder()
         build_encoder("auto")
     assert len(caplog.records) == 1
     msg = caplog.records[0].getMessage()
     assert caplog.records[0].levelno == logging.WARNING
-    assert str(empty_home / "hub" / "checkpoints") in msg and "'small'" in msg
+    assert str(empty_home / "hub" / "checkpoints") in msg and "'pyramid'" in msg
     assert "resnet34-*.pth" in msg and "\n" not in msg
+    assert (e.name, e.pretrained, e.trainable, e.feature_dim) == ("pyramid", False, False, 12)
+    x = torch.rand(1, 3, 64, 64)
+    out = e(x)
+    assert out.shape == (1, 12, 32, 32)
+    # level 0 is the texture box-filtered 2x2 (ImageNet-normalised)
+    mean = torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1)
+    std = torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1)
+    expect = torch.nn.functional.avg_pool2d((x - mean) / std, 2)
+    assert torch.allclose(out[:, :3], expect, atol=1e-6)
+
+
+def test_small_encoder_trains(empty_home):
+    e = build_encoder("small")
     assert (e.name, e.pretrained, e.trainable, e.feature_dim) == ("small", False, True, 192)
     out = e(torch.rand(1, 3, 256, 256))
     assert out.shape == (1, 192, 128, 128) and torch.isfinite(out).all()

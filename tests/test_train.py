@@ -40,7 +40,7 @@ def capture(tmp_path_factory):
 
 def test_loss_falls_and_psnr_rises(capture, tmp_path):
     cap = open_capture(capture)
-    trainer = Trainer(cap, tiny_settings(), tmp_path / "run", progress=False)
+    trainer = Trainer(cap, tiny_settings(encoder="auto"), tmp_path / "run", progress=False)
     logs = trainer.run()
     first = np.mean([r["psnr"] for r in logs[:8]])
     last = np.mean([r["psnr"] for r in logs[-8:]])

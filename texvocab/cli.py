@@ -28,6 +28,15 @@ def cmd_demo(args) -> int:
     print(f"synthetic capture ready in {time.perf_counter() - t0:.1f} s")
     print(f"  capture (ZJU-MoCap layout): {root.resolve()}")
     print(f"  views x frames sheet:       {sheet.resolve()}")
+    if args.train_minutes > 0:
+        from texvocab.demo import demo_avatar
+
+        t0 = time.perf_counter()
+        ckpt, report = demo_avatar(args.out, root, args.train_minutes, args.smpl)
+        print(f"avatar trained and evaluated in {time.perf_counter() - t0:.1f} s")
+        print(f"  checkpoint: {ckpt.resolve()}")
+        print(f"  metrics:    {report.resolve()} (grids: {report.parent.resolve()}/grid_*.png)")
+        print(report.read_text())
     return 0
 
 
@@ -45,15 +54,18 @@ def build_parser() -> argparse.ArgumentParser:
         description="TexVocab: pose-driven avatars from multi-view video (CVPR 2024).")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("demo", help="render what exists: body poses and a synthetic capture",
+    p = sub.add_parser("demo", help="body poses, a synthetic capture, a short avatar run",
                        description="Render the body (default, or --smpl) in six poses, front "
                                    "and side, offscreen; synthesise the default multi-view "
-                                   "capture (reused if present); write PNGs and print where "
-                                   "they are.")
+                                   "capture (reused if present), prepare its texture maps, "
+                                   "train a short avatar and evaluate it; write PNGs and "
+                                   "print where they are.")
     p.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     p.add_argument("--size", type=int, default=320, help="tile size in pixels (default: 320)")
     p.add_argument("--frames", type=int, default=None,
                    help="synthesise only the first N frames of the default capture")
+    p.add_argument("--train-minutes", type=float, default=3.0,
+                   help="train the demo avatar this long (default 3; 0 skips training)")
     _add_smpl(p)
     p.set_defaults(func=cmd_demo)
 

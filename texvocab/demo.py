@@ -73,3 +73,27 @@ def demo_capture(out_dir: str | Path, smpl: str | None = None,
     sheet = save_png(out_dir / "capture_sheet.png",
                      contact_sheet(rows, [c.name for c in cap.cameras], labels))
     return root, sheet
+
+
+def demo_avatar(out_dir: str | Path, capture_root: Path, minutes: float = 3.0,
+                smpl: str | None = None) -> tuple[Path, Path]:
+    """Prepare texture maps, train a short avatar (``minutes`` of wall time, resumed on
+    later runs until it has had that long) and evaluate it; returns (checkpoint, report)."""
+    from texvocab.capture import open as open_capture
+    from texvocab.evaluate import build_sets, evaluate_sets, write_report
+    from texvocab.settings import Settings
+    from texvocab.train import Trainer, march_settings
+
+    run = Path(out_dir) / "avatar"
+    cap = open_capture(capture_root, body=load_body(smpl))
+    settings = Settings(iterations=100000, max_minutes=minutes, checkpoint_every=100)
+    trainer = Trainer(cap, settings, run)
+    trainer.resume()
+    trainer.run()
+    trainer.model.eval()
+    sets = build_sets(cap, settings, per_set=2)
+    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(settings))
+    paths = write_report(run / "eval", table, records, grids,
+                         {"checkpoint": str(trainer.checkpoint_path), "step": trainer.step,
+                          "capture": str(capture_root), "settings": settings.to_dict()})
+    return trainer.checkpoint_path, paths[0]
