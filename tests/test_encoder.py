@@ -196,7 +196,7 @@ def _head(state, upto="bn1.num_batches_tracked"):
                     r"got \(64, 64, 1, 1\)"),
     ("missing", r"key 'layer1.0.conv1.weight' missing \(expected shape \(64, 64, 3, 3\)\)"),
     ("unexpected", r"unexpected key 'layer5.0.conv1.weight'"),
-    ("not_a_dict", r"expected a ResNet34 state dict, got list"),
+    ("not_a_dict", r"expected a torchvision ResNet34 state dict, got list"),
     ("empty_file", r"not loadable as a torch state dict with weights_only=True \(EOFError\)"),
 ])
 def test_wrong_checkpoint_raises_one_line_naming_file_and_key(tmp_path, standin_state,

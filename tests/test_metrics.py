@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 
+from texvocab import weights as _weights
 from texvocab.errors import AssetError
 from texvocab.metrics import (
     LPIPS,
     PSNR_MAX_DB,
-    _weights,
     evaluate_pair,
     fid,
     frechet,

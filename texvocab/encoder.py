@@ -41,7 +41,6 @@ checkpoint's file name is not verified; its keys and shapes are.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
 
@@ -50,6 +49,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from texvocab.errors import AssetError
+from texvocab.weights import load_state_dict
 
 ENCODER_NAMES = ("auto", "resnet34", "resnet34-scratch", "small", "pyramid")
 DEFAULT_ENCODER = "auto"
@@ -223,49 +223,16 @@ def _resnet34_layout() -> dict[str, torch.Size]:
     return {k: v.shape for k, v in ResNet34(with_fc=False).state_dict().items()}
 
 
-def _load_error_reason(e: Exception) -> str:
-    """The informative line of a ``torch.load`` error (torch wraps it in generic advice,
-    including re-running with ``weights_only=False``, which we never suggest)."""
-    lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-    boiler = ("Weights only load failed", "Please file an issue", "Check the documentation")
-    useful = [ln for ln in lines if not ln.startswith(boiler)]
-    reason = (useful or lines or [""])[0]
-    return f"{type(e).__name__}: {reason}" if reason else type(e).__name__
-
-
 def load_resnet34_state_dict(path: str | Path) -> dict[str, torch.Tensor]:
     """A torchvision ResNet34 state dict from ``path`` (weights-only unpickling), checked
     against :class:`ResNet34`; ``fc.*`` keys are dropped and a missing
-    ``num_batches_tracked`` is filled with 0, so ``ResNet34(with_fc=False)`` loads the
-    result with ``strict=True``. Raises :class:`AssetError` naming the file and the
-    first offending key."""
-    path = Path(path)
-    if not path.is_file():
-        raise AssetError(f"{path}: ResNet34 weights file not found")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - any unreadable/unsafe file is an asset problem
-        raise AssetError(f"{path}: not loadable as a torch state dict with weights_only=True "
-                         f"({_load_error_reason(e)})") from None
-    if not isinstance(state, Mapping):
-        raise AssetError(f"{path}: expected a ResNet34 state dict, got {type(state).__name__}")
+    ``num_batches_tracked`` is filled with 0 (absent from pre-2018 torchvision files), so
+    ``ResNet34(with_fc=False)`` loads the result with ``strict=True``. Raises
+    :class:`AssetError` naming the file and the first offending key."""
     expected = _resnet34_layout()
-    out = {}
-    for key, want in expected.items():
-        got = state.get(key)
-        if got is None and key.endswith("num_batches_tracked"):
-            got = torch.tensor(0)  # absent from pre-2018 torchvision checkpoints
-        if got is None:
-            raise AssetError(f"{path}: key '{key}' missing (expected shape {tuple(want)})")
-        if not isinstance(got, torch.Tensor) or got.shape != want:
-            shape = tuple(got.shape) if isinstance(got, torch.Tensor) else type(got).__name__
-            raise AssetError(f"{path}: key '{key}' expected shape {tuple(want)}, got {shape}")
-        out[key] = got
-    for key in state:
-        if key not in expected and not key.startswith("fc."):
-            raise AssetError(f"{path}: unexpected key '{key}', not a torchvision ResNet34 "
-                             "state dict")
-    return out
+    defaults = {k: torch.tensor(0) for k in expected if k.endswith("num_batches_tracked")}
+    return load_state_dict(Path(path), "torchvision ResNet34", expected, ("fc.",), defaults,
+                           cast_float=False)
 
 
 def _resnet34_encoder(weights: Path | None, num_levels: int) -> TextureEncoder:

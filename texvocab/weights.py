@@ -1,4 +1,4 @@
-"""Finding and checking the pretrained files the perceptual metrics need (no downloads).
+"""Finding and checking pretrained files (texture encoder, LPIPS, FID); no downloads.
 
 Checkpoints are read with ``torch.load(weights_only=True)``: a pickle that names any
 code is refused before any of it runs. Missing optional files are reported on the
@@ -55,11 +55,14 @@ def _load_error_reason(e: Exception) -> str:
 
 
 def load_state_dict(path: Path, what: str, expected: Mapping[str, torch.Size],
-                    ignore_prefixes: tuple[str, ...] = ()) -> dict[str, torch.Tensor]:
+                    ignore_prefixes: tuple[str, ...] = (),
+                    defaults: Mapping[str, torch.Tensor] | None = None,
+                    cast_float: bool = True) -> dict[str, torch.Tensor]:
     """The state dict in ``path`` restricted to the keys of ``expected`` (key -> shape),
     read with weights-only unpickling. Keys starting with ``ignore_prefixes`` are
-    dropped; any other missing, extra or wrongly shaped key raises :class:`AssetError`
-    naming the file and the key. ``what`` names the file's content in messages."""
+    dropped; keys in ``defaults`` may be absent and then take that value; any other
+    missing, extra or wrongly shaped key raises :class:`AssetError` naming the file and
+    the key. ``what`` names the file's content in messages."""
     if not path.is_file():
         raise AssetError(f"{path}: {what} file not found")
     try:
@@ -72,13 +75,15 @@ def load_state_dict(path: Path, what: str, expected: Mapping[str, torch.Size],
     out = {}
     for key, want in expected.items():
         got = state.get(key)
+        if got is None and defaults is not None and key in defaults:
+            got = defaults[key]
         if got is None:
             raise AssetError(f"{path}: key '{key}' missing (expected shape {tuple(want)}); "
                              f"not a {what} state dict")
         if not isinstance(got, torch.Tensor) or got.shape != want:
             shape = tuple(got.shape) if isinstance(got, torch.Tensor) else type(got).__name__
             raise AssetError(f"{path}: key '{key}' expected shape {tuple(want)}, got {shape}")
-        out[key] = got.float()
+        out[key] = got.float() if cast_float and got.is_floating_point() else got
     for key in state:
         if key not in expected and not str(key).startswith(ignore_prefixes):
             raise AssetError(f"{path}: unexpected key '{key}', not a {what} state dict")
