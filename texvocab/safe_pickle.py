@@ -149,3 +149,18 @@ def _plain_tree(value, source: str, key: str = ""):
     if isinstance(value, list):
         return [_plain_tree(v, source, key) for v in value]
     return _to_plain(value, key, source)
+
+
+def read_npz(path: str | Path, what: str = "file") -> dict:
+    """Every array of an ``.npz`` (``allow_pickle=False``: object arrays are refused);
+    one :class:`AssetError` naming the file for a missing or unreadable one."""
+    path = Path(path)
+    if not path.is_file():
+        raise AssetError(f"{what} not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except ValueError as exc:
+        raise AssetError(f"{path}: object arrays are refused in .npz files ({exc})") from None
+    except Exception as exc:
+        raise AssetError(f"{path}: not a readable .npz ({exc})") from None

@@ -9,7 +9,7 @@ import numpy as np
 
 from texvocab.assets import load_spec, name_is_accepted, require_valid, spec_ref
 from texvocab.errors import AssetError
-from texvocab.safe_pickle import read_pickle
+from texvocab.safe_pickle import read_npz, read_pickle
 
 
 def read_model_arrays(path: str | Path) -> dict:
@@ -21,13 +21,7 @@ def read_model_arrays(path: str | Path) -> dict:
     if path.suffix == ".pkl":
         return read_pickle(path)
     if path.suffix == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as npz:
-                return {k: npz[k] for k in npz.files}
-        except ValueError as exc:
-            raise AssetError(f"{path}: object arrays are refused in .npz model files ({exc})") from None
-        except Exception as exc:
-            raise AssetError(f"{path}: not a readable .npz ({exc})") from None
+        return read_npz(path, "SMPL model file")
     raise AssetError(f"{path}: expected an SMPL model .pkl or .npz; see {spec_ref('smpl_model')}")
 
 

@@ -225,14 +225,10 @@ def ground_truth_renderer(capture) -> tuple[SynthRenderer, list[Camera]]:
 def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Poses (T, 24, 3) and trans (T, 3) from an .npz with ``poses`` ((T, 24, 3) or
     (T, 72)) and optional ``trans`` (T, 3)."""
+    from texvocab.safe_pickle import read_npz
+
     path = Path(path)
-    if not path.is_file():
-        raise AssetError(f"pose file not found: {path}; expected an .npz with 'poses' (T, 24, 3)")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except Exception as exc:
-        raise AssetError(f"{path}: not a readable .npz ({exc})") from None
+    data = read_npz(path, "pose file (an .npz with 'poses' (T, 24, 3))")
     if "poses" not in data:
         raise AssetError(f"{path}: missing key 'poses' (T, 24, 3) axis-angle")
     poses = data["poses"].astype(np.float32)

@@ -22,6 +22,7 @@ from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture
 from texvocab.errors import AssetError
 from texvocab.imageio import atomic_write_bytes, to_uint8
+from texvocab.safe_pickle import read_npz
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 
@@ -73,13 +74,7 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
         image_paths.append(imgs)
         mask_paths.append(masks)
     params_path = root / "smpl_params.npz"
-    if not params_path.is_file():
-        raise AssetError(f"{root}: missing smpl_params.npz (SMPL-X fits)")
-    try:
-        with np.load(params_path, allow_pickle=False) as npz:
-            p = {k: npz[k] for k in npz.files}
-    except Exception as exc:
-        raise AssetError(f"{params_path}: not a readable .npz ({exc})") from None
+    p = read_npz(params_path, "SMPL-X fits (smpl_params.npz)")
     require_valid(p, "thuman_smpl_params", str(params_path))
     n = len(frames)
     if len(p["body_pose"]) < max(frames) + 1:
