@@ -1,0 +1,176 @@
+"""Progressive neural render in a background thread.
+
+The UI thread :meth:`ProgressiveWorker.submit`s the current pose and camera with the
+viewer's version number whenever either changes; the worker renders that job coarse to
+fine (1/8, 1/4, 1/2, 1 of the requested size, :func:`texvocab.render.progressive_render`)
+and hands each finished level back through :meth:`ProgressiveWorker.poll`. A newer
+submission cancels the job in progress: the version is checked between levels and
+between ray chunks, and a level is delivered only if its version is still the newest,
+so stale images never reach the screen.
+
+Torch in the worker runs with few intra-op threads (``threads``, default 1) so the UI
+thread keeps a core for drawing on small machines.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+#: render(job, cancelled) -> iterator of (level, rgb (H_l, W_l, 3), seconds)
+LevelRenderer = Callable[["RenderJob", Callable[[], bool]], Iterator[tuple[int, object, float]]]
+
+
+@dataclass(frozen=True)
+class RenderJob:
+    """One request: the viewer ``version`` it belongs to, pose (24, 3) axis-angle, trans
+    (3,), and a :class:`texvocab.capture.Camera` at the full target size."""
+
+    version: int
+    pose: np.ndarray
+    trans: np.ndarray
+    camera: object
+
+
+@dataclass(frozen=True)
+class RenderFrame:
+    """One delivered level: ``image`` (H, W, 3) float32 in [0, 1]; ``level`` the
+    downscale factor (8, 4, 2, 1); ``seconds`` the wall time of this level;
+    ``elapsed`` since the job was picked up (all levels so far)."""
+
+    version: int
+    level: int
+    image: np.ndarray
+    seconds: float
+    elapsed: float
+
+
+def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
+    """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
+    once, then the levels (as :func:`texvocab.evaluate.render_view` does for one)."""
+    import torch
+
+    from texvocab.render import ShellGeometry, progressive_render
+
+    def render(job: RenderJob, cancelled: Callable[[], bool]):
+        with torch.no_grad():
+            ctx = model.pose_feature.context(job.pose, job.trans)
+            if cancelled():
+                return
+            shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
+                                        index=ctx.index)
+            field = model.for_pose(ctx)
+        yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, march,
+                                      levels=levels, cancelled=cancelled, shell=shell)
+    return render
+
+
+class ProgressiveWorker:
+    """Background thread rendering the newest :class:`RenderJob` level by level.
+
+    ``render`` yields ``(level, rgb, seconds)`` and must stop soon after its
+    ``cancelled()`` argument returns True (progressive_render does, between levels and
+    ray chunks). ``threads``: torch intra-op threads for the worker (None: unchanged).
+    """
+
+    def __init__(self, render: LevelRenderer, threads: int | None = 1):
+        self._render = render
+        self._threads = threads
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._job: RenderJob | None = None
+        self._version = -1
+        self._frame: RenderFrame | None = None
+        self._fresh = False
+        self._busy = False
+        self._stop = False
+        self.delivered: deque[tuple[int, int]] = deque(maxlen=256)  # (version, level), in order
+        self.errors: deque[str] = deque(maxlen=16)
+        self._thread = threading.Thread(target=self._run, name="texvocab-neural", daemon=True)
+        self._thread.start()
+
+    # --- UI thread --------------------------------------------------------------------
+    def submit(self, job: RenderJob) -> None:
+        """Make ``job`` the newest request, cancelling older work; a version already
+        submitted is ignored (the caller bumps the version on every change)."""
+        with self._wake:
+            if job.version == self._version:
+                return
+            self._version = job.version
+            self._job = job
+            self._busy = True
+            self._wake.notify()
+
+    def poll(self) -> RenderFrame | None:
+        """The newest delivered level if not returned before, else None."""
+        with self._lock:
+            if not self._fresh:
+                return None
+            self._fresh = False
+            return self._frame
+
+    @property
+    def latest(self) -> RenderFrame | None:
+        with self._lock:
+            return self._frame
+
+    @property
+    def busy(self) -> bool:
+        """True from a submission until its finest level is delivered (or it fails)."""
+        with self._lock:
+            return self._busy
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self, timeout: float = 10.0) -> bool:
+        """Cancel any work and join the thread; True if it ended within ``timeout``."""
+        with self._wake:
+            self._stop = True
+            self._version += 1  # cancels the job in progress
+            self._wake.notify()
+        self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    # --- worker thread ----------------------------------------------------------------
+    def _run(self) -> None:
+        if self._threads is not None:
+            import torch
+
+            torch.set_num_threads(self._threads)
+        while True:
+            with self._wake:
+                while self._job is None and not self._stop:
+                    self._wake.wait()
+                if self._stop:
+                    return
+                job, self._job = self._job, None
+            self._render_job(job)
+
+    def _stale(self, job: RenderJob) -> bool:
+        return self._stop or job.version != self._version  # int read: atomic under the GIL
+
+    def _render_job(self, job: RenderJob) -> None:
+        start = time.perf_counter()
+        try:
+            for level, rgb, seconds in self._render(job, lambda: self._stale(job)):
+                image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32))
+                frame = RenderFrame(job.version, int(level), image, float(seconds),
+                                    time.perf_counter() - start)
+                with self._lock:
+                    if self._stale(job):
+                        return
+                    self._frame, self._fresh = frame, True
+                    self.delivered.append((job.version, int(level)))
+        except Exception as exc:  # shown in the panel; the worker keeps serving
+            with self._lock:
+                self.errors.append(f"{type(exc).__name__}: {exc}")
+        finally:
+            with self._lock:
+                if not self._stale(job) and self._job is None:
+                    self._busy = False

@@ -1,0 +1,237 @@
+"""The viewer's progressive render worker (app/worker.py), no GL: levels arrive coarse to
+fine with timings, a newer version cancels stale work (stale levels never reach the UI),
+and the thread stops cleanly, also in the middle of a render."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from app.worker import ProgressiveWorker, RenderJob, model_renderer
+from texvocab.capture.camera import Camera
+from texvocab.render import MarchSettings, progressive_render
+from texvocab.render.analytic import SphereField
+
+SETTINGS = MarchSettings(chunk_rays=64, coarse_samples=8, fine_samples=4)
+
+
+def sphere_camera(size: int = 64) -> Camera:
+    """Camera 1.2 m in front of the origin looking along +z (OpenCV)."""
+    K = np.array([[size * 1.2, 0, size / 2], [0, size * 1.2, size / 2], [0, 0, 1]])
+    return Camera(K=K, R=np.eye(3), t=np.array([0.0, 0.0, 1.2]), width=size, height=size)
+
+
+def sphere_mesh():
+    """A coarse icosphere-like mesh (V, 3), (F, 3) around the unit sphere field's surface."""
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=2, radius=0.3)
+    return torch.tensor(m.vertices, dtype=torch.float32), torch.tensor(m.faces)
+
+
+class CountingField:
+    """SphereField that calls ``hook()`` (once armed) on its next evaluation."""
+
+    def __init__(self):
+        self.field = SphereField(radius=0.3)
+        self.hook = None
+
+    def __call__(self, points, dirs):
+        if self.hook is not None:
+            hook, self.hook = self.hook, None
+            hook()
+        return self.field(points, dirs)
+
+
+def sphere_renderer(field, levels=(8, 4, 2, 1), after_level=None):
+    """A LevelRenderer over the real progressive_render; ``after_level(job, level)`` runs
+    after each level is yielded by the marcher (before the worker delivers it)."""
+    v, f = sphere_mesh()
+
+    def render(job, cancelled):
+        for level, rgb, sec in progressive_render(field, job.camera, v, f, SETTINGS, levels,
+                                                  cancelled=cancelled):
+            if after_level is not None:
+                after_level(job, level)
+            yield level, rgb, sec
+    return render
+
+
+def job(version: int, size: int = 64) -> RenderJob:
+    return RenderJob(version, np.zeros((24, 3)), np.zeros(3), sphere_camera(size))
+
+
+def wait_idle(worker: ProgressiveWorker, timeout: float = 30.0) -> None:
+    t0 = time.perf_counter()
+    while worker.busy:
+        assert time.perf_counter() - t0 < timeout, "worker still busy"
+        time.sleep(0.01)
+
+
+def test_levels_arrive_coarse_to_fine_with_timings():
+    worker = ProgressiveWorker(sphere_renderer(CountingField()))
+    seen = []
+    worker.submit(job(1))
+    t0 = time.perf_counter()
+    while worker.busy or worker.latest is None or worker.latest.level != 1:
+        frame = worker.poll()
+        if frame is not None:
+            seen.append(frame)
+        assert time.perf_counter() - t0 < 30
+        time.sleep(0.002)
+    frame = worker.poll()
+    if frame is not None:
+        seen.append(frame)
+    assert worker.stop()
+    assert list(worker.delivered) == [(1, 8), (1, 4), (1, 2), (1, 1)]
+    assert seen[-1].level == 1 and [f.level for f in seen] == sorted(f.level for f in seen)[::-1]
+    assert [f.image.shape for f in seen][-1] == (64, 64, 3)
+    assert all(f.seconds > 0 and f.version == 1 for f in seen)
+    assert all(a.elapsed < b.elapsed for a, b in zip(seen, seen[1:]))
+    centre, corner = seen[-1].image[32, 32], seen[-1].image[0, 0]
+    assert centre.sum() > 0.3 and corner.sum() == 0  # the sphere over a black background
+    assert worker.errors == type(worker.errors)()
+
+
+def test_new_version_cancels_mid_level_and_stale_levels_never_arrive():
+    field = CountingField()
+    state = {}
+    produced = []
+
+    def after_level(j, level):
+        produced.append((j.version, level))
+        if j.version == 1 and level == 8:  # v1 is now marching level 4: change the pose
+            field.hook = lambda: worker.submit(job(2))
+            state["armed"] = True
+
+    calls = []
+    render = sphere_renderer(field, after_level=after_level)
+
+    def spy(j, cancelled):
+        calls.append(j.version)
+        yield from render(j, cancelled)
+
+    worker = ProgressiveWorker(spy)
+    worker.submit(job(1))
+    time.sleep(0.05)
+    wait_idle(worker)
+    assert worker.stop()
+    assert state.get("armed")
+    delivered = list(worker.delivered)
+    assert delivered == [(1, 8), (2, 8), (2, 4), (2, 2), (2, 1)], delivered
+    assert produced == delivered  # v1's level 4 was abandoned mid-march, not finished
+    assert calls == [1, 2]
+    assert worker.latest.version == 2 and worker.latest.level == 1
+
+
+def test_levels_of_an_uncooperative_renderer_are_dropped_once_stale():
+    """Even a renderer that ignores cancelled() cannot deliver a stale level."""
+    release = threading.Event()
+
+    def stubborn(j, cancelled):
+        for level in (8, 4, 2, 1):
+            if j.version == 1 and level == 4:
+                release.wait(10)  # the UI submits version 2 while this level "renders"
+            yield level, np.full((64 // level, 64 // level, 3), j.version / 10, np.float32), 0.01
+
+    worker = ProgressiveWorker(stubborn, threads=None)
+    worker.submit(job(1))
+    t0 = time.perf_counter()
+    while worker.latest is None:
+        assert time.perf_counter() - t0 < 10
+        time.sleep(0.005)
+    worker.submit(job(2))
+    release.set()
+    time.sleep(0.05)
+    wait_idle(worker)
+    assert worker.stop()
+    delivered = list(worker.delivered)
+    assert delivered == [(1, 8), (2, 8), (2, 4), (2, 2), (2, 1)], delivered
+    assert np.allclose(worker.latest.image, 0.2)
+
+
+def test_stop_joins_promptly_during_a_long_render():
+    started = threading.Event()
+
+    def slow(j, cancelled):
+        started.set()
+        while not cancelled():
+            time.sleep(0.005)
+        return
+        yield  # a generator that never yields a level
+
+    worker = ProgressiveWorker(slow, threads=None)
+    worker.submit(job(1))
+    assert started.wait(10) and worker.busy
+    t0 = time.perf_counter()
+    assert worker.stop(timeout=5)
+    assert time.perf_counter() - t0 < 1.0 and not worker.alive
+    assert list(worker.delivered) == []
+
+
+def test_errors_are_reported_and_the_worker_keeps_serving():
+    def flaky(j, cancelled):
+        if j.version == 1:
+            raise ValueError("boom")
+        yield 1, np.ones((4, 4, 3), np.float32), 0.01
+
+    worker = ProgressiveWorker(flaky, threads=None)
+    worker.submit(job(1))
+    time.sleep(0.05)
+    wait_idle(worker)
+    worker.submit(job(2))
+    time.sleep(0.05)
+    wait_idle(worker)
+    assert worker.stop()
+    assert list(worker.errors) == ["ValueError: boom"]
+    assert list(worker.delivered) == [(2, 1)]
+
+
+def test_same_version_is_not_rendered_twice():
+    calls = []
+
+    def once(j, cancelled):
+        calls.append(j.version)
+        yield 1, np.zeros((2, 2, 3), np.float32), 0.0
+
+    worker = ProgressiveWorker(once, threads=None)
+    for _ in range(3):
+        worker.submit(job(7))
+        time.sleep(0.02)
+    wait_idle(worker)
+    assert worker.stop()
+    assert calls == [7]
+
+
+@pytest.mark.parametrize("levels", [(4, 1)])
+def test_model_renderer_uses_the_models_pose_context(levels):
+    """model_renderer builds the per-pose context once and renders its field in levels."""
+    calls = {"context": 0, "for_pose": 0}
+    v, f = sphere_mesh()
+
+    class Ctx:
+        vertices, index = v, None
+
+    class Model:
+        class body:
+            faces = f
+
+        class pose_feature:
+            @staticmethod
+            def context(pose, trans):
+                calls["context"] += 1
+                return Ctx()
+
+        @staticmethod
+        def for_pose(ctx):
+            calls["for_pose"] += 1
+            return SphereField(radius=0.3)
+
+    render = model_renderer(Model, SETTINGS, levels)
+    out = list(render(job(1, 32), lambda: False))
+    assert [lv for lv, _, _ in out] == list(levels)
+    assert tuple(out[-1][1].shape) == (32, 32, 3)
+    assert calls == {"context": 1, "for_pose": 1}
