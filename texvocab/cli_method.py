@@ -110,6 +110,8 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("--out", required=True, help="run folder (checkpoint, logs)")
     p.add_argument("--iterations", type=int, default=None, help="steps (default: settings)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
+                   help="speed/accuracy preset (bench/tradeoff.py); --set applies after it")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a setting, e.g. --set strategy=joint --set field.hidden=64")
     p.add_argument("--train-frames", type=int, default=None,
@@ -125,15 +127,20 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("capture", help="capture folder (the one trained on)")
     p.add_argument("--out", default=None, help="report folder (default: next to the checkpoint)")
     p.add_argument("--per-set", type=int, default=4, help="frames per set (default 4)")
+    p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
+                   help="render preset (render knobs only; the rest is in the checkpoint)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a render knob, e.g. --set coarse_samples=24")
     add_smpl(p)
     p.set_defaults(func=cmd_eval)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from texvocab.settings import Settings
+    from texvocab.settings import Settings, preset_overrides
     from texvocab.train import Trainer
 
-    settings = Settings().with_overrides(args.overrides)
+    pre = preset_overrides(args.preset) if args.preset else []
+    settings = Settings().with_overrides(pre + args.overrides)
     if args.iterations is not None:
         settings.iterations = args.iterations
     cap = _open(args)
@@ -172,7 +179,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from texvocab.train import march_settings
 
     cap = _open(args)
+    from texvocab.settings import render_overrides
+
     model, settings, ck = load_model(args.checkpoint, cap)
+    settings = render_overrides(settings, args.preset, args.overrides)
     sets = build_sets(cap, settings, args.per_set)
     t0 = time.perf_counter()
     table, records, grids = evaluate_sets(model, sets, march_settings(settings))

@@ -31,6 +31,7 @@ class Settings:
     fine_samples: int = 8
     early_stop_eps: float = 1e-3
     image_scale: float = 1.0  # render at this fraction of the capture's resolution
+    shell_width: float | None = None  # marcher δ (m); None: the field's shell_width
     # training
     iterations: int = 2000
     rays_per_batch: int = 1024
@@ -102,3 +103,33 @@ def _parse(raw: str, current, key: str):
     except ValueError:
         raise TexvocabError(f"--set {key}={raw}: expected a {type(current).__name__}") from None
     return raw
+
+
+# Render knobs: a preset or ``--set`` may change these on a trained checkpoint (the rest
+# is baked into the weights). See bench/tradeoff.py for what each costs and buys.
+RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps", "shell_width")
+
+# Chosen from bench/tradeoff.py on the default synthetic capture (README, "Presets").
+PRESETS: dict[str, dict] = {
+    "fast": {"image_scale": 0.5, "coarse_samples": 12, "fine_samples": 4, "early_stop_eps": 1e-2},
+    "balanced": {},
+    "quality": {"coarse_samples": 36, "fine_samples": 16, "early_stop_eps": 1e-4},
+}
+
+
+def preset_overrides(name: str, render_only: bool = False) -> list[str]:
+    """``key=value`` strings of preset ``name`` (only the render knobs if ``render_only``)."""
+    if name not in PRESETS:
+        raise TexvocabError(f"preset {name!r}: expected one of {', '.join(PRESETS)}")
+    return [f"{k}={v}" for k, v in PRESETS[name].items() if not render_only or k in RENDER_KNOBS]
+
+
+def render_overrides(settings: Settings, preset: str | None, items: list[str]) -> Settings:
+    """A trained checkpoint's settings with a preset and ``--set`` items applied; only the
+    render knobs may change (the rest is baked into the weights)."""
+    bad = [i for i in items if i.partition("=")[0] not in RENDER_KNOBS]
+    if bad:
+        raise TexvocabError(f"--set {bad[0]!r}: only render knobs ({', '.join(RENDER_KNOBS)}) "
+                            "can change on a trained checkpoint")
+    pre = preset_overrides(preset, render_only=True) if preset else []
+    return settings.with_overrides(pre + list(items))

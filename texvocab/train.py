@@ -36,7 +36,8 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     call (no scouting, one segment): each call's backward through the texture-feature
     sampling costs a dense pass over the feature maps, so few large calls are far cheaper
     than the many small ones that early termination favours at render time."""
-    m = MarchSettings(shell_width=s.field.shell_width, coarse_samples=s.coarse_samples,
+    width = s.field.shell_width if training or s.shell_width is None else s.shell_width
+    m = MarchSettings(shell_width=width, coarse_samples=s.coarse_samples,
                       fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps)
     if training:
         m.segment, m.scout_threshold = m.max_coarse, None

@@ -1,0 +1,282 @@
+"""The speed-accuracy dial, measured: sweeps every render knob of a trained avatar (image
+scale, coarse and fine samples per ray, shell width δ, early-termination ε) one at a
+time from the defaults, plus the presets, and reports
+
+- seconds per frame (median over the images), field evaluations per frame;
+- PSNR/SSIM against the capture's ground truth (mask bounding box; renders at a reduced
+  image scale are upsampled bilinearly to the full size first, as a viewer shows them);
+- PSNR against a high-quality reference render of the same avatar (64+32 samples, no
+  early termination), which isolates the renderer's error from the model's;
+
+then writes a Pareto plot (seconds vs PSNR, presets marked) and two cost-growth tables:
+seconds per frame vs image size, and the method's data-side costs (texture maps,
+vocabulary build/query, pose-feature cost) vs the number of training frames, M and K.
+
+    .venv/bin/python bench/tradeoff.py [CKPT] [--out out/bench/tradeoff] [--per-set 2]
+
+Without CKPT it uses the demo avatar (out/demo/avatar/checkpoint.pt, made by
+``texvocab demo``) or trains one for ``--train-minutes`` on the default synthetic capture.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from texvocab.imageio import atomic_write_bytes
+from texvocab.metrics import metrics_in_bbox, psnr
+from texvocab.render import MarchSettings, ShellGeometry, render_image
+from texvocab.settings import PRESETS, RENDER_KNOBS
+
+REFERENCE = {"coarse_samples": 64, "fine_samples": 32, "early_stop_eps": 0.0}
+
+# (label, overrides of the render knobs); one knob at a time from the defaults.
+SWEEP: list[tuple[str, dict]] = (
+    [(f"image_scale={v}", {"image_scale": v}) for v in (0.25, 0.5, 0.75)]
+    + [(f"coarse={v}", {"coarse_samples": v}) for v in (6, 9, 12, 24, 36)]
+    + [(f"fine={v}", {"fine_samples": v}) for v in (0, 4, 16)]
+    + [(f"eps={v:g}", {"early_stop_eps": v}) for v in (0.0, 1e-2, 5e-2)]
+    + [(f"shell={v}", {"shell_width": v}) for v in (0.02, 0.03)]
+)
+
+
+def march_of(knobs: dict, base: MarchSettings) -> MarchSettings:
+    keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width"}
+    return replace(base, **{k: v for k, v in knobs.items() if k in keys})
+
+
+def render(model, pose, trans, camera, march: MarchSettings, scale: float):
+    """((H, W, 3) float32 at the camera's full size, seconds, field evaluations)."""
+    t0 = time.perf_counter()
+    with torch.no_grad():
+        ctx = model.pose_feature.context(pose, trans)
+        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
+                                    index=ctx.index)
+        cam = camera if scale == 1.0 else camera.scaled(scale)
+        out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
+                           shell=shell)
+        rgb = out.rgb
+        if scale != 1.0:
+            rgb = torch.nn.functional.interpolate(
+                rgb.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
+                align_corners=False)[0].permute(1, 2, 0).clamp(0, 1)
+    return rgb.numpy().astype(np.float32), time.perf_counter() - t0, out.stats.field_evals
+
+
+def measure(model, items, knobs: dict, base: MarchSettings, references=None) -> dict:
+    march = march_of(knobs, base)
+    scale = float(knobs.get("image_scale", 1.0))
+    secs, evals, p_gt, s_gt, p_ref, images = [], [], [], [], [], []
+    for i, (pose, trans, cam, gt, mask) in enumerate(items):
+        rgb, s, n = render(model, pose, trans, cam, march, scale)
+        m = metrics_in_bbox(rgb, gt, mask)
+        secs.append(s)
+        evals.append(n)
+        p_gt.append(m["psnr"])
+        s_gt.append(m["ssim"])
+        images.append(rgb)
+        if references is not None:
+            from texvocab.metrics import crop_to_bbox, mask_bbox
+
+            box = mask_bbox(mask)
+            p_ref.append(psnr(crop_to_bbox(rgb, box), crop_to_bbox(references[i], box)))
+    return {"seconds": float(np.median(secs)), "evals": float(np.mean(evals)),
+            "psnr_gt": float(np.mean(p_gt)), "ssim_gt": float(np.mean(s_gt)),
+            "psnr_ref": float(np.mean(p_ref)) if p_ref else None, "images": images}
+
+
+def pareto(rows: list[dict]) -> set[str]:
+    """Labels of the settings no other setting beats in both seconds and PSNR vs truth."""
+    keep = set()
+    for r in rows:
+        if not any(o["seconds"] <= r["seconds"] and o["psnr_gt"] >= r["psnr_gt"]
+                   and (o["seconds"] < r["seconds"] or o["psnr_gt"] > r["psnr_gt"])
+                   for o in rows):
+            keep.add(r["label"])
+    return keep
+
+
+def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5), dpi=110)
+    for r in rows:
+        preset = r["label"].startswith("preset ")
+        ax.scatter(r["seconds"], r["psnr_gt"], s=90 if preset else 30,
+                   marker="*" if preset else "o",
+                   color="crimson" if preset else ("tab:blue" if r["label"] in front else "grey"),
+                   zorder=3 if preset else 2)
+        ax.annotate(r["label"], (r["seconds"], r["psnr_gt"]), fontsize=7, xytext=(4, 3),
+                    textcoords="offset points")
+    pts = sorted((r["seconds"], r["psnr_gt"]) for r in rows if r["label"] in front)
+    ax.plot([p[0] for p in pts], [p[1] for p in pts], "--", color="tab:blue", lw=1,
+            label="Pareto front")
+    ax.set_xscale("log")
+    ax.set_xlabel("seconds per 256² frame (median, 2 CPU cores)")
+    ax.set_ylabel("PSNR vs ground truth, mask bbox (dB)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+
+    def write(tmp):
+        fig.savefig(tmp, format="png")
+
+    atomic_write_bytes(path, write)
+    plt.close(fig)
+    return path
+
+
+def size_growth(model, item, base: MarchSettings) -> list[str]:
+    pose, trans, cam, _, _ = item
+    lines = ["| image | pixels | s/frame | field evals | s per 10⁴ px | × 256² time |",
+             "|---|---|---|---|---|---|"]
+    rows = []
+    for scale in (0.25, 0.5, 1.0, 2.0):
+        c = cam.scaled(scale) if scale != 1.0 else cam
+        t0 = time.perf_counter()
+        with torch.no_grad():
+            ctx = model.pose_feature.context(pose, trans)
+            shell = ShellGeometry.build(ctx.vertices, model.body.faces, base.shell_width,
+                                        index=ctx.index)
+            out = render_image(model.for_pose(ctx), c, ctx.vertices, model.body.faces, base,
+                               shell=shell)
+        rows.append((c.width, c.height, time.perf_counter() - t0, out.stats.field_evals))
+    ref = next(r[2] for r in rows if r[0] == cam.width)
+    for w, h, s, n in rows:
+        lines.append(f"| {w}×{h} | {w * h} | {s:.3f} | {n} | {s / (w * h) * 1e4:.4f} | "
+                     f"{s / ref:.2f} |")
+    return lines
+
+
+def data_growth(capture, model) -> list[str]:
+    """Costs that grow with the training set and the vocabulary."""
+    from texvocab.feature import PoseFeature
+    from texvocab.texmap import build_texture_map
+    from texvocab.vocab import Vocabulary
+
+    poses = capture.poses[: capture.num_train]
+    t0 = time.perf_counter()
+    for t in range(3):
+        build_texture_map(capture, t)
+    per_map = (time.perf_counter() - t0) / 3
+    lines = ["| training frames T | M | K | texture maps (s, est.) | vocab build (s) | "
+             "query (ms) | pose feature, 20k points (s) |", "|---|---|---|---|---|---|---|"]
+    pts = None
+    for T, M, K in ((18, 20, 3), (36, 20, 3), (72, 20, 3), (72, 5, 3), (72, 10, 3),
+                    (72, 40, 3), (72, 20, 1), (72, 20, 5)):
+        if T > len(poses) or M > T:
+            continue
+        t0 = time.perf_counter()
+        vocab = Vocabulary.build(poses[:T], "part", M, K)
+        build_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        for _ in range(20):
+            vocab.query(poses[-1])
+        query_ms = (time.perf_counter() - t0) / 20 * 1e3
+        pf = PoseFeature(model.body, vocab, model.pose_feature.textures,
+                         model.pose_feature.encoder)
+        with torch.no_grad():
+            ctx = pf.context(poses[-1], capture.trans[len(poses) - 1])
+            if pts is None:
+                g = torch.Generator().manual_seed(0)
+                idx = torch.randint(0, len(ctx.vertices), (20000,), generator=g)
+                pts = torch.as_tensor(ctx.vertices, dtype=torch.float32)[idx]
+                pts = pts + 0.01 * torch.randn(pts.shape, generator=g)
+            t0 = time.perf_counter()
+            pf(ctx, pts)
+            feat_s = time.perf_counter() - t0
+        lines.append(f"| {T} | {M} | {K} | {per_map * T:.1f} | {build_s:.3f} | {query_ms:.2f} | "
+                     f"{feat_s:.3f} |")
+    return lines
+
+
+def load_or_train(args):
+    from texvocab.capture import open as open_capture
+    from texvocab.cli_method import load_model
+
+    ckpt = Path(args.checkpoint) if args.checkpoint else Path("out/demo/avatar/checkpoint.pt")
+    if not ckpt.is_file():
+        from texvocab.demo import demo_avatar, demo_capture
+
+        root, _ = demo_capture("out/demo")
+        ckpt, _ = demo_avatar("out/demo", root, args.train_minutes)
+    from texvocab.checkpoint import load_checkpoint
+
+    cap = open_capture(args.capture or load_checkpoint(ckpt)["capture"])
+    model, settings, ck = load_model(str(ckpt), cap)
+    return ckpt, cap, model, settings, ck
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("checkpoint", nargs="?", default=None)
+    ap.add_argument("--capture", default=None, help="default: the checkpoint's capture")
+    ap.add_argument("--out", default="out/bench/tradeoff")
+    ap.add_argument("--per-set", type=int, default=2, help="frames per set (x 2 views)")
+    ap.add_argument("--train-minutes", type=float, default=5.0)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(2)
+
+    from texvocab.evaluate import build_sets
+    from texvocab.train import march_settings
+
+    ckpt, cap, model, settings, ck = load_or_train(args)
+    sets = build_sets(cap, settings, args.per_set, generated=("kick", "squat"))
+    items = [it for name in ("training_poses", "novel_poses", "generated_novel_poses")
+             for it in sets.get(name, [])]
+    base = march_settings(settings)
+    print(f"checkpoint {ckpt} (step {ck['step']}), {len(items)} images of "
+          f"{items[0][2].width}×{items[0][2].height}; reference {REFERENCE}", flush=True)
+
+    ref = measure(model, items, REFERENCE, base)
+    rows = [{"label": "reference 64+32 ε=0", **ref}]
+    print(f"  reference: {ref['seconds']:.2f} s/frame", flush=True)
+    configs = [("default", {})] + SWEEP + [(f"preset {n}", {k: v for k, v in p.items()
+                                                           if k in RENDER_KNOBS})
+                                         for n, p in PRESETS.items()]
+    for label, knobs in configs:
+        r = measure(model, items, knobs, base, references=ref["images"])
+        rows.append({"label": label, "knobs": knobs, **r})
+        print(f"  {label}: {r['seconds']:.2f} s, {r['psnr_gt']:.2f} dB", flush=True)
+
+    front = pareto(rows)
+    default = next(r for r in rows if r["label"] == "default")
+    lines = [f"# Speed-accuracy trade: {ckpt} (step {ck['step']}), {len(items)} images", "",
+             "Seconds: median per frame incl. pose setup and shell build; PSNR/SSIM in the "
+             "mask bounding box; 'vs ref' against the 64+32, ε = 0 render of the same model.",
+             "", "| setting | s/frame | × default time | field evals/frame | × default evals | "
+             "PSNR vs truth | SSIM vs truth | PSNR vs ref | Pareto |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        pr = "—" if r.get("psnr_ref") is None else f"{r['psnr_ref']:.2f}"
+        lines.append(f"| {r['label']} | {r['seconds']:.3f} | {r['seconds'] / default['seconds']:.2f}"
+                     f" | {r['evals']:.0f} | {r['evals'] / default['evals']:.2f} | "
+                     f"{r['psnr_gt']:.2f} | {r['ssim_gt']:.4f} | {pr} | "
+                     f"{'★' if r['label'] in front else ''} |")
+    lines += ["", "## Cost vs image size (default settings, one training pose)", ""]
+    lines += size_growth(model, items[0], base)
+    lines += ["", "## Cost vs training frames and vocabulary size", ""]
+    lines += data_growth(cap, model)
+    md = "\n".join(lines) + "\n"
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / "tradeoff.md", lambda t: Path(t).write_text(md))
+    blob = [{k: v for k, v in r.items() if k != "images"} for r in rows]
+    atomic_write_bytes(out / "tradeoff.json", lambda t: Path(t).write_text(json.dumps(blob, indent=1)))
+    plot(rows, front, out / "pareto.png", f"{ckpt} (step {ck['step']}), {len(items)} images")
+    print(md)
+    print(f"wrote {out / 'tradeoff.md'}, {out / 'pareto.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,42 @@
+"""Speed/accuracy presets and render-knob overrides on trained checkpoints."""
+import pytest
+
+from texvocab.errors import TexvocabError
+from texvocab.settings import PRESETS, RENDER_KNOBS, Settings, preset_overrides, render_overrides
+from texvocab.train import march_settings
+
+
+def _with(name: str) -> Settings:
+    return Settings().with_overrides(preset_overrides(name))
+
+
+def test_presets_are_valid_settings_and_ordered_by_cost():
+    fast, balanced, quality = _with("fast"), _with("balanced"), _with("quality")
+    assert balanced == Settings()  # balanced is the documented default
+    # every knob moves monotonically from fast to quality
+    for knob in ("image_scale", "coarse_samples", "fine_samples"):
+        assert getattr(fast, knob) <= getattr(balanced, knob) <= getattr(quality, knob), knob
+    assert fast.early_stop_eps >= balanced.early_stop_eps >= quality.early_stop_eps
+    assert fast != balanced != quality
+
+
+def test_unknown_preset_names_the_choices():
+    with pytest.raises(TexvocabError, match="expected one of fast, balanced, quality"):
+        preset_overrides("ultra")
+
+
+def test_render_overrides_touch_only_render_knobs():
+    trained = Settings(num_keys=7, k=2)
+    s = render_overrides(trained, "fast", ["coarse_samples=10"])
+    assert s.coarse_samples == 10 and s.image_scale == PRESETS["fast"]["image_scale"]
+    assert (s.num_keys, s.k) == (7, 2)
+    with pytest.raises(TexvocabError, match="only render knobs"):
+        render_overrides(trained, None, ["num_keys=3"])
+    assert set(RENDER_KNOBS) <= set(Settings().to_dict())
+
+
+def test_marcher_shell_width_is_a_render_knob_but_training_keeps_the_fields():
+    s = Settings().with_overrides(["shell_width=0.025"])
+    assert march_settings(s).shell_width == 0.025
+    assert march_settings(s, training=True).shell_width == s.field.shell_width
+    assert march_settings(Settings()).shell_width == Settings().field.shell_width
