@@ -1,0 +1,143 @@
+"""Orbit camera of the 3D view, and the one conversion between it, OpenGL matrices and the
+project's OpenCV :class:`~texvocab.capture.Camera` (so the neural render and the GL view
+of the same camera line up pixel for pixel).
+
+GL and OpenCV differ in two ways handled here only: camera axes (GL looks down -z with
++y up, OpenCV down +z with +y down) and pixel centres (GL at i + 0.5, OpenCV at i).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from texvocab.capture import Camera
+
+CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV camera axes -> GL camera axes
+DEFAULT_TARGET = (0.0, -0.3, 0.0)  # the default body's centre (its synthetic captures aim here)
+
+
+def look_at_cv(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV extrinsics (R (3, 3), t (3,)) of a camera at ``eye`` looking at ``target``."""
+    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(-up, z)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: viewing direction is parallel to up")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ eye
+
+
+def gl_projection_from_K(K: np.ndarray, width: int, height: int, near: float,
+                         far: float) -> np.ndarray:
+    """(4, 4) clip-space matrix for OpenCV camera coordinates (x right, y down, z forward).
+
+    OpenCV pixel (u, v) with centres at integers maps to GL window pixel (u + 0.5,
+    H - v - 0.5) (bottom-up rows). Depth maps [near, far] to NDC [-1, 1].
+    """
+    fx, s, cx = K[0]
+    fy, cy = K[1, 1], K[1, 2]
+    return np.array([
+        [2 * fx / width, 2 * s / width, 2 * (cx + 0.5) / width - 1, 0.0],
+        [0.0, -2 * fy / height, 1 - 2 * (cy + 0.5) / height, 0.0],
+        [0.0, 0.0, (far + near) / (far - near), -2 * far * near / (far - near)],
+        [0.0, 0.0, 1.0, 0.0],
+    ])
+
+
+def gl_mvp(camera: Camera, near: float = 0.05, far: float = 100.0) -> np.ndarray:
+    """(4, 4) world -> clip matrix for drawing what ``camera`` sees at its image size."""
+    extr = np.eye(4)
+    extr[:3, :3], extr[:3, 3] = camera.R, camera.t
+    return gl_projection_from_K(camera.K, camera.width, camera.height, near, far) @ extr
+
+
+@dataclass
+class OrbitCamera:
+    """Camera on a sphere around ``target``.
+
+    Attributes:
+        target: (3,) world point looked at, metres.
+        yaw: degrees about +y; 0 looks at the body's front (camera on +z).
+        pitch: degrees above the horizontal, in (-89, 89).
+        distance: metres from the target; fov: vertical field of view, degrees.
+    """
+
+    target: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_TARGET))
+    yaw: float = 0.0
+    pitch: float = 0.0
+    distance: float = 3.2
+    fov: float = 40.0
+    near: float = 0.05
+    far: float = 100.0
+
+    def __post_init__(self):
+        self.target = np.asarray(self.target, dtype=np.float64).reshape(3)
+
+    @property
+    def eye(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates."""
+        yaw, pitch = np.radians(self.yaw), np.radians(self.pitch)
+        offset = np.array([np.cos(pitch) * np.sin(yaw), np.sin(pitch),
+                           np.cos(pitch) * np.cos(yaw)])
+        return self.target + self.distance * offset
+
+    def orbit(self, dx: float, dy: float) -> None:
+        """Turn by ``dx`` degrees of yaw and ``dy`` degrees of pitch (clamped to ±89°)."""
+        self.yaw = (self.yaw + dx + 180.0) % 360.0 - 180.0
+        self.pitch = float(np.clip(self.pitch + dy, -89.0, 89.0))
+
+    def zoom(self, factor: float) -> None:
+        """Multiply the distance by ``factor`` (> 0), kept within [0.2, 50] metres."""
+        self.distance = float(np.clip(self.distance * factor, 0.2, 50.0))
+
+    def pan(self, dx: float, dy: float) -> None:
+        """Move the target in the image plane by fractions of the view height (dx right,
+        dy up), so a drag across the view moves the scene about as far."""
+        R, _ = look_at_cv(self.eye, self.target)
+        scale = 2.0 * self.distance * np.tan(np.radians(self.fov) / 2)
+        self.target = self.target + scale * (dx * R[0] - dy * R[1])
+
+    def view_matrix(self) -> np.ndarray:
+        """(4, 4) world -> GL camera (looks down -z, +y up)."""
+        R, t = look_at_cv(self.eye, self.target)
+        extr = np.eye(4)
+        extr[:3, :3], extr[:3, 3] = R, t
+        return CV_TO_GL @ extr
+
+    def projection(self, aspect: float) -> np.ndarray:
+        """(4, 4) GL perspective projection for width / height = ``aspect``."""
+        f = 1.0 / np.tan(np.radians(self.fov) / 2)
+        n, fa = self.near, self.far
+        return np.array([[f / aspect, 0, 0, 0], [0, f, 0, 0],
+                         [0, 0, (fa + n) / (n - fa), 2 * fa * n / (n - fa)], [0, 0, -1, 0]])
+
+    def intrinsics(self, width: int, height: int) -> np.ndarray:
+        """OpenCV K (3, 3): vertical fov ``fov``, principal point at the image centre."""
+        f = 0.5 * height / np.tan(np.radians(self.fov) / 2)
+        return np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
+
+    def to_texvocab_camera(self, width: int, height: int) -> Camera:
+        """The same view as an OpenCV :class:`Camera` of ``width`` × ``height`` pixels."""
+        R, t = look_at_cv(self.eye, self.target)
+        return Camera(self.intrinsics(width, height), R, t, width, height, name="orbit")
+
+    @classmethod
+    def from_capture_camera(cls, cam: Camera, target=None) -> OrbitCamera:
+        """The orbit camera closest to a capture camera: same centre, same viewing axis
+        (looking at the point of the axis nearest to ``target``, default the body centre)
+        and vertical fov. Exact for cameras without roll and with a centred principal
+        point (synthetic captures); others lose their roll and principal-point offset."""
+        centre = cam.center
+        forward = cam.R[2] / np.linalg.norm(cam.R[2])
+        ref = np.asarray(DEFAULT_TARGET if target is None else target, dtype=np.float64)
+        dist = max(float(np.dot(ref - centre, forward)), 0.2)
+        look = centre + dist * forward
+        offset = (centre - look) / dist
+        pitch = float(np.degrees(np.arcsin(np.clip(offset[1], -1.0, 1.0))))
+        yaw = float(np.degrees(np.arctan2(offset[0], offset[2])))
+        fov = float(np.degrees(2 * np.arctan(0.5 * cam.height / cam.K[1, 1])))
+        return cls(target=look, yaw=yaw, pitch=pitch, distance=dist, fov=fov)

@@ -1,0 +1,270 @@
+"""The 3D view: the posed body drawn with the GLSL programs in ``shaders/`` into an
+offscreen framebuffer of any moderngl context (the window's, EGL or OSMesa); this module
+never creates a context.
+
+Colour modes (first that applies): ``novelty`` (each vertex coloured by the distance of
+its vocabulary part(s) to the nearest key, Eq. 2, blended by skinning attention; heat
+scale :func:`app.colors.heat_color` over [0, ``novelty_scale``]), ``part_colors`` (the
+five body parts of Table 1), ``textured`` (the blended vocabulary texture of the pose;
+a neutral grey checker without a vocabulary). ``wireframe`` draws triangle edges over
+it and ``skeleton`` the joints and bones on top of everything.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+from scipy import sparse
+
+from app.camera import gl_mvp
+from app.colors import PART_COLORS, heat_color
+from app.glsl import build_program, set_uniform
+from texvocab.body.parts import BODY_PARTS, part_attention
+from texvocab.capture import Camera
+
+
+@dataclass
+class SceneOptions:
+    """What the 3D view shows (see the module docstring for the colour modes)."""
+
+    textured: bool = True
+    part_colors: bool = False
+    novelty: bool = False
+    wireframe: bool = False
+    skeleton: bool = False
+    lighting: bool = True
+    novelty_scale: float = 0.1  # part distance (Eq. 2) drawn fully red
+    background: tuple[float, float, float] = (0.13, 0.14, 0.16)
+    wire_color: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    bone_color: tuple[float, float, float] = (1.0, 0.85, 0.1)
+    joint_color: tuple[float, float, float] = (0.95, 0.15, 0.15)
+
+
+def as_camera(camera, width: int, height: int) -> Camera:
+    """An OpenCV :class:`Camera` of exactly ``width`` × ``height`` for an orbit camera or a
+    capture camera (scaled when its size differs; the aspect ratio must match)."""
+    if hasattr(camera, "to_texvocab_camera"):
+        return camera.to_texvocab_camera(width, height)
+    if (camera.width, camera.height) == (width, height):
+        return camera
+    factor = width / camera.width
+    if round(camera.height * factor) != height:
+        raise ValueError(f"camera {camera.name!r} is {camera.width}x{camera.height}; cannot draw "
+                         f"it at {width}x{height} (different aspect ratio)")
+    return camera.scaled(factor)
+
+
+class SceneRenderer:
+    """Draws a :class:`~app.state.ViewerState` of ``data`` into its own framebuffer.
+
+    Args:
+        ctx: a current moderngl context (3.3 core).
+        data: :class:`~app.state.ViewerData` (body, vocabulary, textures).
+        samples: MSAA samples (0: none); resolved into the returned texture.
+    """
+
+    def __init__(self, ctx: moderngl.Context, data, samples: int = 0):
+        self.ctx, self.data = ctx, data
+        self.samples = min(int(samples), ctx.max_samples) if samples else 0
+        body = data.body
+        faces = body.faces.numpy()
+        self.faces = faces
+        self.num_corners = faces.size
+        self.mesh_prog = build_program(ctx, "mesh.vert", "mesh.frag")
+        self.bone_prog = build_program(ctx, "bone.vert", "flat.frag")
+        self.joint_prog = build_program(ctx, "joint.vert", "flat.frag")
+        n = self.num_corners
+        if body.vt is not None and body.ft is not None:
+            uv = body.vt.numpy()[body.ft.numpy()].reshape(-1, 2)
+        else:
+            uv = np.zeros((n, 2))
+        bary = np.tile(np.eye(3), (len(faces), 1))
+        self.vbo_pos = ctx.buffer(reserve=n * 12, dynamic=True)
+        self.vbo_nrm = ctx.buffer(reserve=n * 12, dynamic=True)
+        self.vbo_col = ctx.buffer(reserve=n * 12, dynamic=True)
+        self.vbo_uv = ctx.buffer(uv.astype("f4").tobytes())
+        self.vbo_bary = ctx.buffer(bary.astype("f4").tobytes())
+        self.mesh_vao = ctx.vertex_array(self.mesh_prog, self._bindings(self.mesh_prog, [
+            (self.vbo_pos, "3f", "in_position"), (self.vbo_nrm, "3f", "in_normal"),
+            (self.vbo_uv, "2f", "in_uv"), (self.vbo_col, "3f", "in_color"),
+            (self.vbo_bary, "3f", "in_bary")]))
+        parents = body.parents.numpy()
+        self.bones = np.stack([parents[1:], np.arange(1, len(parents))], 1)
+        self.vbo_bones = ctx.buffer(reserve=len(self.bones) * 24, dynamic=True)
+        self.vbo_joints = ctx.buffer(reserve=len(parents) * 12, dynamic=True)
+        self.bone_vao = ctx.vertex_array(self.bone_prog, [
+            (self.vbo_bones, "3f 3f/i", "in_a", "in_b")])
+        self.joint_vao = ctx.vertex_array(self.joint_prog, [(self.vbo_joints, "3f", "in_position")])
+        # vertex -> incident faces, for smooth normals: (V, F) sparse incidence
+        rows = faces.reshape(-1)
+        cols = np.repeat(np.arange(len(faces)), 3)
+        self._incidence = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)),
+                                            shape=(body.num_vertices, len(faces)))
+        weights = body.weights.double()
+        attn5 = part_attention(weights, list(BODY_PARTS.values())).numpy()
+        palette = np.array([PART_COLORS[p] for p in BODY_PARTS])
+        self._part_rgb = palette[attn5.argmax(1)][faces].reshape(-1, 3).astype("f4")
+        self._vocab_attention = None
+        if data.vocab is not None:
+            self._vocab_attention = part_attention(weights, data.vocab.part_joints).numpy()
+        self.texture = None
+        self.grey = ctx.texture((1, 1), 3, bytes([158, 158, 158]))
+        self.size = None
+        self._geometry_key = None
+        self._texture_key = None
+        self._color_key = None
+
+    @staticmethod
+    def _bindings(prog, items):
+        """VAO content without attributes the compiler dropped (one buffer each)."""
+        return [item for item in items if item[2] in prog]
+
+    # -- resources --------------------------------------------------------------------
+    def _ensure_target(self, size: tuple[int, int]) -> None:
+        if self.size == size:
+            return
+        for name in ("fbo", "color", "depth", "msaa_fbo", "msaa_color", "msaa_depth"):
+            obj = getattr(self, name, None)
+            if obj is not None:
+                obj.release()
+        ctx = self.ctx
+        self.color = ctx.texture(size, 4)
+        self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.depth = ctx.depth_texture(size)
+        self.fbo = ctx.framebuffer([self.color], self.depth)
+        self.msaa_fbo = self.msaa_color = self.msaa_depth = None
+        if self.samples:
+            self.msaa_color = ctx.renderbuffer(size, 4, samples=self.samples)
+            self.msaa_depth = ctx.depth_renderbuffer(size, samples=self.samples)
+            self.msaa_fbo = ctx.framebuffer([self.msaa_color], self.msaa_depth)
+        self.size = size
+
+    def _update_geometry(self, state) -> None:
+        key = (id(state), state.version)
+        if key == self._geometry_key:
+            return
+        verts, joints = state.posed()
+        verts = verts.astype(np.float64)
+        tri = verts[self.faces]
+        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        vn = self._incidence @ fn
+        vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
+        self.vbo_pos.write(tri.reshape(-1, 3).astype("f4").tobytes())
+        self.vbo_nrm.write(vn[self.faces].reshape(-1, 3).astype("f4").tobytes())
+        j = joints.astype("f4")
+        self.vbo_bones.write(np.concatenate([j[self.bones[:, 0]], j[self.bones[:, 1]]], 1).tobytes())
+        self.vbo_joints.write(j.tobytes())
+        self._geometry_key = key
+
+    def _update_texture(self, state) -> bool:
+        """Upload the blended texture of the pose; False when there is none."""
+        key = (id(state), state.version)
+        if key == self._texture_key:
+            return self.texture is not None
+        tex = state.blended_texture()
+        self._texture_key = key
+        if tex is None:
+            return False
+        # row 0 of a texture image is v = 1 (texvocab.uv); GL's first row is t = 0, so the
+        # image goes up flipped and the shader samples at the OBJ uv unchanged
+        data = (np.clip(np.flipud(tex), 0, 1) * 255 + 0.5).astype(np.uint8)
+        h, w = data.shape[:2]
+        if self.texture is None or self.texture.size != (w, h):
+            if self.texture is not None:
+                self.texture.release()
+            self.texture = self.ctx.texture((w, h), 3, alignment=1)
+            self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.texture.write(np.ascontiguousarray(data).tobytes())
+        self.texture.build_mipmaps()
+        return True
+
+    def novelty_colors(self, state, scale: float) -> np.ndarray:
+        """(V, 3) per-vertex heat colours: Σ_p Ω(v, p) d_p / scale (grey without vocabulary)."""
+        if self._vocab_attention is None:
+            return np.full((self.data.body.num_vertices, 3), 0.6)
+        per_vertex = self._vocab_attention @ state.novelty()
+        return heat_color(per_vertex / max(scale, 1e-9))
+
+    def _update_colors(self, state, options: SceneOptions) -> None:
+        key = (id(state), state.version, options.novelty, options.part_colors,
+               options.novelty_scale)
+        if key == self._color_key:
+            return
+        if options.novelty:
+            rgb = self.novelty_colors(state, options.novelty_scale)[self.faces].reshape(-1, 3)
+        else:
+            rgb = self._part_rgb
+        self.vbo_col.write(np.ascontiguousarray(rgb, dtype="f4").tobytes())
+        self._color_key = key
+
+    # -- drawing ----------------------------------------------------------------------
+    def render(self, state, camera, size: tuple[int, int] = (1280, 800),
+               options: SceneOptions | None = None) -> moderngl.Texture:
+        """Draw ``state`` seen by ``camera`` (an :class:`~app.camera.OrbitCamera` or a
+        capture :class:`Camera`) at ``size`` = (width, height); returns the RGBA colour
+        texture (rows bottom-up, as GL stores them)."""
+        o = options or SceneOptions()
+        w, h = int(size[0]), int(size[1])
+        cam = as_camera(camera, w, h)
+        ctx = self.ctx
+        self._ensure_target((w, h))
+        self._update_geometry(state)
+        mode = 0
+        if o.novelty or o.part_colors:
+            self._update_colors(state, o)
+            mode = 2
+        elif o.textured and self._update_texture(state):
+            mode = 1
+        target = self.msaa_fbo or self.fbo
+        target.use()
+        ctx.viewport = (0, 0, w, h)
+        ctx.clear(*o.background, 1.0, depth=1.0)
+        ctx.enable_only(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
+        mvp = gl_mvp(cam)
+        prog = self.mesh_prog
+        set_uniform(prog, "mvp", mvp)
+        set_uniform(prog, "mode", mode)
+        set_uniform(prog, "lighting", bool(o.lighting))
+        set_uniform(prog, "eye", tuple(float(x) for x in cam.center))
+        set_uniform(prog, "wireframe", bool(o.wireframe))
+        set_uniform(prog, "wire_color", tuple(o.wire_color))
+        set_uniform(prog, "wire_width", 0.75)
+        set_uniform(prog, "tex", 0)
+        (self.texture if mode == 1 else self.grey).use(0)
+        self.mesh_vao.render(moderngl.TRIANGLES, vertices=self.num_corners)
+        if o.skeleton:
+            ctx.disable(moderngl.DEPTH_TEST)
+            for p, color, extra in ((self.bone_prog, o.bone_color, {"width": 3.0}),
+                                    (self.joint_prog, o.joint_color, {"size": 9.0})):
+                set_uniform(p, "mvp", mvp)
+                set_uniform(p, "color", tuple(color))
+                set_uniform(p, "viewport", (float(w), float(h)))
+                set_uniform(p, "round_points", p is self.joint_prog)
+                for name, value in extra.items():
+                    set_uniform(p, name, value)
+            self.bone_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(self.bones))
+            self.joint_vao.render(moderngl.POINTS, vertices=len(self.bones) + 1)
+        if self.msaa_fbo is not None:
+            ctx.copy_framebuffer(self.fbo, self.msaa_fbo)
+        return self.color
+
+    def read(self, size: tuple[int, int] | None = None) -> np.ndarray:
+        """(H, W, 3) uint8 of the last render, top row first."""
+        if self.size is None or (size is not None and tuple(size) != self.size):
+            raise ValueError(f"nothing rendered at size {size}; last render: {self.size}")
+        w, h = self.size
+        data = np.frombuffer(self.fbo.read(components=3, alignment=1), np.uint8)
+        return np.flipud(data.reshape(h, w, 3)).copy()
+
+    def read_depth(self) -> np.ndarray:
+        """(H, W) float32 window depth of the last render in [0, 1] (1: background),
+        top row first."""
+        w, h = self.size
+        data = np.frombuffer(self.depth.read(alignment=1), np.float32)
+        return np.flipud(data.reshape(h, w)).copy()
+
+    def release(self) -> None:
+        for obj in list(vars(self).values()):
+            if hasattr(obj, "release") and obj is not self.ctx and hasattr(obj, "glo"):
+                obj.release()

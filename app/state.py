@@ -1,0 +1,250 @@
+"""What the viewer shows: the loaded data (:class:`ViewerData`) and the pose being edited
+(:class:`ViewerState`, versioned so renderers and workers can tell when it changed).
+No GL and no GUI here."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from texvocab.body.limits import JOINT_LIMITS_DEG
+from texvocab.body.parts import BODY_PARTS
+from texvocab.errors import TexvocabError
+from texvocab.settings import Settings
+
+
+@dataclass
+class ViewerData:
+    """Everything loaded once.
+
+    Attributes:
+        body: :class:`~texvocab.body.BodyModel`.
+        vocab: :class:`~texvocab.vocab.Vocabulary` or None (no capture given).
+        textures: (T, S, S, 3) float32 texture maps of the training frames, or None.
+        model: the trained :class:`~texvocab.field.AvatarField` or None (no checkpoint).
+        capture: :class:`~texvocab.capture.Capture` or None.
+        settings: :class:`~texvocab.settings.Settings` (the checkpoint's, else defaults).
+        source: what was loaded, for the window title and messages.
+    """
+
+    body: object
+    vocab: object | None = None
+    textures: np.ndarray | None = None
+    model: object | None = None
+    capture: object | None = None
+    settings: Settings | None = None
+    source: str = "default body"
+
+
+def _capture_data(path: Path, smpl: str | None) -> ViewerData:
+    from texvocab.body import load_body
+    from texvocab.capture import open as open_capture
+    from texvocab.train import load_textures
+    from texvocab.vocab import Vocabulary
+
+    cap = open_capture(path, body=load_body(smpl))
+    if cap.num_train < 1:
+        raise TexvocabError(f"{path}: the capture has no training frames to build a vocabulary")
+    s = Settings()
+    vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k, s.weighting)
+    textures = load_textures(cap, s, progress=True).permute(0, 2, 3, 1).numpy()
+    return ViewerData(cap.body, vocab, textures, None, cap, s,
+                      f"capture {path} ({cap.num_train} training frames)")
+
+
+def _checkpoint_data(path: Path, smpl: str | None) -> ViewerData:
+    from texvocab.body import load_body
+    from texvocab.capture import open as open_capture
+    from texvocab.checkpoint import load_checkpoint
+    from texvocab.cli_method import load_model
+
+    ck = load_checkpoint(path)
+    cap_path = Path(str(ck.get("capture", "")))
+    if not str(ck.get("capture", "")) or not cap_path.is_dir():
+        raise TexvocabError(f"{path}: its capture folder {str(cap_path)!r} is missing; the "
+                            "viewer needs the capture the checkpoint was trained on")
+    cap = open_capture(cap_path, body=load_body(smpl))
+    model, settings, ck = load_model(str(path), cap)
+    textures = model.pose_feature.textures.permute(0, 2, 3, 1).numpy()
+    return ViewerData(cap.body, model.pose_feature.vocab, textures, model, cap, settings,
+                      f"checkpoint {path} (step {int(ck['step'])}, capture {cap_path})")
+
+
+def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
+    """Load what ``texvocab view [SOURCE]`` shows.
+
+    Args:
+        source: None (the body only), a capture folder (vocabulary from its training
+            poses with default Settings, cached texture maps prepared if missing) or a
+            checkpoint file written by ``texvocab train`` (its model, vocabulary and
+            capture).
+        smpl: the user's SMPL model file/folder; default the embedded default body.
+    """
+    if source is None:
+        from texvocab.body import load_body
+
+        body = load_body(smpl)
+        return ViewerData(body, settings=Settings(), source=body.name)
+    path = Path(source).expanduser()
+    if path.is_dir():
+        return _capture_data(path, smpl)
+    if path.is_file():
+        return _checkpoint_data(path, smpl)
+    raise TexvocabError(f"{source}: no such file or folder; expected a checkpoint .pt written "
+                        "by 'texvocab train' or a capture folder")
+
+
+PART_NAMES: tuple[str, ...] = tuple(BODY_PARTS)
+
+
+class ViewerState:
+    """The pose being edited and everything derived from it, cached per :attr:`version`.
+
+    Attributes:
+        pose: (24, 3) float64 axis-angle, radians (SMPL order; joint 0 is the root).
+        trans: (3,) float64 root translation, metres.
+        version: incremented on every change of pose or trans.
+    """
+
+    def __init__(self, data: ViewerData, pose=None, trans=None):
+        self.data = data
+        self.rest_trans = np.zeros(3)
+        if data.capture is not None and len(data.capture.trans):
+            self.rest_trans = np.asarray(data.capture.trans[0], dtype=np.float64).copy()
+        self.pose = np.zeros((24, 3)) if pose is None else np.array(pose, np.float64).reshape(24, 3)
+        self.trans = self.rest_trans.copy() if trans is None else np.array(trans, np.float64)
+        self.version = 0
+        self._cache: dict[str, tuple[int, object]] = {}
+        self._vocab_texture = None
+
+    # -- editing ------------------------------------------------------------------------
+    def _changed(self, pose: np.ndarray, trans: np.ndarray | None = None) -> bool:
+        trans = self.trans if trans is None else np.asarray(trans, np.float64).reshape(3)
+        if np.array_equal(pose, self.pose) and np.array_equal(trans, self.trans):
+            return False
+        if not (np.isfinite(pose).all() and np.isfinite(trans).all()):
+            raise TexvocabError("pose and translation must be finite")
+        self.pose, self.trans = pose, trans.copy()
+        self.version += 1
+        return True
+
+    def set_pose(self, pose, trans=None) -> bool:
+        """Replace the whole pose (24, 3) (and trans (3,)); no clamping. True if changed."""
+        return self._changed(np.array(pose, np.float64).reshape(24, 3), trans)
+
+    def joint_deg(self, j: int) -> np.ndarray:
+        """(3,) axis-angle components of joint ``j`` in degrees (the sliders' values)."""
+        return np.degrees(self.pose[j])
+
+    def set_joint(self, j: int, xyz_deg) -> bool:
+        """Set joint ``j``'s axis-angle components (degrees), clamped to its limits."""
+        lim = JOINT_LIMITS_DEG[j].astype(np.float64)
+        deg = np.clip(np.asarray(xyz_deg, np.float64).reshape(3), lim[:, 0], lim[:, 1])
+        pose = self.pose.copy()
+        pose[j] = np.radians(deg)
+        return self._changed(pose)
+
+    def set_trans(self, xyz) -> bool:
+        return self._changed(self.pose.copy(), np.asarray(xyz, np.float64))
+
+    def reset_joint(self, j: int) -> bool:
+        pose = self.pose.copy()
+        pose[j] = 0.0
+        return self._changed(pose)
+
+    def reset_part(self, name: str) -> bool:
+        """Rest pose for the joints of one of the five body parts (``BODY_PARTS``)."""
+        if name not in BODY_PARTS:
+            raise TexvocabError(f"unknown body part {name!r}; expected one of {PART_NAMES}")
+        pose = self.pose.copy()
+        pose[list(BODY_PARTS[name])] = 0.0
+        return self._changed(pose)
+
+    def reset_all(self) -> bool:
+        """Rest pose (T-pose, zero root orientation) at the rest translation."""
+        return self._changed(np.zeros((24, 3)), self.rest_trans)
+
+    def apply_preset(self, name: str) -> bool:
+        """A named preset (texvocab.body.poses): joints 1..23 from the preset, the root
+        orientation kept, translation = rest translation + the preset's offset."""
+        from texvocab.body.poses import PRESETS, preset
+
+        if name not in PRESETS:
+            raise TexvocabError(f"unknown pose preset {name!r}; expected one of {sorted(PRESETS)}")
+        p, t = preset(name)
+        pose = np.asarray(p, np.float64).copy()
+        pose[0] = self.pose[0]
+        return self._changed(pose, self.rest_trans + np.asarray(t, np.float64))
+
+    def key_pose(self, part: str | int, key_index: int) -> tuple[tuple[int, ...], np.ndarray]:
+        """(joints of the vocabulary part, their (J_p, 3) axis-angle in key ``key_index``)."""
+        from texvocab.rotations import quat_to_rotvec
+
+        vocab = self._require_vocab()
+        p = vocab.part_names.index(part) if isinstance(part, str) else int(part)
+        if not 0 <= p < vocab.num_parts:
+            raise TexvocabError(f"part {part!r}: the vocabulary has parts {vocab.part_names}")
+        keys = vocab.key_quats[p]
+        if not 0 <= key_index < len(keys):
+            raise TexvocabError(f"key {key_index}: part {vocab.part_names[p]} has keys "
+                                f"0..{len(keys) - 1}")
+        return vocab.part_joints[p], quat_to_rotvec(keys[key_index]).double().numpy()
+
+    def set_part_to_key(self, part: str | int, key_index: int) -> bool:
+        """Move the part's joints to the pose of one of its keys (not clamped: keys are
+        training poses), making that key the part's nearest (distance ~0)."""
+        joints, rotvecs = self.key_pose(part, key_index)
+        pose = self.pose.copy()
+        pose[list(joints)] = rotvecs
+        return self._changed(pose)
+
+    # -- derived, cached per version -----------------------------------------------------
+    def _cached(self, key: str, make):
+        hit = self._cache.get(key)
+        if hit is not None and hit[0] == self.version:
+            return hit[1]
+        value = make()
+        self._cache[key] = (self.version, value)
+        return value
+
+    def _require_vocab(self):
+        if self.data.vocab is None:
+            raise TexvocabError("no vocabulary: open a capture folder or a checkpoint")
+        return self.data.vocab
+
+    def query(self) -> list:
+        """Per vocabulary part a :class:`~texvocab.vocab.PartQuery` (``key_ids``,
+        ``frames``, ``weights`` (K,) each, ``distances`` (K,), ``novelty`` = distance to
+        the nearest key); [] without a vocabulary."""
+        if self.data.vocab is None:
+            return []
+        return self._cached("query", lambda: self.data.vocab.query(self.pose))
+
+    def novelty(self) -> np.ndarray:
+        """(P,) distance of each vocabulary part to its nearest key (Eq. 2); (0,) without
+        a vocabulary."""
+        return np.array([q.novelty for q in self.query()], dtype=np.float64)
+
+    def blended_texture(self) -> np.ndarray | None:
+        """(S, S, 3) float32 texture of the current pose (texvocab.vocab_texture), or None
+        without a vocabulary and texture maps."""
+        if self.data.vocab is None or self.data.textures is None:
+            return None
+        if self._vocab_texture is None:
+            from texvocab.vocab_texture import VocabTexture
+
+            self._vocab_texture = VocabTexture(self.data.body, self.data.vocab, self.data.textures)
+        return self._cached("texture", lambda: self._vocab_texture.blend(self.pose))
+
+    def posed(self) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices (V, 3), joints (24, 3)) float32 of the current pose, world space."""
+        def make():
+            import torch
+
+            out = self.data.body.forward(torch.as_tensor(self.pose)[None],
+                                         torch.as_tensor(self.trans)[None])
+            return (out.vertices[0].numpy().astype(np.float32),
+                    out.joints[0].numpy().astype(np.float32))
+
+        return self._cached("posed", make)

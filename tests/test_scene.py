@@ -1,0 +1,162 @@
+"""The 3D view over a headless OSMesa moderngl context: not blank, the silhouette equals the
+CPU rasteriser's and pyrender's for the same camera (in this process, with pyrender on
+PyOpenGL's OSMesa platform), five part colours, a novelty map that follows the pose, and
+the orbit camera's GL matrices equal its OpenCV camera."""
+import numpy as np
+import pytest
+import torch
+
+from app.camera import OrbitCamera, gl_mvp
+from app.colors import PART_COLORS
+from app.gl_headless import create_headless_context, make_current, release
+from app.scene import SceneOptions, SceneRenderer
+from app.state import ViewerData, ViewerState
+from texvocab.body import default_body
+from texvocab.body.parts import BODY_PARTS
+from texvocab.capture import Camera
+from texvocab.raster import rasterize_mesh
+from texvocab.vocab import Vocabulary
+
+W, H = 320, 200
+LEFT_SHOULDER = 16
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    c = create_headless_context()
+    yield c
+    release(c)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return default_body()
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def gl_mask(renderer: SceneRenderer) -> np.ndarray:
+    return renderer.read_depth() < 1.0
+
+
+def test_orbit_camera_gl_matrices_equal_its_opencv_camera():
+    cam = OrbitCamera(yaw=35, pitch=-20, distance=2.5)
+    cam.pan(0.1, -0.05)
+    cam.orbit(10, 5)
+    cv = cam.to_texvocab_camera(W, H)
+    np.testing.assert_allclose(gl_mvp(cv, cam.near, cam.far),
+                               cam.projection(W / H) @ cam.view_matrix(), atol=1e-9)
+    np.testing.assert_allclose(cv.center, cam.eye, atol=1e-12)
+    back = OrbitCamera.from_capture_camera(cv, target=cam.target)
+    np.testing.assert_allclose(back.to_texvocab_camera(W, H).K, cv.K, atol=1e-9)
+    np.testing.assert_allclose(back.to_texvocab_camera(W, H).R, cv.R, atol=1e-9)
+    np.testing.assert_allclose(back.eye, cam.eye, atol=1e-9)
+
+
+def test_default_body_silhouette_matches_cpu_raster_and_pyrender(ctx, body):
+    data = ViewerData(body)
+    state = ViewerState(data)
+    state.apply_preset("walk")
+    renderer = SceneRenderer(ctx, data)
+    verts = torch.as_tensor(state.posed()[0])
+    # an orbit camera, and a capture-style camera with an off-centre principal point
+    orbit = OrbitCamera(yaw=30, pitch=10).to_texvocab_camera(W, H)
+    K = np.array([[300.0, 0, 0.42 * W], [0, 300.0, 0.55 * H], [0, 0, 1]])
+    capture_cam = Camera(K, orbit.R, orbit.t, W, H, name="off-centre")
+    for cam in (orbit, capture_cam):
+        tex = renderer.render(state, cam, (W, H), SceneOptions())
+        assert tex.size == (W, H)
+        img = renderer.read((W, H))
+        assert img.shape == (H, W, 3) and img.dtype == np.uint8
+        mask = gl_mask(renderer)
+        assert 0.03 < mask.mean() < 0.5  # not blank, not everything
+        bg = np.asarray(SceneOptions().background) * 255
+        assert np.abs(img[~mask] - bg).max() <= 1 and np.abs(img[mask] - bg).max(-1).mean() > 20
+        cpu = rasterize_mesh(verts, body.faces, cam).mask.numpy()
+        score = iou(mask, cpu)
+        print(f"{cam.name}: IoU GL vs CPU raster {score:.4f}")
+        assert score > 0.98
+    # pyrender (PyOpenGL on OSMesa) in the same process, then moderngl again
+    from texvocab.render_mesh import MeshRenderer
+
+    with MeshRenderer(W, H) as pr:
+        _, depth = pr.render(verts.numpy(), body.faces.numpy(), capture_cam.K, capture_cam.R,
+                             capture_cam.t, flat=True)
+    make_current(ctx)
+    renderer.render(state, capture_cam, (W, H), SceneOptions())
+    score = iou(gl_mask(renderer), depth > 0)
+    print(f"IoU GL vs pyrender {score:.4f}")
+    assert score > 0.98
+
+
+def test_part_colors_give_five_colours(ctx, body):
+    data = ViewerData(body)
+    state = ViewerState(data)
+    renderer = SceneRenderer(ctx, data)
+    renderer.render(state, OrbitCamera(), (W, H), SceneOptions(part_colors=True, lighting=False))
+    img = renderer.read().astype(np.float64)
+    body_px = img[gl_mask(renderer)]
+    palette = np.array(list(PART_COLORS.values())) * 255
+    dist = np.linalg.norm(body_px[:, None] - palette[None], axis=-1)  # (N, 5)
+    near = dist.min(1) < 8
+    assert near.mean() > 0.9  # (the rest: triangles straddling two parts, blended)
+    counts = np.bincount(dist.argmin(1)[near], minlength=5)
+    print(dict(zip(BODY_PARTS, counts.tolist(), strict=True)))
+    assert np.all(counts > 0.01 * len(body_px))
+
+
+def test_novelty_overlay_follows_the_pose(ctx, body):
+    rng = np.random.default_rng(0)
+    poses = rng.normal(0, 0.05, (10, 24, 3))
+    poses[:, 0] = 0
+    vocab = Vocabulary.build(poses, "part", num_keys=5, k=2)
+    data = ViewerData(body, vocab)
+    state = ViewerState(data)
+    for part in BODY_PARTS:
+        state.set_part_to_key(part, 0)
+    renderer = SceneRenderer(ctx, data)
+    opts = SceneOptions(novelty=True, lighting=False, novelty_scale=0.1)
+    cam = OrbitCamera()
+    renderer.render(state, cam, (W, H), opts)
+    seen = renderer.read().astype(np.int32)
+    seen_mask = gl_mask(renderer)
+    assert np.all(state.novelty() < 1e-9)
+    state.set_joint(LEFT_SHOULDER, (0.0, 0.0, 80.0))  # the left arm far from every key
+    renderer.render(state, cam, (W, H), opts)
+    novel = renderer.read().astype(np.int32)
+    arm = list(BODY_PARTS).index("left_arm")
+    assert state.novelty()[arm] > 0.1 and np.all(np.delete(state.novelty(), arm) < 1e-9)
+
+    def red(img):  # hot pixels of the heat scale
+        return (img[..., 0] > 180) & (img[..., 2] < 80)
+
+    def blue(img):  # cold pixels: a pose the vocabulary has
+        return (img[..., 2] > 150) & (img[..., 0] < 60)
+
+    mask = gl_mask(renderer)
+    assert red(seen).sum() == 0 and blue(seen)[seen_mask].mean() > 0.95
+    assert red(novel).sum() > 0.05 * mask.sum()  # the arm turned red
+    assert blue(novel)[mask].mean() > 0.6  # the rest stays cold
+
+
+def test_wireframe_and_skeleton_draw_over_the_body(ctx, body):
+    data = ViewerData(body)
+    state = ViewerState(data)
+    renderer = SceneRenderer(ctx, data)
+    cam = OrbitCamera(distance=2.0)
+    plain = renderer.render(state, cam, (W, H), SceneOptions()) and renderer.read()
+    renderer.render(state, cam, (W, H), SceneOptions(wireframe=True))
+    wire = renderer.read()
+    mask = gl_mask(renderer)
+    darker = (wire.astype(int).sum(-1) < plain.astype(int).sum(-1) - 30) & mask
+    assert darker.mean() > 0.2 * mask.mean()  # edges drawn across the body
+    renderer.render(state, cam, (W, H), SceneOptions(skeleton=True))
+    skel = renderer.read().astype(int)
+    yellow = (skel[..., 0] > 200) & (skel[..., 1] > 170) & (skel[..., 2] < 80)
+    assert yellow.sum() > 200  # bones
+    # a joint (right wrist) drawn in red on top, where the camera projects it
+    px, _ = cam.to_texvocab_camera(W, H).project(state.posed()[1][21:22])
+    x, y = np.rint(px[0]).astype(int)
+    assert skel[y, x, 0] > 200 and skel[y, x, 1] < 80
