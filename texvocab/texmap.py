@@ -82,7 +82,11 @@ def build_texture_map(capture, frame: int, settings: TexmapSettings | None = Non
         ok[ok] &= mask[yi[ok], xi[ok]]  # foreground pixels only
         if not ok.any():
             continue
-        acc[ok] += sample_image(capture.image(v, frame), pix[ok, 0], pix[ok, 1])
+        # texels whose nearest pixel is inside may sit up to half a pixel past the outer
+        # pixel centres; clamp there so bilinear sampling never blends in the zero outside
+        x = np.clip(pix[ok, 0], 0, cam.width - 1)
+        y = np.clip(pix[ok, 1], 0, cam.height - 1)
+        acc[ok] += sample_image(capture.image(v, frame), x, y)
         count[ok] += 1
     color = acc / np.maximum(count, 1)[:, None]
     if (count > 0).any():
