@@ -235,8 +235,9 @@ class SceneRenderer:
         self.mesh_vao.render(moderngl.TRIANGLES, vertices=self.num_corners)
         if o.skeleton:
             ctx.disable(moderngl.DEPTH_TEST)
-            for p, color, extra in ((self.bone_prog, o.bone_color, {"width": 3.0}),
-                                    (self.joint_prog, o.joint_color, {"size": 9.0})):
+            scale = max(h / 800.0, 0.45)  # sizes in pixels for an 800-pixel-high view
+            for p, color, extra in ((self.bone_prog, o.bone_color, {"width": 3.0 * scale}),
+                                    (self.joint_prog, o.joint_color, {"size": 9.0 * scale})):
                 set_uniform(p, "mvp", mvp)
                 set_uniform(p, "color", tuple(color))
                 set_uniform(p, "viewport", (float(w), float(h)))

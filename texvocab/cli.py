@@ -48,6 +48,62 @@ def cmd_check_assets(args) -> int:
     return 1 if any(line.startswith("FAIL") or "no SMPL" in line for line in lines) else 0
 
 
+def cmd_shot(args) -> int:
+    from app.shot import cmd_shot as run_shot
+
+    return run_shot(args)
+
+
+def cmd_view(args) -> int:
+    from app.shot import parse_size
+
+    w, h = parse_size(args.size)
+    from app.window import run_viewer
+
+    return run_viewer(args.source, smpl=args.smpl, size=(w, h))
+
+
+SHOT_OVERLAYS = ("part_colors", "novelty", "wireframe", "skeleton")
+
+
+def add_viewer_parsers(sub) -> None:
+    """``view`` (the desktop viewer, app/) and ``shot`` (its headless screenshot)."""
+    p = sub.add_parser("view", help="the desktop viewer: pose, 3D view, vocabulary, neural render",
+                       description="Open the viewer window on a checkpoint (its avatar, "
+                                   "vocabulary and capture), a capture folder (its vocabulary "
+                                   "and texture maps) or, with no SOURCE, the body alone.")
+    p.add_argument("source", nargs="?", default=None,
+                   help="checkpoint.pt or capture folder (default: the body alone)")
+    p.add_argument("--size", default="1280x800", metavar="WxH",
+                   help="window size (default 1280x800)")
+    _add_smpl(p)
+    p.set_defaults(func=cmd_view)
+
+    p = sub.add_parser("shot", help="headless screenshot of the viewer's 3D view (+ neural render)",
+                       description="Render the viewer's 3D view of a pose, and for a checkpoint "
+                                   "the neural render from the same camera, offscreen (OSMesa, "
+                                   "no display); write view3d.png, neural.png and shot.png "
+                                   "(side by side) to --out and print their paths.")
+    p.add_argument("source", nargs="?", default=None,
+                   help="checkpoint.pt or capture folder (default: the body alone)")
+    p.add_argument("--pose", default="a_pose",
+                   help="a preset name (t_pose, a_pose, walk, squat, ...), a capture frame "
+                        "index N (or frame:N), or FILE.npz[:N] (default: a_pose)")
+    p.add_argument("--camera", default="0,0,3.2",
+                   help="a capture view index, or 'yaw,pitch,distance' of an orbit camera "
+                        "around the body (degrees, degrees, metres; default 0,0,3.2: the "
+                        "front)")
+    p.add_argument("--size", default=None, metavar="WxH",
+                   help="image size (default: the capture view's size, else 640x400)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--overlay", nargs="+", default=[], choices=SHOT_OVERLAYS, metavar="NAME",
+                   help="any of: " + ", ".join(SHOT_OVERLAYS) + " (over the blended texture)")
+    p.add_argument("--neural", action=argparse.BooleanOptionalAction, default=None,
+                   help="also render the trained avatar (default: when SOURCE is a checkpoint)")
+    _add_smpl(p)
+    p.set_defaults(func=cmd_shot)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="texvocab",
@@ -86,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_method_parsers(sub, _add_smpl)
     add_train_parsers(sub, _add_smpl)
+    add_viewer_parsers(sub)
     return parser
 
 

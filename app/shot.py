@@ -1,0 +1,186 @@
+"""``texvocab shot``: the viewer's 3D view (and, for a checkpoint, the neural render from
+the same camera) for one pose, written as PNGs with no display (moderngl over OSMesa)."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.camera import DEFAULT_TARGET, OrbitCamera
+from app.scene import SceneOptions, SceneRenderer, as_camera
+from app.state import ViewerData, ViewerState, load_viewer_data
+from texvocab.errors import TexvocabError
+
+DEFAULT_SIZE = (640, 400)
+
+
+def parse_size(spec: str) -> tuple[int, int]:
+    """'WxH' -> (W, H), both in [16, 8192]."""
+    w, sep, h = spec.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        size = None
+    if not sep or size is None or not all(16 <= v <= 8192 for v in size):
+        raise TexvocabError(f"--size {spec!r}: expected WIDTHxHEIGHT, e.g. 1280x800 "
+                            "(16..8192 pixels each)")
+    return size
+
+
+def apply_pose(state: ViewerState, spec: str) -> None:
+    """Set ``state`` from a preset name, a capture frame index (``N`` or ``frame:N``), or
+    ``FILE.npz[:N]`` (poses (T, 24, 3) and optional trans (T, 3))."""
+    from texvocab.body.poses import PRESETS
+
+    cap = state.data.capture
+    if spec in PRESETS:
+        state.apply_preset(spec)
+        return
+    frame = spec.split(":", 1)[1] if spec.startswith("frame:") else spec
+    if frame.isdigit():
+        if cap is None:
+            raise TexvocabError(f"--pose {spec}: a frame index needs a capture or checkpoint")
+        n = int(frame)
+        if n >= cap.num_frames:
+            raise TexvocabError(f"--pose {spec}: the capture has frames 0..{cap.num_frames - 1}")
+        state.set_pose(cap.poses[n], cap.trans[n])
+        return
+    path, _, idx = spec.rpartition(":") if ":" in spec and not Path(spec).exists() else (spec, "", "")
+    if Path(path).suffix == ".npz":
+        from texvocab.capture.synth import load_pose_file
+
+        poses, trans = load_pose_file(path)
+        if not idx.isdigit() and idx:
+            raise TexvocabError(f"--pose {spec}: expected FILE.npz:N with a frame number N")
+        n = int(idx or 0)
+        if n >= len(poses):
+            raise TexvocabError(f"--pose {spec}: {path} has poses 0..{len(poses) - 1}")
+        state.set_pose(poses[n], trans[n])
+        return
+    raise TexvocabError(f"--pose {spec!r}: expected a preset ({', '.join(sorted(PRESETS))}), a "
+                        "capture frame index N (or frame:N) or FILE.npz[:N]")
+
+
+def parse_camera(spec: str, data: ViewerData, state: ViewerState):
+    """A capture view index -> its camera; 'yaw,pitch,distance' (degrees, metres) -> an
+    :class:`OrbitCamera` looking at the body centre (default centre + root translation)."""
+    if spec.isdigit():
+        cap = data.capture
+        if cap is None:
+            raise TexvocabError(f"--camera {spec}: a view index needs a capture or checkpoint")
+        if int(spec) >= cap.num_views:
+            raise TexvocabError(f"--camera {spec}: the capture has views 0..{cap.num_views - 1}")
+        return cap.cameras[int(spec)]
+    try:
+        yaw, pitch, dist = (float(v) for v in spec.split(","))
+    except ValueError:
+        raise TexvocabError(f"--camera {spec!r}: expected a capture view index or "
+                            "'yaw,pitch,distance' (degrees, degrees, metres)") from None
+    if not (np.isfinite([yaw, pitch, dist]).all() and dist > 0 and abs(pitch) < 90):
+        raise TexvocabError(f"--camera {spec!r}: need distance > 0 and |pitch| < 90")
+    return OrbitCamera(target=np.asarray(DEFAULT_TARGET) + state.trans, yaw=yaw, pitch=pitch,
+                       distance=dist)
+
+
+@dataclass
+class Shot:
+    """view3d: (H, W, 3) uint8 GL view; neural: (H, W, 3) uint8 or None; seconds each."""
+
+    view3d: np.ndarray
+    neural: np.ndarray | None
+    gl_seconds: float
+    neural_seconds: float = 0.0
+
+
+def render_neural(data: ViewerData, state: ViewerState, camera, background) -> np.ndarray:
+    """(H, W, 3) uint8 render of the trained field at the state's pose, ``camera`` (an
+    OpenCV Camera), with the checkpoint's march settings."""
+    import torch
+
+    from texvocab.imageio import to_uint8
+    from texvocab.render import ShellGeometry, render_image
+    from texvocab.train import march_settings
+
+    model, march = data.model, march_settings(data.settings)
+    with torch.no_grad():
+        ctx = model.pose_feature.context(state.pose, state.trans)
+        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
+                                    index=ctx.index)
+        out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
+                           background=tuple(background), shell=shell)
+    return to_uint8(out.rgb.numpy())
+
+
+def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int],
+              options: SceneOptions, neural: bool, ctx=None) -> Shot:
+    """Render the 3D view (on ``ctx``, or a fresh OSMesa context released afterwards) and,
+    when ``neural`` and a model is loaded, the neural render from the same camera."""
+    import time
+
+    from app.gl_headless import create_headless_context, make_current, release
+
+    own = ctx is None
+    ctx = create_headless_context() if own else ctx
+    t0 = time.perf_counter()
+    try:
+        if own:
+            make_current(ctx)
+        renderer = SceneRenderer(ctx, data)
+        renderer.render(state, camera, size, options)
+        view = renderer.read(size)
+        renderer.release()
+    finally:
+        if own:
+            release(ctx)
+    shot = Shot(view, None, time.perf_counter() - t0)
+    if neural and data.model is not None:
+        t0 = time.perf_counter()
+        shot.neural = render_neural(data, state, as_camera(camera, *size), options.background)
+        shot.neural_seconds = time.perf_counter() - t0
+    return shot
+
+
+def write_shot(out: str | Path, shot: Shot) -> list[Path]:
+    """view3d.png, neural.png (if any) and shot.png (side by side, labelled) under ``out``."""
+    from texvocab.imageio import contact_sheet, save_png
+
+    out = Path(out)
+    paths = [save_png(out / "view3d.png", shot.view3d)]
+    tiles, labels = [shot.view3d], ["3D view (GL)"]
+    if shot.neural is not None:
+        paths.append(save_png(out / "neural.png", shot.neural))
+        tiles.append(shot.neural)
+        labels.append("neural render")
+    paths.append(save_png(out / "shot.png", contact_sheet([tiles], col_labels=labels)))
+    return paths
+
+
+def cmd_shot(args: argparse.Namespace) -> int:
+    if args.neural and args.source is None:
+        raise TexvocabError("--neural needs a checkpoint (SOURCE = checkpoint.pt)")
+    data = load_viewer_data(args.source, smpl=args.smpl)
+    if args.neural and data.model is None:
+        raise TexvocabError(f"--neural: {args.source} is a capture, not a checkpoint")
+    state = ViewerState(data)
+    apply_pose(state, args.pose)
+    camera = parse_camera(args.camera, data, state)
+    if args.size is not None:
+        size = parse_size(args.size)
+    elif hasattr(camera, "width"):
+        size = (camera.width, camera.height)
+    else:
+        size = DEFAULT_SIZE
+    try:
+        as_camera(camera, *size)
+    except ValueError as exc:
+        raise TexvocabError(f"--size {args.size}: {exc}") from None
+    options = SceneOptions(**{name: True for name in args.overlay})
+    shot = take_shot(data, state, camera, size, options, neural=args.neural is not False)
+    paths = write_shot(args.out, shot)
+    print(f"3D view {size[0]}x{size[1]} in {shot.gl_seconds:.2f} s"
+          + (f", neural render in {shot.neural_seconds:.1f} s" if shot.neural is not None else ""))
+    for p in paths:
+        print(f"  {p.resolve()}")
+    return 0
