@@ -1,0 +1,103 @@
+"""3D view panel: the posed body drawn by :class:`app.scene.SceneRenderer` into its own
+texture, overlay toggles, and the orbit camera (left drag orbits, wheel zooms, right or
+middle drag pans).
+
+Widget IDs: window "3D view", checkboxes ``**/Texture``, ``**/Part colours``,
+``**/Novelty``, ``**/Wireframe``, ``**/Skeleton``, the viewport ``**/##viewport``.
+"""
+from __future__ import annotations
+
+from imgui_bundle import imgui
+
+TOGGLES = (("textured", "Texture"), ("part_colors", "Part colours"), ("novelty", "Novelty"),
+           ("wireframe", "Wireframe"), ("skeleton", "Skeleton"))
+ORBIT_DEG_PER_PIXEL = 0.4
+ZOOM_PER_NOTCH = 0.9
+
+
+def _same_line_if_fits(width: float, right: float) -> None:
+    """Continue the row when an item ``width`` pixels wide ends left of ``right``
+    (screen x), else start a new row."""
+    imgui.same_line()
+    if imgui.get_cursor_screen_pos().x + width > right:
+        imgui.new_line()
+
+
+def _toggles(viewer) -> None:
+    o = viewer.options
+    right = imgui.get_cursor_screen_pos().x + imgui.get_content_region_avail().x
+    box = imgui.get_frame_height() + imgui.get_style().item_inner_spacing.x
+    for i, (name, label) in enumerate(TOGGLES):
+        if i:
+            _same_line_if_fits(box + imgui.calc_text_size(label).x, right)
+        changed, value = imgui.checkbox(label, bool(getattr(o, name)))
+        if changed:
+            setattr(o, name, value)
+            if name == "part_colors" and value:
+                o.novelty = False
+            if name == "novelty" and value:
+                o.part_colors = False
+    _same_line_if_fits(imgui.calc_text_size("Reset camera").x
+                       + 2 * imgui.get_style().frame_padding.x, right)
+    if imgui.button("Reset camera"):
+        viewer.reset_camera()
+
+
+def _interact(viewer, height: float) -> None:
+    io = imgui.get_io()
+    cam = viewer.camera
+    if imgui.is_item_active():
+        d = io.mouse_delta
+        if d.x or d.y:
+            if imgui.is_mouse_down(imgui.MouseButton_.left):
+                cam.orbit(-d.x * ORBIT_DEG_PER_PIXEL, d.y * ORBIT_DEG_PER_PIXEL)
+            elif imgui.is_mouse_down(imgui.MouseButton_.right) or \
+                    imgui.is_mouse_down(imgui.MouseButton_.middle):
+                cam.pan(-d.x / height, d.y / height)
+    if imgui.is_item_hovered() and io.mouse_wheel:
+        cam.zoom(ZOOM_PER_NOTCH ** io.mouse_wheel)
+
+
+def _legend(viewer, pos, size) -> None:
+    """Novelty colour scale in the view's lower left corner."""
+    draw = imgui.get_window_draw_list()
+    colours = viewer.novelty_colours(9)
+    x0, y1 = pos.x + 12, pos.y + size.y - 12
+    w, h = 160.0, 10.0
+    for i in range(len(colours) - 1):
+        a = imgui.get_color_u32(imgui.ImVec4(*colours[i], 1.0))
+        b = imgui.get_color_u32(imgui.ImVec4(*colours[i + 1], 1.0))
+        xa = x0 + w * i / (len(colours) - 1)
+        xb = x0 + w * (i + 1) / (len(colours) - 1)
+        draw.add_rect_filled_multi_color(imgui.ImVec2(xa, y1 - h), imgui.ImVec2(xb, y1), a, b, b, a)
+    white = imgui.get_color_u32(imgui.ImVec4(1, 1, 1, 1))
+    lo, hi = viewer.novelty_range()
+    draw.add_text(imgui.ImVec2(x0, y1 - h - 18), white,
+                  f"distance to nearest key: {lo:.2f} .. {hi:.2f}")
+
+
+def draw_view_panel(viewer) -> None:
+    """The "3D view" window's contents."""
+    _toggles(viewer)
+    avail = imgui.get_content_region_avail()
+    w, h = int(max(avail.x, 16)), int(max(avail.y, 16))
+    viewer.view_size = (w, h)
+    if not viewer.framed:
+        viewer.reset_camera()
+        viewer.framed = True
+    tex = viewer.render_scene((w, h))
+    pos = imgui.get_cursor_screen_pos()
+    size = imgui.ImVec2(w, h)
+    flags = (imgui.ButtonFlags_.mouse_button_left | imgui.ButtonFlags_.mouse_button_right
+             | imgui.ButtonFlags_.mouse_button_middle)
+    imgui.invisible_button("##viewport", size, flags)
+    viewer.view_rect = (pos.x, pos.y, float(w), float(h))
+    _interact(viewer, float(h))
+    draw = imgui.get_window_draw_list()
+    if tex is not None:
+        draw.add_image(imgui.ImTextureRef(tex.glo), pos, imgui.ImVec2(pos.x + w, pos.y + h),
+                       imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
+    grey = imgui.get_color_u32(imgui.ImVec4(0.85, 0.85, 0.85, 1.0))
+    draw.add_text(imgui.ImVec2(pos.x + 8, pos.y + 6), grey, viewer.view_caption())
+    if viewer.options.novelty:
+        _legend(viewer, pos, size)

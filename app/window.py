@@ -1,0 +1,260 @@
+"""``texvocab view``: the desktop viewer, an imgui-bundle (hello_imgui + GLFW) window with
+docked panels over one moderngl context (the window's own; no other GL context is made
+in this process): Pose (left), 3D view and Neural render (centre), Vocabulary (right).
+
+``python -m app.window [SOURCE] [--size WxH]`` runs the same window; hidden flags
+``--script NAME --report FILE.json [--screenshot FILE.png]`` drive it with the ImGui
+Test Engine or a per-frame driver (app/panel_scripts.py) for tests and benchmarks.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections import deque
+
+import numpy as np
+
+from texvocab.errors import TexvocabError
+
+PANELS = ("Pose", "3D view", "Neural render", "Vocabulary")
+
+
+def _choose_gl_platform() -> None:
+    """PyOpenGL (if anything imports it here) must match the window's context: GLX on X11
+    (also under Xvfb), EGL on Wayland; an inherited offscreen choice (osmesa) would break."""
+    wayland_only = os.environ.get("WAYLAND_DISPLAY") and not os.environ.get("DISPLAY")
+    os.environ["PYOPENGL_PLATFORM"] = "egl" if wayland_only else "glx"
+
+
+def require_display() -> None:
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise TexvocabError("no display ($DISPLAY is not set): use 'texvocab shot' for headless "
+                            "images, or run the viewer under xvfb-run")
+
+
+class Viewer:
+    """Everything the panels share: loaded data, the edited pose, the orbit camera, scene
+    options, GL resources (made in :meth:`post_init`, inside the window's context) and
+    the neural render worker."""
+
+    def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1):
+        from app.camera import OrbitCamera
+        from app.scene import SceneOptions
+        from app.state import ViewerState
+
+        self.data, self.size = data, size
+        self.state = ViewerState(data)
+        self.camera = OrbitCamera()
+        self.view_size = (max(size[0] // 3, 16), max(size[1] - 60, 16))
+        self.framed = False  # the camera is framed once the 3D view's size is known
+        self.reset_camera()
+        self.options = SceneOptions()
+        self.neural_threads = neural_threads
+        self.neural_resolution: int | None = None  # long side of the neural render (default 256)
+        self.ctx = self.scene = self.thumbs = self.neural = None
+        self.preset = ""
+        self.sequence = None
+        self.sequence_path, self.sequence_error = "", ""
+        self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
+        self.frame_ms: deque[float] = deque(maxlen=600)
+        self._last_frame = None
+        self._scene_key = None
+        self._scene_tex = None
+        self.drawn_keys: dict[str, list[tuple[int, int, float]]] = {}
+
+    # -- lifecycle (hello_imgui callbacks) ---------------------------------------------
+    def post_init(self) -> None:
+        import moderngl
+
+        from app.panel_neural import NeuralView
+        from app.panel_vocab import ThumbnailCache
+        from app.scene import SceneRenderer
+
+        self.ctx = moderngl.create_context()  # attaches to the window's current context
+        self.scene = SceneRenderer(self.ctx, self.data)
+        self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
+        if self.data.model is not None:
+            from texvocab.train import march_settings
+
+            self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
+                                     self.neural_threads)
+            if self.neural_resolution:
+                self.neural.resolution = int(self.neural_resolution)
+
+    def before_exit(self) -> None:
+        if self.neural is not None:
+            self.neural.close()
+        if self.thumbs is not None:
+            self.thumbs.release()
+        if self.scene is not None:
+            self.scene.release()
+
+    def pre_new_frame(self) -> None:
+        from imgui_bundle import hello_imgui
+
+        from app.panel_pose import tick_sequence
+
+        now = time.perf_counter()
+        if self._last_frame is not None:
+            self.frame_ms.append((now - self._last_frame) * 1000)
+        self._last_frame = now
+        tick_sequence(self)
+        playing = self.sequence is not None and self.sequence.playing
+        busy = self.neural is not None and self.neural.busy
+        hello_imgui.get_runner_params().fps_idling.enable_idling = not (busy or playing)
+
+    # -- helpers for the panels ---------------------------------------------------------
+    def reset_camera(self, aspect: float | None = None) -> None:
+        """Frame the body of the current pose from the front, in a view of width / height
+        ``aspect`` (default: the 3D view's)."""
+        aspect = self.view_aspect() if aspect is None else aspect
+        verts, _ = self.state.posed()
+        lo, hi = verts.min(0), verts.max(0)
+        self.camera.target = (lo + hi) / 2.0
+        self.camera.yaw, self.camera.pitch = 0.0, 0.0
+        half = np.tan(np.radians(self.camera.fov) / 2)
+        need = max((hi[1] - lo[1]) / (2 * half), (hi[0] - lo[0]) / (2 * half * aspect))
+        self.camera.distance = 1.12 * float(need) + float(hi[2] - lo[2]) / 2
+
+    def render_scene(self, size: tuple[int, int]):
+        """The 3D view's texture at ``size``, redrawn only when something changed."""
+        if self.scene is None:
+            return None
+        from app.panel_neural import _camera_key
+
+        o = self.options
+        key = (self.state.version, _camera_key(self.camera), tuple(size), o.textured,
+               o.part_colors, o.novelty, o.wireframe, o.skeleton)
+        if key != self._scene_key:
+            self._scene_tex = self.scene.render(self.state, self.camera, size, o)
+            self.ctx.screen.use()
+            self._scene_key = key
+        return self._scene_tex
+
+    def view_aspect(self) -> float:
+        w, h = self.view_size
+        return w / max(h, 1)
+
+    def view_caption(self) -> str:
+        ms = list(self.frame_ms)[-60:]
+        fps = f"{1000.0 / np.median(ms):.0f} fps" if ms else ""
+        return f"{fps}   left drag: orbit   wheel: zoom   right drag: pan"
+
+    def novelty_colours(self, n: int) -> np.ndarray:
+        from app.colors import heat_color
+
+        return heat_color(np.linspace(0.0, 1.0, n))
+
+    def novelty_range(self) -> tuple[float, float]:
+        return 0.0, float(self.options.novelty_scale)
+
+    def neural_absent_reason(self) -> str:
+        if self.data.capture is None:
+            return ("No neural render: no checkpoint loaded (only the body). Start the viewer "
+                    "with a trained avatar: texvocab view RUN/checkpoint.pt")
+        return (f"No neural render: {self.data.source} is a capture, not a trained avatar. "
+                "Train one (texvocab train CAPTURE --out RUN) and open RUN/checkpoint.pt.")
+
+
+def _runner_params(viewer: Viewer, title: str):
+    from imgui_bundle import hello_imgui, imgui
+
+    from app.panel_neural import draw_neural_panel
+    from app.panel_pose import draw_pose_panel
+    from app.panel_view import draw_view_panel
+    from app.panel_vocab import draw_vocab_panel
+
+    rp = hello_imgui.RunnerParams()
+    rp.app_window_params.window_title = title
+    rp.app_window_params.window_geometry.size = viewer.size
+    rp.app_window_params.restore_previous_geometry = False
+    rp.imgui_window_params.default_imgui_window_type = \
+        hello_imgui.DefaultImGuiWindowType.provide_full_screen_dock_space
+    rp.imgui_window_params.enable_viewports = False
+    rp.ini_disable = True
+    rp.fps_idling.enable_idling = True
+    splits = [
+        hello_imgui.DockingSplit("MainDockSpace", "PoseSpace", imgui.Dir.left, 0.22),
+        hello_imgui.DockingSplit("MainDockSpace", "VocabSpace", imgui.Dir.right, 0.28),
+    ]
+    neural_space = "VocabSpace"  # without a model the panel only explains: a tab
+    if viewer.data.model is not None:
+        splits.append(hello_imgui.DockingSplit("MainDockSpace", "NeuralSpace", imgui.Dir.right,
+                                               0.5))
+        neural_space = "NeuralSpace"
+    rp.docking_params.docking_splits = splits
+    windows = []
+    for label, space, fn in (("Pose", "PoseSpace", draw_pose_panel),
+                             ("3D view", "MainDockSpace", draw_view_panel),
+                             ("Neural render", neural_space, draw_neural_panel),
+                             ("Vocabulary", "VocabSpace", draw_vocab_panel)):
+        win = hello_imgui.DockableWindow(label, space, (lambda f=fn: f(viewer)))
+        win.can_be_closed = False
+        windows.append(win)
+    rp.docking_params.dockable_windows = windows
+    rp.callbacks.post_init = viewer.post_init
+    rp.callbacks.before_exit = viewer.before_exit
+    rp.callbacks.pre_new_frame = viewer.pre_new_frame
+    return rp
+
+
+def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
+               script: str | None = None, report: str | None = None,
+               screenshot: str | None = None, neural_resolution: int | None = None) -> int:
+    """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
+    until it is closed. ``script``: a driver from app/panel_scripts.py (tests, benchmarks)
+    writing a JSON ``report`` and the last frame to ``screenshot``."""
+    require_display()
+    _choose_gl_platform()
+    from imgui_bundle import hello_imgui, immapp
+
+    from app.state import load_viewer_data
+
+    data = load_viewer_data(source, smpl)
+    viewer = Viewer(data, (int(size[0]), int(size[1])))
+    viewer.neural_resolution = neural_resolution
+    rp = _runner_params(viewer, f"texvocab - {data.source}")
+    driver = None
+    if script is not None:
+        from app.panel_scripts import make_driver
+
+        driver = make_driver(script, viewer, rp)
+    immapp.run(rp)
+    if driver is not None:
+        shot = hello_imgui.final_app_window_screenshot()
+        return driver.finish(report, screenshot, shot)
+    return 0
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise TexvocabError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 1280x800") from None
+    if w < 320 or h < 240:
+        raise TexvocabError(f"--size {text!r}: the window needs at least 320x240")
+    return w, h
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m app.window", description=__doc__.split("\n")[0])
+    p.add_argument("source", nargs="?", default=None, help="checkpoint .pt or capture folder")
+    p.add_argument("--smpl", default=None, help="SMPL model file or folder")
+    p.add_argument("--size", default="1280x800", help="window size WxH (default 1280x800)")
+    p.add_argument("--script", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--report", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--neural-resolution", type=int, default=None, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    try:
+        return run_viewer(args.source, args.smpl, _parse_size(args.size), args.script,
+                          args.report, args.screenshot, args.neural_resolution)
+    except TexvocabError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,115 @@
+"""The viewer window for real: a GLFW window under Xvfb, driven by the ImGui Test Engine
+(app/panel_scripts.py). It moves a left-arm slider and clicks a vocabulary key the way a
+user would; the vocabulary panel's keys and weights must follow, the screenshot must show
+the body, and the app (and its neural render worker) must exit cleanly."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from texvocab.body import default_body
+from texvocab.capture import open as open_capture
+from texvocab.capture.motion import make_sequence
+from texvocab.capture.synth import SynthSettings, synthesize
+from texvocab.field import FieldSettings
+from texvocab.settings import Settings
+from texvocab.train import Trainer
+
+ROOT = Path(__file__).resolve().parent.parent
+PYTHON = sys.executable
+XVFB = shutil.which("xvfb-run")
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tmp_path_factory):
+    """A 6-frame, 4-view 64² capture and a checkpoint after 2 steps of a tiny model (its
+    vocabulary: 3 keys per part, K = 2; the field still near its body-SDF init)."""
+    root = tmp_path_factory.mktemp("viewer")
+    poses, trans = make_sequence([("walk", 4), ("arm_raise", 4)], seed=5)
+    cap = synthesize(root / "cap", poses, trans, 6, default_body(),
+                     SynthSettings(ring_views=4, raised_views=0, size=64, texture_size=128),
+                     progress=False)
+    s = Settings(texture_size=64, num_keys=3, k=2, encoder="small", rays_per_batch=128,
+                 coarse_samples=8, fine_samples=4, iterations=2, checkpoint_every=10,
+                 field=FieldSettings(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4))
+    Trainer(open_capture(cap), s, root / "run", progress=False).run()
+    return root / "run" / "checkpoint.pt"
+
+
+def run_window(source, script: str, tmp_path: Path, timeout: float = 150):
+    assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
+    report, shot = tmp_path / f"{script}.json", tmp_path / f"{script}.png"
+    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", PYTHON, "-m", "app.window", str(source),
+           "--size", "1280x800", "--script", script, "--report", str(report),
+           "--screenshot", str(shot), "--neural-resolution", "48"]
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    assert report.is_file(), f"no report; rc {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    return proc, json.loads(report.read_text()), shot
+
+
+def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
+    proc, rep, shot = run_window(tiny_checkpoint, "slider", tmp_path)
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"),
+                                                proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr
+
+    # the slider moved the joint (left shoulder z, degrees) and bumped the pose version
+    assert rep["left_shoulder_deg"] == pytest.approx([0.0, 0.0, -70.0], abs=0.5)
+    assert rep["version_after"] > rep["version_before"]
+
+    # the vocabulary panel redrew the left arm's keys/weights; the other parts did not move
+    before, after = rep["before"]["keys"], rep["after"]["keys"]
+    assert set(before) == set(after) == {"main_body", "left_leg", "right_leg", "left_arm",
+                                         "right_arm"}
+    assert before["left_arm"] != after["left_arm"]
+    for part in ("main_body", "left_leg", "right_leg", "right_arm"):
+        assert before[part] == after[part], part
+    for part, keys in after.items():
+        assert len(keys) == 2 and sum(w for _, _, w in keys) == pytest.approx(1.0), part
+    assert rep["before"]["novelty"]["left_arm"] != rep["after"]["novelty"]["left_arm"]
+    # the buttons of the newly selected keys exist in the panel
+    assert set(rep["left_arm_buttons_found"]) == {str(k) for k, _, _ in after["left_arm"]}
+    assert all(rep["left_arm_buttons_found"].values())
+
+    # clicking a key moved the left arm onto that key: its nearest-key distance is ~0
+    clicked = rep["after_click"]
+    assert clicked["novelty"]["left_arm"] < 1e-6 < rep["after"]["novelty"]["left_arm"]
+    assert rep["clicked_key"] in [k for k, _, _ in clicked["keys"]["left_arm"]]
+
+    # the neural render ran coarse to fine for the newest version, and its worker stopped
+    neural = rep["neural"]
+    assert neural["errors"] == [] and neural["level"] == 1
+    last = max(v for v, _ in neural["delivered"])
+    assert [lv for v, lv in neural["delivered"] if v == last] == [8, 4, 2, 1]
+    assert rep["worker_stopped"] is True
+
+    # the screenshot is the whole window and shows the body in the 3D view
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(np.float32)
+    assert img.shape == (800, 1280, 3) and img.std() > 10
+    x, y, w, h = (int(round(v)) for v in rep["view_rect"])
+    assert w > 200 and h > 400
+    bg = np.array((0.13, 0.14, 0.16)) * 255  # SceneOptions.background
+    view = img[y:y + h, x:x + w]
+    corner = view[h - 20:h - 5, 5:20]
+    assert np.abs(corner - bg).max() < 12, "the view's corner should be background"
+    centre = view[int(h * 0.3):int(h * 0.6), int(w * 0.4):int(w * 0.6)]  # torso
+    body = np.abs(centre - bg).max(-1) > 30
+    assert body.mean() > 0.6, f"only {body.mean():.0%} of the view's centre differs from the background"
+
+
+def test_viewer_without_display_says_what_to_do(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run([PYTHON, "-m", "app.window"], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: no display")
+    assert "texvocab shot" in lines[0] and "xvfb-run" in lines[0]
