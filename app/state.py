@@ -117,6 +117,7 @@ class ViewerState:
         self.version = 0
         self._cache: dict[str, tuple[int, object]] = {}
         self._vocab_texture = None
+        self._poser = None
 
     # -- editing ------------------------------------------------------------------------
     def _changed(self, pose: np.ndarray, trans: np.ndarray | None = None) -> bool:
@@ -240,11 +241,11 @@ class ViewerState:
     def posed(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertices (V, 3), joints (24, 3)) float32 of the current pose, world space."""
         def make():
-            import torch
+            if self._poser is None:
+                from app.posing import BodyPoser
 
-            out = self.data.body.forward(torch.as_tensor(self.pose)[None],
-                                         torch.as_tensor(self.trans)[None])
-            return (out.vertices[0].numpy().astype(np.float32),
-                    out.joints[0].numpy().astype(np.float32))
+                self._poser = BodyPoser(self.data.body)
+            verts, joints = self._poser(self.pose, self.trans)
+            return verts.astype(np.float32), joints.astype(np.float32)
 
         return self._cached("posed", make)

@@ -34,10 +34,13 @@ void main() {
         color = base * (0.35 + 0.65 * diffuse);
     }
     if (wireframe) {
-        vec3 d = v_bary / max(fwidth(v_bary), vec3(1e-6));
+        vec3 w = fwidth(v_bary);  // barycentric change per pixel: ~1 / triangle size
+        vec3 d = v_bary / max(w, vec3(1e-6));
         float edge = min(min(d.x, d.y), d.z);
         float on = 1.0 - smoothstep(0.0, wire_width, edge);
-        color = mix(color, wire_color, 0.8 * on);
+        // fade lines out where triangles are only a few pixels wide (they would cover all)
+        float dense = smoothstep(0.12, 0.4, max(max(w.x, w.y), w.z));
+        color = mix(color, wire_color, 0.8 * on * (1.0 - dense));
     }
     frag_color = vec4(color, 1.0);
 }

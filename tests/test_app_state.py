@@ -144,3 +144,27 @@ def test_no_vocabulary_and_bad_sources(tmp_path):
     junk.write_bytes(b"junk")
     with pytest.raises(TexvocabError, match="junk.pt: not a loadable texvocab checkpoint"):
         load_viewer_data(str(junk))
+
+
+def test_numpy_posing_equals_the_body_model(body, toy_arrays):
+    """app.posing (NumPy LBS for display) against BodyModel.forward, with and without
+    pose correctives."""
+    import torch
+
+    from app.posing import BodyPoser
+    from texvocab.body import BodyModel
+    from texvocab.body.smpl_io import parents_from_kintree
+
+    toy = BodyModel(v_template=toy_arrays["v_template"], faces=toy_arrays["f"],
+                    weights=toy_arrays["weights"],
+                    parents=parents_from_kintree(toy_arrays["kintree_table"]),
+                    J_regressor=toy_arrays["J_regressor"], posedirs=toy_arrays["posedirs"],
+                    dtype=torch.float64)
+    rng = np.random.default_rng(3)
+    for model in (body, toy):
+        pose, trans = rng.normal(0, 0.6, (24, 3)), rng.normal(0, 0.3, 3)
+        verts, joints = BodyPoser(model)(pose, trans)
+        ref = model.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
+        tol = 1e-9 if model is toy else 1e-5  # the default body's model is float32
+        np.testing.assert_allclose(verts, ref.vertices[0].double().numpy(), atol=tol)
+        np.testing.assert_allclose(joints, ref.joints[0].double().numpy(), atol=tol)

@@ -145,17 +145,25 @@ def test_wireframe_and_skeleton_draw_over_the_body(ctx, body):
     data = ViewerData(body)
     state = ViewerState(data)
     renderer = SceneRenderer(ctx, data)
+
+    def darker_share(cam):
+        renderer.render(state, cam, (W, H), SceneOptions())
+        plain = renderer.read().astype(int).sum(-1)
+        renderer.render(state, cam, (W, H), SceneOptions(wireframe=True))
+        wire = renderer.read().astype(int).sum(-1)
+        mask = gl_mask(renderer)
+        return ((wire < plain - 30) & mask).sum() / mask.sum()
+
+    close = darker_share(OrbitCamera(target=(0.0, 0.2, 0.0), distance=0.9))
+    far = darker_share(OrbitCamera(distance=8.0))
+    print(f"wireframe pixels: close-up {close:.1%} of the body, far away {far:.1%}")
+    assert close > 0.1  # edges drawn across the body
+    assert far < 0.02  # triangles of a pixel or two: lines fade out instead of covering all
     cam = OrbitCamera(distance=2.0)
-    plain = renderer.render(state, cam, (W, H), SceneOptions()) and renderer.read()
-    renderer.render(state, cam, (W, H), SceneOptions(wireframe=True))
-    wire = renderer.read()
-    mask = gl_mask(renderer)
-    darker = (wire.astype(int).sum(-1) < plain.astype(int).sum(-1) - 30) & mask
-    assert darker.mean() > 0.2 * mask.mean()  # edges drawn across the body
     renderer.render(state, cam, (W, H), SceneOptions(skeleton=True))
     skel = renderer.read().astype(int)
     yellow = (skel[..., 0] > 200) & (skel[..., 1] > 170) & (skel[..., 2] < 80)
-    assert yellow.sum() > 200  # bones
+    assert yellow.sum() > 100  # bones
     # a joint (right wrist) drawn in red on top, where the camera projects it
     px, _ = cam.to_texvocab_camera(W, H).project(state.posed()[1][21:22])
     x, y = np.rint(px[0]).astype(int)

@@ -63,11 +63,22 @@ class VocabTexture:
         #: (N, P) attention Ω of each covered texel to each vocabulary part
         self.attention = part_attention(torch.as_tensor(weights), vocab.part_joints).numpy()
         self._flat = textures.reshape(len(textures), -1, 3)[:, self.tmap.covered.reshape(-1)]
+        # per part: the texels attending to it at all, and their attention (float32)
+        self._part_texels = []
+        for p in range(self.attention.shape[1]):
+            idx = np.nonzero(self.attention[:, p] > 0)[0]
+            self._part_texels.append((idx, self.attention[idx, p, None].astype(np.float32)))
 
     def blend(self, pose) -> np.ndarray:
         """(S, S, 3) float32 blended texture for a pose (24, 3); uncovered texels copy
         the nearest covered texel (as the texture maps themselves do)."""
         frames, coef = part_coefficients(self.vocab, pose)
-        per_texel = self.attention @ coef  # (N, U)
-        colour = np.einsum("nu,unc->nc", per_texel, self._flat[frames].astype(np.float64))
-        return self.tmap.to_image(colour.astype(np.float32), fill=True)
+        colour = np.zeros((self._flat.shape[1], 3), np.float32)
+        for (idx, omega), row in zip(self._part_texels, coef, strict=True):
+            if len(idx) == 0:
+                continue
+            blend = np.zeros((len(idx), 3), np.float32)  # Eq. 3 on this part's texels
+            for u in np.nonzero(row > 0)[0]:
+                blend += np.float32(row[u]) * self._flat[frames[u], idx]
+            colour[idx] += omega * blend
+        return self.tmap.to_image(colour, fill=True)
