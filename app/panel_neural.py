@@ -6,6 +6,8 @@ Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render 
 """
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 from imgui_bundle import imgui
 
@@ -25,6 +27,8 @@ class NeuralView:
         self._key = None
         self.frame: RenderFrame | None = None
         self.texture = None
+        #: (version, level, milliseconds, seconds since the job started, (h, w)) per shown level
+        self.history: deque[tuple] = deque(maxlen=200)
 
     @property
     def busy(self) -> bool:
@@ -53,6 +57,8 @@ class NeuralView:
             self.texture.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
         self.texture.write(img.tobytes())
         self.frame = frame
+        self.history.append((frame.version, frame.level, frame.seconds * 1000, frame.elapsed,
+                             img.shape[:2]))
 
     def close(self) -> None:
         self.worker.stop()
@@ -78,9 +84,8 @@ def status_line(frame: RenderFrame | None, busy: bool) -> str:
         return "rendering..." if busy else "waiting"
     level = "full resolution" if frame.level == 1 else f"1/{frame.level} resolution"
     h, w = frame.image.shape[:2]
-    refining = "   refining..." if busy else ""
-    return (f"{level} ({w}x{h}): {frame.seconds * 1000:.0f} ms, {frame.elapsed:.2f} s so far"
-            f"{refining}")
+    total = f"{frame.elapsed:.1f} s so far, refining..." if busy else f"{frame.elapsed:.1f} s in all"
+    return f"{level} ({w}x{h}): {frame.seconds * 1000:.0f} ms; {total}"
 
 
 def draw_neural_panel(viewer) -> None:

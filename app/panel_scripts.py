@@ -169,6 +169,7 @@ class BenchDriver(Driver):
         self.seconds, self.resolution = seconds, resolution
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
         self.times: dict[str, list[float]] = {"idle": [], "rendering": []}
+        self.cpu: dict[str, list[float]] = {"idle": [], "rendering": []}
         self._last = None
         self._nudge = 0
         previous = rp.callbacks.pre_new_frame
@@ -183,13 +184,15 @@ class BenchDriver(Driver):
         now = time.perf_counter()
         dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
         self.count += 1
+        cpu = v.frame_cpu_ms[-1] if v.frame_cpu_ms else None
         if self.phase == "warmup":
             if self.count > 30:
                 self.phase, self.t0 = "idle", now
             return
         if self.phase == "idle":
-            if dt is not None:
+            if dt is not None and cpu is not None:
                 self.times["idle"].append(dt)
+                self.cpu["idle"].append(cpu)
             if now - self.t0 > self.seconds:
                 if v.neural is None:
                     self._done(rp, "no neural render: the source is not a checkpoint")
@@ -198,8 +201,9 @@ class BenchDriver(Driver):
                 self.phase, self.t0 = "rendering", now
             return
         nv = v.neural
-        if nv.busy and dt is not None:
+        if nv.busy and dt is not None and cpu is not None:
             self.times["rendering"].append(dt)
+            self.cpu["rendering"].append(cpu)
         elif not nv.busy:
             self._nudge += 1
             v.state.set_joint(16, v.state.joint_deg(16) + (0, 0, 2.0 if self._nudge % 2 else -2.0))
@@ -216,11 +220,15 @@ class BenchDriver(Driver):
         if v.neural is not None:
             w = v.neural.worker
             self.report["levels_delivered"] = len(w.delivered)
+            self.report["levels"] = [[int(a), int(b), float(c), float(d), [int(x) for x in e]]
+                                     for a, b, c, d, e in v.neural.history]
             self.report["resolution"] = self.resolution
             f = v.neural.frame
             self.report["last_level"] = None if f is None else {
                 "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2])}
+        self.report["frame_cpu_ms"] = self.cpu
         self.report["summary"] = {k: _stats(t) for k, t in self.times.items() if t}
+        self.report["summary_cpu"] = {k: _stats(t) for k, t in self.cpu.items() if t}
         rp.app_shall_exit = True
 
 

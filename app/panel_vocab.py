@@ -1,6 +1,6 @@
 """Vocabulary panel: per body part, the K keys the current pose selects (key id, source
-frame, weight bar, thumbnail of the key's texture map) and the part's distance to its
-nearest key; clicking a key moves that part's pose to the key.
+frame t, weight bar, thumbnail of the key's texture map U_t) and the part's distance to
+its nearest key; clicking a key moves that part's pose to the key.
 
 Widget IDs: window "Vocabulary", key buttons ``<part>/keys/key<K>`` (K = key id; the
 test engine's "**" wildcard does not reach into the table).
@@ -11,7 +11,7 @@ import numpy as np
 from imgui_bundle import imgui
 
 THUMB = 64  # thumbnail side, texels
-THUMB_PX = 40  # thumbnail side on screen, pixels
+THUMB_PX = 36  # thumbnail side on screen, pixels
 
 
 class ThumbnailCache:
@@ -55,14 +55,14 @@ def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float) -> None
     else:
         clicked = imgui.button(f"{key_id}##key{key_id}", size)
     if imgui.is_item_hovered():
-        imgui.set_tooltip(f"move {part.replace('_', ' ')} to key {key_id} "
-                          f"(texture of training frame {frame})")
+        imgui.set_tooltip(f"key {key_id} of {part.replace('_', ' ')}: the texture map of "
+                          f"training frame t = {frame}.\nClick to move the part to this key.")
     if clicked:
         viewer.state.set_part_to_key(part, key_id)
     imgui.same_line()
     imgui.begin_group()
     imgui.text(f"key {key_id}")
-    imgui.text_disabled(f"frame {frame}")
+    imgui.text_disabled(f"t = {frame}")
     imgui.end_group()
     imgui.progress_bar(weight, imgui.ImVec2(-1, 0), f"{weight:.2f}")
 
