@@ -63,7 +63,9 @@ def vocab():
 
 @pytest.fixture(scope="module")
 def avatar(body, vocab):
-    return make_field(body, vocab)
+    """The avatar with the default no-weights encoder (frozen texture pyramid); trainable
+    encoders are exercised by the texture tests."""
+    return make_field(body, vocab, encoder="pyramid")
 
 
 def uniform_pose(angle: float) -> np.ndarray:
@@ -432,7 +434,7 @@ def test_extreme_joint_angles(body, vocab, avatar, case):
 SPECIAL = [0.0, 1e-8, -1e-8, PI - 1e-7, PI, -PI, 2 * PI, 1.0]
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=15, deadline=None)
 @given(kinds=st.lists(st.sampled_from(range(len(SPECIAL))), min_size=24, max_size=24),
        seed=st.integers(0, 2**16))
 def test_body_and_vocabulary_at_special_angles_on_random_axes(body, vocab, kinds, seed):
@@ -463,10 +465,19 @@ def test_all_zero_textures(body, vocab, encoder):
         assert torch.equal(out.features, torch.zeros_like(out.features))
     elif encoder == "pyramid":  # ImageNet-normalised black: one constant feature
         assert torch.allclose(valid, valid[:1].expand_as(valid), atol=1e-6)
-    check_field_and_render(field, pose)
+    if encoder == "resnet34-scratch":  # BatchNorm of a constant batch: variance zero
+        field.zero_grad(set_to_none=True)
+        sdf, rgb, _ = field.sdf_and_color(ctx, shell_points(ctx, 200), torch.ones(200, 3) / 3**0.5)
+        (out.features.square().mean() + sdf.abs().mean() + rgb.mean()).backward()
+        assert_finite(sdf=sdf, rgb=rgb)
+        assert_param_grads(field)
+    else:
+        check_field_and_render(field, pose)
     if encoder in ("small", "resnet34-scratch"):
-        grads = [p.grad for p in field.pose_feature.encoder.parameters() if p.grad is not None]
-        assert grads and all(torch.isfinite(g).all() for g in grads)
+        grads = {n: p.grad for n, p in field.pose_feature.encoder.named_parameters()
+                 if p.grad is not None}
+        assert grads
+        assert_finite(**grads)
 
 
 class FrontOnlyCapture:
