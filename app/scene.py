@@ -215,6 +215,7 @@ class SceneRenderer:
             mode = 2
         elif o.textured and self._update_texture(state):
             mode = 1
+        previous = ctx.fbo  # given back at the end (the window draws its GUI there)
         target = self.msaa_fbo or self.fbo
         target.use()
         ctx.viewport = (0, 0, w, h)
@@ -247,6 +248,8 @@ class SceneRenderer:
             self.joint_vao.render(moderngl.POINTS, vertices=len(self.bones) + 1)
         if self.msaa_fbo is not None:
             ctx.copy_framebuffer(self.fbo, self.msaa_fbo)
+        if previous is not None:
+            previous.use()
         return self.color
 
     def read(self, size: tuple[int, int] | None = None) -> np.ndarray:

@@ -168,3 +168,23 @@ def test_wireframe_and_skeleton_draw_over_the_body(ctx, body):
     px, _ = cam.to_texvocab_camera(W, H).project(state.posed()[1][21:22])
     x, y = np.rint(px[0]).astype(int)
     assert skel[y, x, 0] > 200 and skel[y, x, 1] < 80
+
+
+def test_msaa_resolves_into_the_same_image_with_smoother_edges(ctx, body):
+    data = ViewerData(body)
+    state = ViewerState(data)
+    plain, msaa = SceneRenderer(ctx, data), SceneRenderer(ctx, data, samples=4)
+    assert msaa.samples == min(4, ctx.max_samples) > 0
+    opts = SceneOptions(part_colors=True, lighting=False)
+    images = []
+    for r in (plain, msaa):
+        r.render(state, OrbitCamera(), (W, H), opts)
+        images.append(r.read().astype(int))
+    diff = np.abs(images[0] - images[1]).max(-1)
+    assert 0 < (diff > 0).mean() < 0.05  # only edge pixels change
+    palette = np.array(list(PART_COLORS.values()) + [SceneOptions().background]) * 255
+
+    def off_palette(img):  # pixels that are a blend of two colours
+        return (np.linalg.norm(img[:, :, None] - palette, axis=-1).min(-1) > 8).sum()
+
+    assert off_palette(images[1]) > 1.5 * off_palette(images[0])
