@@ -14,6 +14,7 @@ import traceback
 from pathlib import Path
 
 import numpy as np
+from imgui_bundle import imgui
 
 LEFT_ARM_MOVE = ("**/left_shoulder/##z", -70.0)  # lower the left arm from the T-pose
 
@@ -39,7 +40,8 @@ def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
     report["neural"] = None if f is None else {
         "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2]),
         "delivered": [list(d) for d in viewer.neural.worker.delivered],
-        "errors": list(viewer.neural.worker.errors)}
+        "errors": list(viewer.neural.worker.errors),
+        "traceback": viewer.neural.worker.last_traceback}
 
 
 def script_slider(ctx, viewer, report: dict) -> None:
@@ -63,7 +65,51 @@ def script_slider(ctx, viewer, report: dict) -> None:
     ctx.yield_(3)
     report["clicked_key"] = far_key
     report["after_click"] = snapshot(viewer)
+    _camera_steps(ctx, viewer, report)
+    if viewer.sequence_path:
+        _sequence_steps(ctx, viewer, report)
     wait_neural(ctx, viewer, report)
+
+
+def _camera(viewer) -> dict:
+    c = viewer.camera
+    return {"yaw": c.yaw, "pitch": c.pitch, "distance": c.distance, "target": c.target.tolist()}
+
+
+def _camera_steps(ctx, viewer, report: dict) -> None:
+    """Orbit (left drag), zoom (wheel) and pan (right drag) in the 3D view."""
+    ctx.set_ref("3D view")
+    report["camera_start"] = _camera(viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_drag_with_delta(imgui.ImVec2(60, 0))
+    report["camera_orbited"] = _camera(viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_wheel_y(2)
+    ctx.yield_(2)
+    report["camera_zoomed"] = _camera(viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_drag_with_delta(imgui.ImVec2(0, 40), imgui.MouseButton_.right)
+    report["camera_panned"] = _camera(viewer)
+    ctx.item_click("**/Reset camera")
+    ctx.yield_(2)
+    report["camera_reset"] = _camera(viewer)
+
+
+def _sequence_steps(ctx, viewer, report: dict) -> None:
+    """Load the pose file given by --poses and scrub its timeline to frame 2."""
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_click("**/Sequence/Load")
+    ctx.yield_(2)
+    report["sequence_error"] = viewer.sequence_error
+    if viewer.sequence is None:
+        return
+    report["sequence_frames"] = len(viewer.sequence.poses)
+    ctx.item_input_value("**/Sequence/frame", 2)
+    ctx.yield_(2)
+    report["sequence_frame"] = viewer.sequence.frame
+    report["pose_at_frame"] = viewer.state.pose.tolist()
+    report["trans_at_frame"] = viewer.state.trans.tolist()
 
 
 def script_shot_default(ctx, viewer, report: dict) -> None:

@@ -223,10 +223,11 @@ def _runner_params(viewer: Viewer, title: str):
 def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
                script: str | None = None, report: str | None = None,
                screenshot: str | None = None, neural_resolution: int | None = None,
-               neural_threads: int = 1) -> int:
+               neural_threads: int = 1, poses: str | None = None) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
-    until it is closed. ``script``: a driver from app/panel_scripts.py (tests, benchmarks)
-    writing a JSON ``report`` and the last frame to ``screenshot``."""
+    until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
+    0). ``script``: a driver from app/panel_scripts.py (tests, benchmarks) writing a JSON
+    ``report`` and the last frame to ``screenshot``."""
     require_display()
     _choose_gl_platform()
     from imgui_bundle import hello_imgui, immapp
@@ -236,6 +237,12 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     data = load_viewer_data(source, smpl)
     viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads)
     viewer.neural_resolution = neural_resolution
+    if poses:
+        from app.panel_pose import PoseSequence
+
+        viewer.sequence_path = poses
+        viewer.sequence = PoseSequence.load(poses)
+        viewer.state.set_pose(viewer.sequence.poses[0], viewer.sequence.trans[0])
     rp = _runner_params(viewer, f"texvocab - {data.source}")
     driver = None
     if script is not None:
@@ -264,6 +271,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("source", nargs="?", default=None, help="checkpoint .pt or capture folder")
     p.add_argument("--smpl", default=None, help="SMPL model file or folder")
     p.add_argument("--size", default="1280x800", help="window size WxH (default 1280x800)")
+    p.add_argument("--poses", default=None,
+                   help="a pose sequence .npz ('poses' (T, 24, 3), optional 'trans') for the "
+                        "Pose panel's timeline")
     p.add_argument("--script", default=None, help=argparse.SUPPRESS)
     p.add_argument("--report", default=None, help=argparse.SUPPRESS)
     p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)
@@ -273,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return run_viewer(args.source, args.smpl, _parse_size(args.size), args.script,
                           args.report, args.screenshot, args.neural_resolution,
-                          args.neural_threads)
+                          args.neural_threads, args.poses)
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -18,6 +18,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -49,6 +50,21 @@ class RenderFrame:
     elapsed: float
 
 
+def pad_single_point_calls(field):
+    """The field with calls of exactly one point evaluated as two (the point twice).
+
+    texvocab.feature.PoseFeature.forward indexes numpy arrays with a torch bool mask; a
+    one-element mask is read as the integer index 1 there (IndexError). The marcher
+    makes such calls when a ray chunk leaves a single sample to evaluate (small images).
+    """
+    def call(points, dirs):
+        if points.shape[0] != 1:
+            return field(points, dirs)
+        sigma, rgb = field(points.expand(2, -1), dirs.expand(2, -1))
+        return sigma[:1], rgb[:1]
+    return call
+
+
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
     once, then the levels (as :func:`texvocab.evaluate.render_view` does for one)."""
@@ -63,7 +79,7 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
                 return
             shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
                                         index=ctx.index)
-            field = model.for_pose(ctx)
+            field = pad_single_point_calls(model.for_pose(ctx))
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, march,
                                       levels=levels, cancelled=cancelled, shell=shell)
     return render
@@ -89,7 +105,8 @@ class ProgressiveWorker:
         self._busy = False
         self._stop = False
         self.delivered: deque[tuple[int, int]] = deque(maxlen=256)  # (version, level), in order
-        self.errors: deque[str] = deque(maxlen=16)
+        self.errors: deque[str] = deque(maxlen=16)  # "Type: message (file:line)"
+        self.last_traceback = ""
         self._thread = threading.Thread(target=self._run, name="texvocab-neural", daemon=True)
         self._thread.start()
 
@@ -168,8 +185,13 @@ class ProgressiveWorker:
                     self._frame, self._fresh = frame, True
                     self.delivered.append((job.version, int(level)))
         except Exception as exc:  # shown in the panel; the worker keeps serving
+            import traceback
+
+            where = traceback.extract_tb(exc.__traceback__)[-1]
+            self.last_traceback = traceback.format_exc()
             with self._lock:
-                self.errors.append(f"{type(exc).__name__}: {exc}")
+                self.errors.append(f"{type(exc).__name__}: {exc} "
+                                   f"({Path(where.filename).name}:{where.lineno})")
         finally:
             with self._lock:
                 if not self._stale(job) and self._job is None:

@@ -44,19 +44,24 @@ def tiny_checkpoint(tmp_path_factory):
     return root / "run" / "checkpoint.pt"
 
 
-def run_window(source, script: str, tmp_path: Path, timeout: float = 150):
+def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float = 150):
     assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
     report, shot = tmp_path / f"{script}.json", tmp_path / f"{script}.png"
     cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", PYTHON, "-m", "app.window", str(source),
            "--size", "1280x800", "--script", script, "--report", str(report),
-           "--screenshot", str(shot), "--neural-resolution", "48"]
+           "--screenshot", str(shot), "--neural-resolution", "48", *extra]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
     assert report.is_file(), f"no report; rc {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc, json.loads(report.read_text()), shot
 
 
 def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
-    proc, rep, shot = run_window(tiny_checkpoint, "slider", tmp_path)
+    seq_poses = np.zeros((4, 24, 3), np.float32)
+    seq_poses[:, 18, 1] = np.radians([-10, -40, -70, -100])  # left elbow bends
+    seq_trans = np.stack([np.zeros(4), np.zeros(4), np.linspace(0, 0.3, 4)], 1).astype(np.float32)
+    np.savez(tmp_path / "seq.npz", poses=seq_poses, trans=seq_trans)
+    proc, rep, shot = run_window(tiny_checkpoint, "slider", tmp_path, "--poses",
+                                 str(tmp_path / "seq.npz"))
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"),
                                                 proc.stderr[-2000:])
     assert "Traceback" not in proc.stderr
@@ -84,6 +89,21 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert clicked["novelty"]["left_arm"] < 1e-6 < rep["after"]["novelty"]["left_arm"]
     assert rep["clicked_key"] in [k for k, _, _ in clicked["keys"]["left_arm"]]
 
+    # the 3D view's camera: left drag orbits, the wheel zooms in, right drag pans, and
+    # "Reset camera" faces the body again
+    start, orbited = rep["camera_start"], rep["camera_orbited"]
+    assert abs(orbited["yaw"] - start["yaw"]) > 5 and orbited["distance"] == start["distance"]
+    assert rep["camera_zoomed"]["distance"] < orbited["distance"]
+    panned = rep["camera_panned"]
+    assert np.abs(np.subtract(panned["target"], rep["camera_zoomed"]["target"])).max() > 0.01
+    assert rep["camera_reset"]["yaw"] == 0 and rep["camera_reset"]["pitch"] == 0
+
+    # the pose file's timeline: loaded, scrubbed to frame 2, which is now the pose
+    assert rep["sequence_error"] == "" and rep["sequence_frames"] == 4
+    assert rep["sequence_frame"] == 2
+    np.testing.assert_allclose(rep["pose_at_frame"], seq_poses[2], atol=1e-6)
+    np.testing.assert_allclose(rep["trans_at_frame"], seq_trans[2], atol=1e-6)
+
     # the neural render ran coarse to fine for the newest version, and its worker stopped
     neural = rep["neural"]
     assert neural["errors"] == [] and neural["level"] == 1
@@ -100,9 +120,12 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     view = img[y:y + h, x:x + w]
     corner = view[h - 20:h - 5, 5:20]
     assert np.abs(corner - bg).max() < 12, "the view's corner should be background"
-    centre = view[int(h * 0.3):int(h * 0.6), int(w * 0.4):int(w * 0.6)]  # torso
-    body = np.abs(centre - bg).max(-1) > 30
-    assert body.mean() > 0.6, f"only {body.mean():.0%} of the view's centre differs from the background"
+    body = np.abs(view - bg).max(-1) > 30
+    body[:40] = False  # the caption line drawn over the view
+    assert 0.05 < body.mean() < 0.8, f"body covers {body.mean():.0%} of the 3D view"
+    ys, xs = np.nonzero(body)
+    assert ys.max() - ys.min() > 0.4 * h, "the body should fill much of the view's height"
+    assert w * 0.25 < xs.mean() < w * 0.75 and h * 0.25 < ys.mean() < h * 0.75
 
 
 def test_viewer_without_display_says_what_to_do(tmp_path):
