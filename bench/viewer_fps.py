@@ -5,7 +5,7 @@ normals and the blended vocabulary texture redone per frame). Prints a Markdown 
 "ratio" is each row's frame rate over the plain textured view's at the same size,
 measured in the same run.
 
-    .venv/bin/python bench/viewer_fps.py [SOURCE] [--seconds 1.0]
+    .venv/bin/python bench/viewer_fps.py [SOURCE] [--seconds 1.5]
 
 SOURCE: a capture folder or checkpoint (its vocabulary and texture maps); default a
 stand-in vocabulary (random training poses, 20 procedural 256² texture maps).
@@ -56,32 +56,52 @@ def stand_in_data() -> ViewerData:
                       source="stand-in vocabulary")
 
 
-def measure(ctx, data, size, options, samples, moving, seconds) -> float:
-    """Frames per second from the median frame time (render + glFinish) over ``seconds``
-    (>= 5 frames); the median resists other processes sharing the CPU."""
-    renderer = SceneRenderer(ctx, data, samples=samples)
-    state = ViewerState(data)
-    state.apply_preset("walk")
-    camera = OrbitCamera(yaw=20, distance=2.8)
-    renderer.render(state, camera, size, options)  # warm-up: uploads, shader compile
-    ctx.finish()
-    times, start = [], time.perf_counter()
-    while len(times) < 5 or time.perf_counter() - start < seconds:
+class Case:
+    """One row: a renderer, a state and a camera of its own, and its frame times."""
+
+    def __init__(self, ctx, data, size, flags, samples, moving):
+        self.ctx, self.size, self.moving = ctx, size, moving
+        self.options = SceneOptions(**flags)
+        self.renderer = SceneRenderer(ctx, data, samples=samples)
+        self.state = ViewerState(data)
+        self.state.apply_preset("walk")
+        self.camera = OrbitCamera(yaw=20, distance=2.8)
+        self.times: list[float] = []
+        self.frame()  # warm-up: uploads, shader compilation
+        self.times.clear()
+
+    def frame(self) -> None:
         t0 = time.perf_counter()
-        if moving:
-            state.set_joint(16, (0.0, 0.0, -60.0 + 40.0 * np.sin(len(times) / 5)))
-        camera.orbit(1.0, 0.0)
-        renderer.render(state, camera, size, options)
-        ctx.finish()
-        times.append(time.perf_counter() - t0)
-    renderer.release()
-    return 1.0 / float(np.median(times))
+        if self.moving:
+            self.state.set_joint(16, (0.0, 0.0, -60.0 + 40.0 * np.sin(len(self.times) / 5)))
+        self.camera.orbit(1.0, 0.0)
+        self.renderer.render(self.state, self.camera, self.size, self.options)
+        self.ctx.finish()
+        self.times.append(time.perf_counter() - t0)
+
+    def fps(self) -> float:
+        """From the median frame time: robust to other processes sharing the CPU."""
+        return 1.0 / float(np.median(self.times))
+
+
+def measure_size(ctx, data, size, seconds: float, rounds: int = 5) -> dict[str, float]:
+    """Frames per second of every mode at one size. Modes take turns in ``rounds`` short
+    bursts (render + glFinish per frame), so a load change hits all of them alike."""
+    cases = {name: Case(ctx, data, size, *spec) for name, spec in MODES.items()}
+    for _ in range(rounds):
+        for case in cases.values():
+            start = time.perf_counter()
+            while time.perf_counter() - start < seconds / rounds or len(case.times) < 3:
+                case.frame()
+    for case in cases.values():
+        case.renderer.release()
+    return {name: case.fps() for name, case in cases.items()}
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("source", nargs="?", default=None)
-    ap.add_argument("--seconds", type=float, default=1.0, help="per measurement (default 1)")
+    ap.add_argument("--seconds", type=float, default=1.5, help="per row and size (default 1.5)")
     args = ap.parse_args(argv)
     data = load_viewer_data(args.source) if args.source else stand_in_data()
     ctx = create_headless_context()
@@ -92,12 +112,11 @@ def main(argv=None) -> int:
     print("| size | view | ms / frame | fps | ratio vs textured |")
     print("|---|---|---:|---:|---:|")
     for size in SIZES:
-        base = None
-        for name, (flags, samples, moving) in MODES.items():
-            fps = measure(ctx, data, size, SceneOptions(**flags), samples, moving, args.seconds)
-            base = base or fps
-            print(f"| {size[0]}x{size[1]} | {name} | {1000 / fps:.1f} | {fps:.1f} | "
-                  f"{fps / base:.2f} |", flush=True)
+        fps = measure_size(ctx, data, size, args.seconds)
+        base = fps["textured"]
+        for name, value in fps.items():
+            print(f"| {size[0]}x{size[1]} | {name} | {1000 / value:.1f} | {value:.1f} | "
+                  f"{value / base:.2f} |", flush=True)
     release(ctx)
     return 0
 
