@@ -30,12 +30,20 @@ def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
     """Yield frames until the neural render reached full resolution (or ``timeout``)."""
     if viewer.neural is None:
         return
+    from imgui_bundle import hello_imgui
+
+    idling = hello_imgui.get_runner_params().fps_idling
     t0 = time.perf_counter()
     ctx.yield_(2)
+    busy_idling = []
     while (viewer.neural.busy or viewer.neural.frame is None) and \
             time.perf_counter() - t0 < timeout:
         ctx.yield_()
+        if viewer.neural.busy:
+            busy_idling.append(bool(idling.enable_idling))
     ctx.yield_(2)
+    report["idling_while_busy"] = sorted(set(busy_idling))
+    report["idling_when_done"] = bool(idling.enable_idling)
     f = viewer.neural.frame
     report["neural"] = None if f is None else {
         "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2]),

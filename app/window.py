@@ -236,6 +236,9 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
 
     data = load_viewer_data(source, smpl)
     viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads)
+    if data.vocab is not None and data.textures is not None:
+        print("preparing the vocabulary texture ...", flush=True)
+        viewer.state.blended_texture()  # its one-off setup (~2 s) before the window opens
     viewer.neural_resolution = neural_resolution
     if poses:
         from app.panel_pose import PoseSequence

@@ -110,6 +110,7 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     last = max(v for v, _ in neural["delivered"])
     assert [lv for v, lv in neural["delivered"] if v == last] == [8, 4, 2, 1]
     assert rep["worker_stopped"] is True
+    assert rep["idling_while_busy"] == [False] and rep["idling_when_done"] is True
 
     # the screenshot is the whole window and shows the body in the 3D view
     img = np.asarray(Image.open(shot).convert("RGB")).astype(np.float32)
@@ -128,11 +129,12 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert w * 0.25 < xs.mean() < w * 0.75 and h * 0.25 < ys.mean() < h * 0.75
 
 
-def test_viewer_without_display_says_what_to_do(tmp_path):
+@pytest.mark.parametrize("cmd", [[PYTHON, "-m", "app.window"],
+                                 [str(Path(PYTHON).parent / "texvocab"), "view"]])
+def test_viewer_without_display_says_what_to_do(cmd):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    proc = subprocess.run([PYTHON, "-m", "app.window"], cwd=ROOT, env=env, capture_output=True,
-                          text=True, timeout=60)
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: no display")
+    assert len(lines) == 1 and lines[0].startswith("error: no display"), proc.stderr
     assert "texvocab shot" in lines[0] and "xvfb-run" in lines[0]
