@@ -188,3 +188,16 @@ def test_msaa_resolves_into_the_same_image_with_smoother_edges(ctx, body):
         return (np.linalg.norm(img[:, :, None] - palette, axis=-1).min(-1) > 8).sum()
 
     assert off_palette(images[1]) > 1.5 * off_palette(images[0])
+
+
+def test_missing_osmesa_is_one_clear_error(monkeypatch):
+    import ctypes.util
+
+    import app.gl_headless as gh
+    from texvocab.errors import TexvocabError
+
+    monkeypatch.setattr(gh, "LIBRARY_NAMES", ("libOSMesa-not-here.so.99",))
+    monkeypatch.setattr(ctypes.util, "find_library", lambda name: None)
+    with pytest.raises(TexvocabError, match="libOSMesa not found .*libOSMesa-not-here.so.99.*"
+                                            "install the Debian package libosmesa6"):
+        gh.create_headless_context()
