@@ -138,12 +138,15 @@ def script_shot_left_arm(ctx, viewer, report: dict) -> None:
 def script_shot_novelty(ctx, viewer, report: dict) -> None:
     ctx.yield_(4)
     ctx.set_ref("Pose")
-    ctx.item_input_value("**/left_shoulder/##x", 80.0)
+    ctx.item_input_value("**/left_shoulder/##z", 60.0)  # raise the left arm
     ctx.item_input_value("**/right_hip/##x", -90.0)
     ctx.set_ref("3D view")
     ctx.item_click("**/Novelty")
+    ctx.item_click("**/Skeleton")
+    ctx.item_click("**/Reset camera")  # frame the new pose
     ctx.yield_(4)
     report["novelty_on"] = bool(viewer.options.novelty)
+    report["skeleton_on"] = bool(viewer.options.skeleton)
     report["after"] = snapshot(viewer)
     wait_neural(ctx, viewer, report)
 
