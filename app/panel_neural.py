@@ -18,9 +18,9 @@ class NeuralView:
     """The neural render's GUI state: the worker, the displayed level's GL texture, and
     the version counter bumped whenever pose, camera or resolution change."""
 
-    def __init__(self, ctx, model, march, threads: int = 1):
+    def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0):
         self.ctx = ctx
-        self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads)
+        self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice)
         self.live = True
         self.resolution = 256  # long side of the full-resolution level, pixels
         self.version = 0

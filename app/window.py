@@ -19,6 +19,10 @@ import numpy as np
 from texvocab.errors import TexvocabError
 
 PANELS = ("Pose", "3D view", "Neural render", "Vocabulary")
+#: niceness added to the neural render thread: the UI, llvmpipe and the X server come
+#: first. bench/viewer_ui.py on a busy 2-core box: UI frame while rendering / idle 1.24-1.53
+#: at 0, 1.07-1.08 at 10; but other busy processes then also win over the render.
+NEURAL_NICE = 10
 
 
 def _choose_gl_platform() -> None:
@@ -39,7 +43,8 @@ class Viewer:
     options, GL resources (made in :meth:`post_init`, inside the window's context) and
     the neural render worker."""
 
-    def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1):
+    def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1,
+                 neural_nice: int = NEURAL_NICE):
         from app.camera import OrbitCamera
         from app.scene import SceneOptions
         from app.state import ViewerState
@@ -51,7 +56,7 @@ class Viewer:
         self.framed = False  # the camera is framed once the 3D view's size is known
         self.reset_camera()
         self.options = SceneOptions()
-        self.neural_threads = neural_threads
+        self.neural_threads, self.neural_nice = neural_threads, neural_nice
         self.neural_resolution: int | None = None  # long side of the neural render (default 256)
         self.ctx = self.scene = self.thumbs = self.neural = None
         self.preset = ""
@@ -80,7 +85,7 @@ class Viewer:
             from texvocab.train import march_settings
 
             self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
-                                     self.neural_threads)
+                                     self.neural_threads, self.neural_nice)
             if self.neural_resolution:
                 self.neural.resolution = int(self.neural_resolution)
 
@@ -223,7 +228,8 @@ def _runner_params(viewer: Viewer, title: str):
 def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
                script: str | None = None, report: str | None = None,
                screenshot: str | None = None, neural_resolution: int | None = None,
-               neural_threads: int = 1, poses: str | None = None) -> int:
+               neural_threads: int = 1, poses: str | None = None,
+               neural_nice: int = NEURAL_NICE) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
     0). ``script``: a driver from app/panel_scripts.py (tests, benchmarks) writing a JSON
@@ -235,7 +241,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     from app.state import load_viewer_data
 
     data = load_viewer_data(source, smpl)
-    viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads)
+    viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice)
     if data.vocab is not None and data.textures is not None:
         print("preparing the vocabulary texture ...", flush=True)
         viewer.state.blended_texture()  # its one-off setup (~2 s) before the window opens
@@ -282,11 +288,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)
     p.add_argument("--neural-resolution", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--neural-threads", type=int, default=1, help=argparse.SUPPRESS)
+    p.add_argument("--neural-nice", type=int, default=NEURAL_NICE, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     try:
         return run_viewer(args.source, args.smpl, _parse_size(args.size), args.script,
                           args.report, args.screenshot, args.neural_resolution,
-                          args.neural_threads, args.poses)
+                          args.neural_threads, args.poses, args.neural_nice)
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -13,6 +13,7 @@ thread keeps a core for drawing on small machines.
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections import deque
@@ -91,11 +92,13 @@ class ProgressiveWorker:
     ``render`` yields ``(level, rgb, seconds)`` and must stop soon after its
     ``cancelled()`` argument returns True (progressive_render does, between levels and
     ray chunks). ``threads``: torch intra-op threads for the worker (None: unchanged).
+    ``nice``: raise the thread's niceness by this much (Linux) so drawing comes first.
     """
 
-    def __init__(self, render: LevelRenderer, threads: int | None = 1):
+    def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0):
         self._render = render
         self._threads = threads
+        self._nice = nice
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._job: RenderJob | None = None
@@ -107,6 +110,7 @@ class ProgressiveWorker:
         self.delivered: deque[tuple[int, int]] = deque(maxlen=256)  # (version, level), in order
         self.errors: deque[str] = deque(maxlen=16)  # "Type: message (file:line)"
         self.last_traceback = ""
+        self.native_id: int | None = None
         self._thread = threading.Thread(target=self._run, name="texvocab-neural", daemon=True)
         self._thread.start()
 
@@ -160,6 +164,13 @@ class ProgressiveWorker:
             import torch
 
             torch.set_num_threads(self._threads)
+        self.native_id = threading.get_native_id()
+        if self._nice:
+            try:  # Linux: a thread is a task with its own niceness
+                current = os.getpriority(os.PRIO_PROCESS, self.native_id)
+                os.setpriority(os.PRIO_PROCESS, self.native_id, min(current + self._nice, 19))
+            except (AttributeError, OSError):
+                pass
         while True:
             with self._wake:
                 while self._job is None and not self._stop:

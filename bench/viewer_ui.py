@@ -27,7 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def run(checkpoint: str, seconds: float, res: int, size: str, threads: int | None) -> dict:
+def run(checkpoint: str, seconds: float, res: int, size: str, threads: int | None,
+        nice: int | None = None) -> dict:
     xvfb = shutil.which("xvfb-run")
     if xvfb is None:
         sys.exit("error: xvfb-run is missing (apt-get install xvfb xauth)")
@@ -38,6 +39,8 @@ def run(checkpoint: str, seconds: float, res: int, size: str, threads: int | Non
                "--report", str(report)]
         if threads:
             cmd += ["--neural-threads", str(threads)]
+        if nice is not None:
+            cmd += ["--neural-nice", str(nice)]
         proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
         if not report.is_file():
             sys.exit(f"error: the window wrote no report (rc {proc.returncode}):\n{proc.stderr[-3000:]}")
@@ -120,6 +123,8 @@ def main() -> int:
     p.add_argument("--res", type=int, default=256, help="neural render long side (default 256)")
     p.add_argument("--size", default="1280x800", help="window size (default 1280x800)")
     p.add_argument("--threads", type=int, default=None, help="torch threads of the worker (default 1)")
+    p.add_argument("--nice", type=int, default=None,
+                   help="niceness of the neural render thread (default: the viewer's, 10)")
     p.add_argument("--json", default=None, help="also write the raw report here")
     p.add_argument("--no-baseline", action="store_true",
                    help="skip the empty-window baseline row")
@@ -129,11 +134,12 @@ def main() -> int:
         empty_window_child(args.size, args.seconds, args.empty_window_child)
         return 0
     empty = None if args.no_baseline else run_empty(args.size, args.seconds)
-    rep = run(args.checkpoint, args.seconds, args.res, args.size, args.threads)
+    rep = run(args.checkpoint, args.seconds, args.res, args.size, args.threads, args.nice)
     if not rep.get("ok"):
         sys.exit(f"error: {rep.get('error', 'the bench did not finish')}")
+    nice = "viewer default" if args.nice is None else args.nice
     print(f"viewer UI frame times, window {args.size}, neural render long side {args.res} px, "
-          f"{args.seconds:g} s per phase\n")
+          f"worker nice {nice}, {args.seconds:g} s per phase\n")
     print(table(rep, empty))
     print("\nneural render levels while the UI ran:\n")
     print(level_table(rep))

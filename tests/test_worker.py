@@ -250,3 +250,16 @@ def test_single_point_field_calls_are_padded():
     assert seen == [2] and sigma.tolist() == [1.0] and rgb.tolist() == [[0.5, 1.0, 2.0]]
     sigma, _ = padded(torch.ones(3, 3), torch.ones(3, 3))
     assert seen == [2, 3] and sigma.shape == (3,)
+
+
+def test_worker_thread_runs_at_the_requested_niceness():
+    import os
+
+    worker = ProgressiveWorker(lambda j, c: iter(()), threads=None, nice=7)
+    t0 = time.perf_counter()
+    while worker.native_id is None:
+        assert time.perf_counter() - t0 < 5
+        time.sleep(0.005)
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    assert os.getpriority(os.PRIO_PROCESS, worker.native_id) == min(base + 7, 19)
+    assert worker.stop()
