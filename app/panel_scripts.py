@@ -118,6 +118,15 @@ def _sequence_steps(ctx, viewer, report: dict) -> None:
     report["sequence_frame"] = viewer.sequence.frame
     report["pose_at_frame"] = viewer.state.pose.tolist()
     report["trans_at_frame"] = viewer.state.trans.tolist()
+    ctx.item_click("**/Sequence/Play")
+    t0 = time.perf_counter()
+    while viewer.sequence.frame == 2 and time.perf_counter() - t0 < 10:
+        ctx.yield_()
+    ctx.item_click("**/Sequence/Pause")
+    seq = viewer.sequence
+    report["played_to"] = seq.frame
+    report["played_pose_matches"] = bool(np.allclose(viewer.state.pose, seq.poses[seq.frame]))
+    report["paused"] = not seq.playing
 
 
 def script_shot_default(ctx, viewer, report: dict) -> None:

@@ -103,6 +103,8 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert rep["sequence_frame"] == 2
     np.testing.assert_allclose(rep["pose_at_frame"], seq_poses[2], atol=1e-6)
     np.testing.assert_allclose(rep["trans_at_frame"], seq_trans[2], atol=1e-6)
+    # Play advances the timeline by wall time (30 fps) and the pose follows; Pause stops
+    assert rep["played_to"] != 2 and rep["played_pose_matches"] and rep["paused"]
 
     # the neural render ran coarse to fine for the newest version, and its worker stopped
     neural = rep["neural"]
