@@ -224,18 +224,20 @@ class EngineDriver(Driver):
 class BenchDriver(Driver):
     """UI frame times while idle and while the neural render runs (bench/viewer_ui.py).
 
-    Idling is off throughout so both phases draw every frame. Phase "idle": the pose
+    Idling is off throughout so every phase draws every frame. Phase "idle": the pose
     and camera stay still. Phase "rendering": whenever the worker is done, the left
     shoulder moves a little, so a new progressive render is always running; only
-    frames while the worker is busy count.
+    frames while the worker is busy count. Phase "dragging": the left shoulder moves
+    every frame, as under a dragged slider (new vocabulary query, blended texture,
+    posed mesh and 3D view each frame; each change restarts the neural render).
     """
 
     def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256):
         super().__init__("bench", viewer)
         self.seconds, self.resolution = seconds, resolution
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
-        self.times: dict[str, list[float]] = {"idle": [], "rendering": []}
-        self.cpu: dict[str, list[float]] = {"idle": [], "rendering": []}
+        self.times: dict[str, list[float]] = {"idle": [], "rendering": [], "dragging": []}
+        self.cpu: dict[str, list[float]] = {"idle": [], "rendering": [], "dragging": []}
         self._last = None
         self._nudge = 0
         previous = rp.callbacks.pre_new_frame
@@ -266,6 +268,16 @@ class BenchDriver(Driver):
                 v.neural.resolution = self.resolution
                 self.phase, self.t0 = "rendering", now
             return
+        if self.phase == "dragging":
+            if dt is not None and cpu is not None:
+                self.times["dragging"].append(dt)
+                self.cpu["dragging"].append(cpu)
+            self._nudge += 1
+            z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
+            v.state.set_joint(16, (0.0, 0.0, z))
+            if now - self.t0 > self.seconds:
+                self._done(rp)
+            return
         nv = v.neural
         if nv.busy and dt is not None and cpu is not None:
             self.times["rendering"].append(dt)
@@ -274,7 +286,7 @@ class BenchDriver(Driver):
             self._nudge += 1
             v.state.set_joint(16, v.state.joint_deg(16) + (0, 0, 2.0 if self._nudge % 2 else -2.0))
         if now - self.t0 > self.seconds:
-            self._done(rp)
+            self.phase, self.t0, self._nudge = "dragging", now, 0
 
     def _done(self, rp, error: str | None = None) -> None:
         v = self.viewer

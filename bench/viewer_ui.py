@@ -4,7 +4,8 @@ llvmpipe) while idle and while the progressive neural render runs in its worker 
 Runs ``python -m app.window CHECKPOINT --script bench:SECONDS:RES`` under xvfb-run (the
 per-frame driver in app/panel_scripts.py: idling off, idle phase, then a phase in which
 the left shoulder moves a little whenever a render finishes, so one is always running;
-only frames while the worker is busy count there). Prints a Markdown table of the wall
+only frames while the worker is busy count there), then a phase in which the shoulder
+moves every frame as under a dragged slider. Prints a Markdown table of the wall
 time between frames (median, p95, max) and the UI thread's own CPU time per frame, with
 the ratio to idle; a first row measures an empty hello_imgui window of the same size (what
 GL under llvmpipe and the X server cost before the viewer draws anything); then the
@@ -89,7 +90,7 @@ def table(rep: dict, empty: dict | None = None) -> str:
     wall, cpu = dict(rep["frame_ms"]), dict(rep["frame_cpu_ms"])
     idle_med = float(np.median(wall["idle"]))
     idle_cpu = float(np.median(cpu["idle"]))
-    phases = ["idle", "rendering"]
+    phases = ["idle", "rendering", "dragging"]
     if empty is not None:
         wall["empty window"], cpu["empty window"] = empty["wall"], empty["cpu"]
         phases.insert(0, "empty window")
