@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from texvocab.feature import PoseContext, PoseFeature
@@ -99,6 +100,19 @@ class AvatarField(nn.Module):
         rot = torch.where(skin.sum(-1, keepdim=True)[..., None] > 0, rot, eye)
         return torch.linalg.solve(rot, (points - tr).unsqueeze(-1)).squeeze(-1)
 
+    def _sdf_hidden(self, ctx: PoseContext, x: torch.Tensor) -> torch.Tensor:
+        """sdf_net([x, q(Θ)]) for per-point inputs x (N, D) and the pose's quaternions q
+        (4J,), the same for every point: their part of the first layer is folded into its
+        bias once per call (one (hidden, 4J) mat-vec) instead of a (N, 4J) block per
+        point. Same function and gradients as ``sdf_net(cat([x, q]))`` up to float
+        rounding; returns (N, 1 + hidden)."""
+        first = self.sdf_net[0]
+        d = x.shape[1]
+        pose = rotvec_to_quat(ctx.pose.to(x.dtype)).reshape(-1)
+        bias = first.bias + first.weight[:, d:].contiguous() @ pose
+        # contiguous copies: row-aligned operands keep BLAS results bitwise reproducible
+        return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))
+
     def sdf_and_color(self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor):
         """SDF (N,), RGB (N, 3), valid (N,) for world points (N, 3) and unit dirs (N, 3).
 
@@ -117,8 +131,7 @@ class AvatarField(nn.Module):
         d_body = d_body + ((points - points.detach()) * grad_dir.detach()).sum(-1)
         x_c = self.canonicalize(ctx, points, out.skin_weights)
         feat = self.feature_proj(out.features.to(points.dtype))
-        pose = rotvec_to_quat(ctx.pose.to(points.dtype)).reshape(1, -1).expand(len(points), -1)
-        h = self.sdf_net(torch.cat([positional_encoding(x_c, s.pos_freqs), feat, pose], -1))
+        h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat], -1))
         sdf = d_body + h[:, 0] * valid
         color_in = torch.cat([h[:, 1:], positional_encoding(dirs, s.dir_freqs), feat], -1)
         rgb = torch.sigmoid(self.color_net(color_in))

@@ -1,0 +1,244 @@
+"""Neural render speed: where the time of one frame of the avatar goes, and its accuracy.
+
+Renders the avatar (a trained checkpoint, or without CKPT the real model architecture
+untrained: its body-SDF geometric initialisation already puts the surface on the body)
+for several poses and held-out views, and prints one Markdown table: per frame the time
+split — pose context (posed body, surface index, vocabulary query, feature maps), shell
+build, field evaluations (seconds and count), marching (ray bounds, in-shell paths,
+sample placement, compositing: the rest of the marcher) — the wall seconds per frame, the
+process CPU seconds (the machine may be shared; CPU time is the steadier number) and the
+PSNR against the capture's ground truth (inside the mask's bounding box and full frame,
+texvocab.metrics). Each marcher variant gets its rows and a mean row; the reference
+uniform marcher (64 + 64 samples per ray in the body's bounding box, no shell) is timed
+on the first frames in the same run, on the same field, for the ratio.
+
+    .venv/bin/python bench/render_speed.py [CKPT] [--capture DIR] [--frames 3]
+        [--variant "12+4:coarse_samples=12,fine_samples=4"] [--reference 1]
+
+CKPT's capture is the one recorded in the checkpoint unless --capture is given. Without
+CKPT and --capture a small synthetic capture (6 frames, 4 views, 256²) is made in a
+temporary folder. Uses 2 threads (the machine's 2 cores).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+
+def parse_variant(text: str):
+    """'name:key=value,key=value' -> (name, {key: value}) for MarchSettings fields."""
+    from texvocab.render import MarchSettings
+
+    name, _, body = text.partition(":")
+    known = {f.name: f.type for f in dataclasses.fields(MarchSettings)}
+    kw = {}
+    for item in filter(None, body.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq or key not in known:
+            raise SystemExit(f"error: --variant {text!r}: expected name:key=value,... with keys "
+                             f"from MarchSettings ({', '.join(known)})")
+        kw[key] = None if value == "None" else (float(value) if "." in value or "e" in value
+                                                 else int(value))
+    return name, kw
+
+
+def small_capture(root: Path) -> Path:
+    """A 6-frame, 4-view 256² synthetic capture (4 training frames) under root."""
+    from texvocab.body import default_body
+    from texvocab.capture.motion import make_sequence
+    from texvocab.capture.synth import SynthSettings, synthesize
+
+    poses, trans = make_sequence([("walk", 4), ("arm_raise", 2)], seed=3)
+    return synthesize(root / "capture", poses, trans, 4, default_body(),
+                      SynthSettings(ring_views=4, raised_views=0, size=256, texture_size=512),
+                      progress=False)
+
+
+def load(args):
+    """(model, settings, capture) from CKPT or an untrained model on a capture."""
+    from texvocab.capture import open as open_capture
+    from texvocab.settings import Settings
+    from texvocab.train import build_model, load_textures
+
+    if args.checkpoint:
+        from texvocab.checkpoint import load_checkpoint
+        from texvocab.cli_method import load_model
+
+        root = args.capture or load_checkpoint(args.checkpoint)["capture"]
+        cap = open_capture(root)
+        model, settings, _ = load_model(args.checkpoint, cap, progress=False)
+        return model, settings, cap, f"checkpoint {args.checkpoint}"
+    root = Path(args.capture) if args.capture else small_capture(Path(tempfile.mkdtemp()))
+    cap = open_capture(root)
+    settings = Settings(eval_views=[v for v in (0, 1) if v < cap.num_views])
+    model = build_model(cap, settings, load_textures(cap, settings, progress=False))
+    model.eval()
+    return model, settings, cap, f"untrained model (geometric init) on {root}"
+
+
+def items_of(cap, settings, frames: int):
+    """[(label, pose, trans, camera, gt (H, W, 3), mask (H, W))]: held-out views of novel
+    (else training) frames, plus generated preset poses on a synthetic capture."""
+    views = list(settings.eval_views)[:2]
+    pool = list(cap.novel_frames) or list(cap.train_frames)
+    picks = sorted({pool[int(i)] for i in np.linspace(0, len(pool) - 1, max(frames - 1, 1))})
+    items = [(f"frame {t} view {v}", cap.poses[t], cap.trans[t], cap.cameras[v],
+              cap.image(v, t), cap.mask(v, t)) for t in picks for v in views[:1]]
+    if cap.synthetic:
+        from texvocab.body.poses import preset
+        from texvocab.capture.synth import ground_truth_renderer
+
+        renderer, cams = ground_truth_renderer(cap)
+        pose, trans = preset("squat")
+        for v in views:
+            rgb, mask = renderer.render(pose, trans, [cams[v]])[0]
+            items.append((f"squat view {v}", pose, trans, cams[v], rgb, mask))
+        renderer.close()
+    return items[:max(frames, 1)]
+
+
+def timed_render(model, item, march):
+    """Render one item with the time split; returns (image (H, W, 3) numpy, row dict)."""
+    from texvocab.render import ShellGeometry, render_image
+
+    _, pose, trans, cam, _, _ = item
+    spent = {"field": 0.0, "evals": 0}
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    with torch.no_grad():
+        ctx = model.pose_feature.context(pose, trans)
+        t1 = time.perf_counter()
+        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
+                                    march.shell_voxel, march.shell_exact, index=ctx.index)
+        t2 = time.perf_counter()
+        field = model.for_pose(ctx)
+
+        def counted(points, dirs):
+            start = time.perf_counter()
+            out = field(points, dirs)
+            spent["field"] += time.perf_counter() - start
+            spent["evals"] += len(points)
+            return out
+
+        out = render_image(counted, cam, ctx.vertices, model.body.faces, march, shell=shell)
+    t3 = time.perf_counter()
+    row = {"context": t1 - wall0, "shell": t2 - t1, "field": spent["field"],
+           "evals": spent["evals"], "march": t3 - t2 - spent["field"], "total": t3 - wall0,
+           "cpu": time.process_time() - cpu0}
+    return out.rgb.numpy().astype(np.float32), row
+
+
+def reference_render(model, item, coarse: int, fine: int):
+    """The uniform reference marcher on the same field: (image, row dict)."""
+    from texvocab.render import mesh_bbox, render_image_uniform
+
+    _, pose, trans, cam, _, _ = item
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    with torch.no_grad():
+        ctx = model.pose_feature.context(pose, trans)
+        lo, hi = mesh_bbox(ctx.vertices, model.settings.shell_width)
+        out = render_image_uniform(model.for_pose(ctx), cam, lo, hi, coarse, fine)
+    total = time.perf_counter() - wall0
+    return out.rgb.numpy().astype(np.float32), {
+        "context": float("nan"), "shell": 0.0, "field": float("nan"),
+        "evals": out.stats.field_evals, "march": float("nan"), "total": total,
+        "cpu": time.process_time() - cpu0}
+
+
+COLS = ("context", "shell", "field", "evals", "march", "total", "cpu", "psnr_bbox", "psnr_full")
+
+
+def fmt(row: dict) -> str:
+    cells = []
+    for c in COLS:
+        v = row.get(c)
+        if v is None or (isinstance(v, float) and np.isnan(v)):
+            cells.append("–")
+        elif c == "evals":
+            cells.append(f"{int(v):,}")
+        elif c.startswith("psnr"):
+            cells.append(f"{v:.3f}")
+        else:
+            cells.append(f"{v:.3f}")
+    return " | ".join(cells)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("checkpoint", nargs="?", default=None, help="trained checkpoint (optional)")
+    ap.add_argument("--capture", default=None, help="capture folder (default: the checkpoint's, "
+                    "or a small synthetic one made in a temporary folder)")
+    ap.add_argument("--frames", type=int, default=3, help="frames (pose, view) to render")
+    ap.add_argument("--variant", action="append", default=[], metavar="NAME:KEY=VALUE,...",
+                    help="extra marcher variant on top of the checkpoint's settings")
+    ap.add_argument("--reference", type=int, default=1,
+                    help="frames also rendered by the uniform 64+64 reference marcher")
+    ap.add_argument("--repeats", type=int, default=1, help="renders per frame (best kept)")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+
+    from texvocab.metrics import evaluate_pair
+    from texvocab.train import march_settings
+
+    model, settings, cap, what = load(args)
+    base = march_settings(settings)
+    variants = [("settings", {})] + [parse_variant(v) for v in args.variant]
+    items = items_of(cap, settings, args.frames)
+    print(f"# render speed: {what}\n\n{len(items)} frames at {items[0][3].width}x"
+          f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds are wall time "
+          "(cpu: process CPU seconds); march = marcher work other than field calls "
+          "(bounds, paths, samples, compositing); PSNR against ground truth.\n")
+    print("| variant | frame | " + " | ".join(COLS) + " |")
+    print("|---" * (len(COLS) + 2) + "|")
+    means = {}
+    for name, kw in variants:
+        march = dataclasses.replace(base, **kw)
+        rows = []
+        for item in items:
+            best = None
+            for _ in range(max(args.repeats, 1)):
+                img, row = timed_render(model, item, march)
+                if best is None or row["total"] < best[1]["total"]:
+                    best = (img, row)
+            img, row = best
+            m = evaluate_pair(img, item[4], item[5])
+            row.update(psnr_bbox=m["psnr_bbox"], psnr_full=m["psnr_full"])
+            rows.append(row)
+            print(f"| {name} | {item[0]} | {fmt(row)} |", flush=True)
+        means[name] = {c: float(np.mean([r[c] for r in rows])) for c in COLS}
+        print(f"| **{name} mean** | | {fmt(means[name])} |", flush=True)
+    ref = []
+    for item in items[:args.reference]:
+        img, row = reference_render(model, item, 64, 64)
+        m = evaluate_pair(img, item[4], item[5])
+        row.update(psnr_bbox=m["psnr_bbox"], psnr_full=m["psnr_full"])
+        ref.append((item, row))
+        print(f"| uniform 64+64 (reference) | {item[0]} | {fmt(row)} |", flush=True)
+    print()
+    for name in means:
+        line = (f"- {name}: {means[name]['total']:.3f} s/frame (cpu {means[name]['cpu']:.3f} s), "
+                f"{means[name]['evals']:,.0f} field evaluations, PSNR bbox "
+                f"{means[name]['psnr_bbox']:.3f} dB")
+        if name != "settings":
+            line += (f" ({means[name]['psnr_bbox'] - means['settings']['psnr_bbox']:+.3f} dB, "
+                     f"{means['settings']['total'] / means[name]['total']:.2f}x faster than "
+                     "settings)")
+        print(line)
+    for item, row in ref:
+        k = next(i for i, it in enumerate(items) if it is item)
+        img, shell_row = timed_render(model, item, base)
+        print(f"- reference uniform 64+64 on {item[0]}: {row['total']:.2f} s, {row['evals']:,} "
+              f"evaluations; the shell marcher ({variants[0][0]}) is "
+              f"{row['total'] / shell_row['total']:.1f}x faster with "
+              f"{row['evals'] / shell_row['evals']:.1f}x fewer evaluations (frame {k})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,81 @@
+"""Faster exact paths of the neural render give the same field values, gradients and
+images as the computation they replace (the weights keep their meaning)."""
+import numpy as np
+import pytest
+import torch
+
+from texvocab.body import default_body
+from texvocab.body.poses import preset
+from texvocab.capture.synth import SynthSettings, default_cameras
+from texvocab.encoder import build_encoder
+from texvocab.feature import PoseFeature
+from texvocab.field import AvatarField, FieldSettings
+from texvocab.render import MarchSettings, ShellGeometry, render_image
+from texvocab.rotations import rotvec_to_quat
+from texvocab.vocab import Vocabulary
+
+
+def _concat_hidden(field, ctx, x):
+    """The original first layer: sdf_net on [x, q(Θ) repeated per point]."""
+    pose = rotvec_to_quat(ctx.pose.to(x.dtype)).reshape(1, -1).expand(len(x), -1)
+    return field.sdf_net(torch.cat([x, pose], -1))
+
+
+@pytest.fixture(scope="module")
+def field():
+    body = default_body()
+    vocab = Vocabulary.build(np.random.default_rng(0).normal(0, 0.2, (4, 24, 3)), num_keys=4, k=2)
+    textures = torch.rand(4, 3, 32, 32, generator=torch.Generator().manual_seed(1))
+    pf = PoseFeature(body, vocab, textures, build_encoder("small"))
+    f = AvatarField(pf, FieldSettings(hidden=32))
+    gen = torch.Generator().manual_seed(2)
+    with torch.no_grad():  # a "trained" residual: the zero-initialised last layer made non-zero
+        for p in f.parameters():
+            p.add_(0.05 * torch.randn(p.shape, generator=gen))
+    return f
+
+
+def _points(ctx, n=300, seed=0):
+    rng = np.random.default_rng(seed)
+    v = ctx.vertices.detach()[rng.integers(0, len(ctx.vertices), n)]
+    pts = v + torch.as_tensor(rng.normal(0, 0.015, v.shape), dtype=v.dtype)
+    dirs = torch.as_tensor(rng.normal(size=v.shape), dtype=v.dtype)
+    return pts, torch.nn.functional.normalize(dirs, dim=1)
+
+
+def test_folded_pose_layer_matches_concatenation_values_and_gradients(field, monkeypatch):
+    ctx = field.pose_feature.context(*preset("walk"))
+    pts, dirs = _points(ctx)
+    field.zero_grad()  # (a context per pass: the trainable encoder's maps are in the graph)
+    sdf, rgb, valid = field.sdf_and_color(ctx, pts, dirs)
+    (sdf.sum() + rgb.sum()).backward()
+    fast = {n: p.grad.clone() for n, p in field.named_parameters() if p.grad is not None}
+    monkeypatch.setattr(AvatarField, "_sdf_hidden", _concat_hidden)
+    field.zero_grad()
+    ctx = field.pose_feature.context(*preset("walk"))
+    sdf0, rgb0, valid0 = field.sdf_and_color(ctx, pts, dirs)
+    (sdf0.sum() + rgb0.sum()).backward()
+    assert valid.any() and torch.equal(valid, valid0)
+    assert (sdf - sdf0).abs().max() < 1e-5 and (rgb - rgb0).abs().max() < 1e-5
+    assert sdf0.abs().max() > 0 and (sdf0 - sdf0.mean()).abs().max() > 1e-3  # not trivial
+    for name, p in field.named_parameters():
+        if p.grad is not None:
+            assert torch.allclose(fast[name], p.grad, rtol=1e-4, atol=1e-6), name
+
+
+def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
+    pose, trans = preset("squat")
+    cam = default_cameras(SynthSettings(size=256))[1].scaled(1 / 8)
+    settings = MarchSettings()
+    with torch.no_grad():
+        ctx = field.pose_feature.context(pose, trans)
+        shell = ShellGeometry.build(ctx.vertices, field.body.faces, settings.shell_width,
+                                    index=ctx.index)
+        fast = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces, settings,
+                            shell=shell)
+        monkeypatch.setattr(AvatarField, "_sdf_hidden", _concat_hidden)
+        slow = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces, settings,
+                            shell=shell)
+    assert fast.alpha.max() > 0.5  # the body is in the picture
+    assert (fast.rgb - slow.rgb).abs().max() < 1e-4
+    assert (fast.alpha - slow.alpha).abs().max() < 1e-4
