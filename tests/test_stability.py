@@ -80,7 +80,9 @@ def random_axes(seed: int) -> np.ndarray:
 
 def check_vocab_query(vocab: Vocabulary, pose: np.ndarray) -> None:
     """Query values are finite, weights are a distribution, distances match Eq. 2 computed
-    joint by joint with rotations.rotvec_distance, and the pose gradient is finite."""
+    joint by joint with rotations.rotvec_distance from the key frames' training poses
+    (``vocab`` must be built from a prefix of :func:`training_poses`), and the pose
+    gradient is finite."""
     frames, weights, dists = vocab.query_tensors(pose)
     keys = training_poses()
     for joints, kf, f, w, d in zip(vocab.part_joints, vocab.key_frames, frames, weights, dists,
@@ -520,7 +522,8 @@ def test_zero_coverage_for_a_part(body, vocab, encoder):
     assert left_forearm_hand.sum() > 20 and coverage[left_forearm_hand].max() == 0
     assert coverage.max() >= 1  # the chest was seen
     assert np.isfinite(texture).all() and np.isfinite(coverage).all()
-    # unseen texels take the nearest seen texel's colour: the constant image colour
+    # unseen texels take the nearest seen texel's colour: the constant image colour (seen
+    # texels up to half a pixel past the outer pixel centres were once blended with black)
     assert np.allclose(texture, capture.colour, atol=1e-5)
     textures = torch.from_numpy(texture).permute(2, 0, 1)[None].repeat(NUM_FRAMES, 1, 1, 1)
     field = make_field(body, vocab, textures, encoder)
