@@ -40,3 +40,16 @@ def test_marcher_shell_width_is_a_render_knob_but_training_keeps_the_fields():
     assert march_settings(s).shell_width == 0.025
     assert march_settings(s, training=True).shell_width == s.field.shell_width
     assert march_settings(Settings()).shell_width == Settings().field.shell_width
+
+
+@pytest.mark.parametrize("item, message", [
+    ("field.beta_min=0", "field.beta_min=0.0: expected >= 1e-8"),
+    ("image_scale=0", "image_scale=0.0: expected in (0, 4]"),
+    ("k=0", "k=0: expected >= 1"),
+    ("strategy=parts", "strategy='parts': expected part, joint or global"),
+    ("early_stop_eps=1", "early_stop_eps=1.0: expected in [0, 1)"),
+])
+def test_out_of_range_settings_name_the_setting_and_the_range(item, message):
+    with pytest.raises(TexvocabError, match=message.replace("(", r"\(").replace(")", r"\)")
+                       .replace("[", r"\[")):
+        Settings().with_overrides([item])

@@ -46,6 +46,33 @@ class Settings:
     max_minutes: float | None = None  # stop (with a checkpoint) after this much training time
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        """Refuse values the method cannot run with, naming the setting and the range."""
+        checks = [
+            ("texture_size", self.texture_size >= 8, ">= 8"),
+            ("num_keys", self.num_keys >= 1, ">= 1"),
+            ("k", self.k >= 1, ">= 1"),
+            ("strategy", self.strategy in ("part", "joint", "global"), "part, joint or global"),
+            ("weighting", self.weighting in ("paper", "inverse"), "paper or inverse"),
+            ("coarse_samples", self.coarse_samples >= 1, ">= 1"),
+            ("fine_samples", self.fine_samples >= 0, ">= 0"),
+            ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),
+            ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
+            ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
+            ("iterations", self.iterations >= 0, ">= 0"),
+            ("rays_per_batch", self.rays_per_batch >= 1, ">= 1"),
+            ("fg_fraction", 0 <= self.fg_fraction <= 1, "in [0, 1]"),
+            # float32 VolSDF density and its gradients break down for beta below ~1e-17
+            ("field.beta_min", self.field.beta_min >= 1e-8, ">= 1e-8"),
+            ("field.beta_init", self.field.beta_init >= self.field.beta_min, ">= field.beta_min"),
+            ("field.shell_width", 0 < self.field.shell_width <= 1, "in (0, 1] m"),
+        ]
+        for name, ok, expected in checks:
+            if not ok:
+                value = self.field.to_dict()[name[6:]] if name.startswith("field.") else getattr(
+                    self, name)
+                raise TexvocabError(f"setting {name}={value!r}: expected {expected}")
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["train_views"] = None if self.train_views is None else list(self.train_views)
