@@ -79,3 +79,16 @@ def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
     assert fast.alpha.max() > 0.5  # the body is in the picture
     assert (fast.rgb - slow.rgb).abs().max() < 1e-4
     assert (fast.alpha - slow.alpha).abs().max() < 1e-4
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_field_call_with_one_or_two_points_matches_the_batch(field, n):
+    """A marcher chunk may hold a single point (the last sample of one ray)."""
+    ctx = field.pose_feature.context(*preset("a_pose"))
+    pts, dirs = _points(ctx, n=6, seed=3)
+    with torch.no_grad():
+        sigma, rgb = field(ctx, pts, dirs)
+        small = field(ctx, pts[:n], dirs[:n])
+    assert sigma.shape == (6,) and small[0].shape == (n,)
+    assert torch.allclose(small[0], sigma[:n], rtol=1e-5, atol=1e-6)
+    assert torch.allclose(small[1], rgb[:n], atol=1e-6)

@@ -128,15 +128,16 @@ class PoseFeature(nn.Module):
         proj = ctx.index.project(points.detach().double().cpu().numpy(), self.body.vt.numpy(),
                                  self.body.ft.numpy(), self.body.weights.numpy(),
                                  max_distance=max_distance)
-        valid = torch.as_tensor(proj.face >= 0)
+        ok = proj.face >= 0  # numpy mask for the numpy arrays (a one-element torch bool
+        valid = torch.from_numpy(ok)  # tensor would index numpy as the integer 0 or 1)
         n = points.shape[0]
         uv = torch.zeros(n, 2, dtype=points.dtype)
         skin = torch.zeros(n, self.body.num_joints, dtype=points.dtype)
-        uv[valid] = torch.as_tensor(proj.uv[valid], dtype=points.dtype)
-        skin[valid] = torch.as_tensor(proj.weights[valid], dtype=points.dtype)
+        uv[valid] = torch.as_tensor(proj.uv[ok], dtype=points.dtype)
+        skin[valid] = torch.as_tensor(proj.weights[ok], dtype=points.dtype)
         dist = torch.as_tensor(proj.distance, dtype=points.dtype)
         closest = torch.zeros(n, 3, dtype=points.dtype)
-        closest[valid] = torch.as_tensor(proj.closest[valid], dtype=points.dtype)
+        closest[valid] = torch.as_tensor(proj.closest[ok], dtype=points.dtype)
         total = skin.sum(-1, keepdim=True)
         omega = (skin @ self.membership.to(skin)) / torch.where(total > 0, total,
                                                                 torch.ones_like(total))
