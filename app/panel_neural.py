@@ -37,7 +37,7 @@ class NeuralView:
     def update(self, state, camera, aspect: float, force: bool = False) -> None:
         """Submit a job when the pose, camera or size changed; upload a new level."""
         w, h = _fit(self.resolution, aspect)
-        key = (state.version, _camera_key(camera), w, h)
+        key = (state.version, camera_key(camera), w, h)
         if (self.live and key != self._key) or force:
             self._key = key
             self.version += 1
@@ -74,7 +74,7 @@ def _fit(long_side: int, aspect: float) -> tuple[int, int]:
     return max(8, round(long_side * aspect)), long_side
 
 
-def _camera_key(camera) -> tuple:
+def camera_key(camera) -> tuple:
     return (float(camera.yaw), float(camera.pitch), float(camera.distance), float(camera.fov),
             *(float(v) for v in camera.target))
 

@@ -32,18 +32,15 @@ def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
         return
     from imgui_bundle import hello_imgui
 
-    idling = hello_imgui.get_runner_params().fps_idling
     t0 = time.perf_counter()
     ctx.yield_(2)
-    busy_idling = []
     while (viewer.neural.busy or viewer.neural.frame is None) and \
             time.perf_counter() - t0 < timeout:
         ctx.yield_()
-        if viewer.neural.busy:
-            busy_idling.append(bool(idling.enable_idling))
     ctx.yield_(2)
-    report["idling_while_busy"] = sorted(set(busy_idling))
-    report["idling_when_done"] = bool(idling.enable_idling)
+    log = list(viewer.idling_log)  # (worker busy, idling enabled) per frame so far
+    report["idling_while_busy"] = sorted({idle for busy, idle in log if busy})
+    report["idling_when_done"] = bool(hello_imgui.get_runner_params().fps_idling.enable_idling)
     f = viewer.neural.frame
     report["neural"] = None if f is None else {
         "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2]),
@@ -119,14 +116,16 @@ def _sequence_steps(ctx, viewer, report: dict) -> None:
     report["pose_at_frame"] = viewer.state.pose.tolist()
     report["trans_at_frame"] = viewer.state.trans.tolist()
     ctx.item_click("**/Sequence/Play")
-    t0 = time.perf_counter()
-    while viewer.sequence.frame == 2 and time.perf_counter() - t0 < 10:
-        ctx.yield_()
-    ctx.item_click("**/Sequence/Pause")
     seq = viewer.sequence
+    t0 = time.perf_counter()
+    while seq.frame == 2 and time.perf_counter() - t0 < 10:
+        ctx.yield_()
     report["played_to"] = seq.frame
     report["played_pose_matches"] = bool(np.allclose(viewer.state.pose, seq.poses[seq.frame]))
-    report["paused"] = not seq.playing
+    ctx.item_click("**/Sequence/Pause")
+    paused_at = seq.frame
+    ctx.yield_(5)
+    report["paused"] = not seq.playing and seq.frame == paused_at
 
 
 def script_shot_default(ctx, viewer, report: dict) -> None:

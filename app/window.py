@@ -18,7 +18,6 @@ import numpy as np
 
 from texvocab.errors import TexvocabError
 
-PANELS = ("Pose", "3D view", "Neural render", "Vocabulary")
 #: niceness added to the neural render thread: the UI, llvmpipe and the X server come
 #: first. bench/viewer_ui.py on a busy 2-core box: UI frame while rendering / idle 1.24-1.53
 #: at 0, 1.07-1.08 at 10; but other busy processes then also win over the render.
@@ -65,6 +64,7 @@ class Viewer:
         self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
         self.frame_ms: deque[float] = deque(maxlen=600)  # wall time between frames
         self.frame_cpu_ms: deque[float] = deque(maxlen=600)  # of it, this thread's CPU time
+        self.idling_log: deque[tuple[bool, bool]] = deque(maxlen=2000)  # (busy, idling) per frame
         self._last_frame = None
         self._scene_key = None
         self._scene_tex = None
@@ -110,7 +110,9 @@ class Viewer:
         tick_sequence(self)
         playing = self.sequence is not None and self.sequence.playing
         busy = self.neural is not None and self.neural.busy
-        hello_imgui.get_runner_params().fps_idling.enable_idling = not (busy or playing)
+        idling = hello_imgui.get_runner_params().fps_idling
+        idling.enable_idling = not (busy or playing)
+        self.idling_log.append((busy, bool(idling.enable_idling)))
 
     # -- helpers for the panels ---------------------------------------------------------
     def reset_camera(self, aspect: float | None = None) -> None:
@@ -129,10 +131,10 @@ class Viewer:
         """The 3D view's texture at ``size``, redrawn only when something changed."""
         if self.scene is None:
             return None
-        from app.panel_neural import _camera_key
+        from app.panel_neural import camera_key
 
         o = self.options
-        key = (self.state.version, _camera_key(self.camera), tuple(size), o.textured,
+        key = (self.state.version, camera_key(self.camera), tuple(size), o.textured,
                o.part_colors, o.novelty, o.wireframe, o.skeleton)
         if key != self._scene_key:
             self._scene_tex = self.scene.render(self.state, self.camera, size, o)
