@@ -92,3 +92,17 @@ def test_field_call_with_one_or_two_points_matches_the_batch(field, n):
     assert sigma.shape == (6,) and small[0].shape == (n,)
     assert torch.allclose(small[0], sigma[:n], rtol=1e-5, atol=1e-6)
     assert torch.allclose(small[1], rgb[:n], atol=1e-6)
+
+
+def test_sample_pdf_on_a_zero_length_ray_is_finite():
+    """A ray clipped to a zero-length interval (near == far after rounding) with zero
+    weights: its importance samples sit at that point instead of NaN."""
+    from texvocab.render import sample_pdf
+
+    edges = torch.tensor([[0.0, 0.5, 1.0], [2.0, 2.0, 2.0]])
+    weights = torch.tensor([[1.0, 3.0], [0.0, 0.0]])
+    for gen in (None, torch.Generator().manual_seed(0)):
+        u = sample_pdf(edges, weights, 8, gen)
+        assert torch.isfinite(u).all()
+        assert torch.equal(u[1], torch.full((8,), 2.0))
+        assert (u[0] >= 0).all() and (u[0] <= 1).all() and (u[0] > 0.5).sum() >= 5

@@ -24,7 +24,7 @@ def render_view(model, pose, trans, camera, march):
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    index=ctx.index)
+                                    march.shell_voxel, march.shell_exact, index=ctx.index)
         out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
                            shell=shell)
     return out.rgb.numpy().astype(np.float32), out.stats

@@ -130,7 +130,9 @@ def sample_pdf(edges: torch.Tensor, weights: torch.Tensor, n: int,
     """
     weights = weights.detach().to(edges.dtype)
     width = edges[:, 1:] - edges[:, :-1]
-    share = width / width.sum(1, keepdim=True).clamp(min=1e-30)
+    total = width.sum(1, keepdim=True)
+    # a zero-length ray (all edges equal) gets equal shares, so its pdf stays proper
+    share = torch.where(total > 0, width / total.clamp(min=1e-30), 1.0 / width.shape[1])
     weights = weights + (pad * weights.sum(1, keepdim=True) + 1e-12) * share
     pdf = weights / weights.sum(1, keepdim=True)
     cdf = torch.cat([torch.zeros_like(pdf[:, :1]), torch.cumsum(pdf, 1)], 1)
