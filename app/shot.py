@@ -184,3 +184,50 @@ def cmd_shot(args: argparse.Namespace) -> int:
     for p in paths:
         print(f"  {p.resolve()}")
     return 0
+
+
+DEMO_LOOKS = (("3D view: vocabulary texture", {}),
+              ("part colours", {"part_colors": True}),
+              ("novelty + skeleton", {"novelty": True, "skeleton": True}))
+
+
+def demo_shots(source: str | Path, out_dir: str | Path, poses: tuple[str, ...] | None = None,
+               view: int = 1, smpl: str | None = None) -> Path:
+    """What the viewer would show, for a display-less demo: for each pose (default: the
+    last novel frame of the capture, then 'kick' and 'arms_up'), the 3D view textured,
+    with part colours and with the novelty overlay, and the neural render (checkpoints),
+    all from the capture's held-out ``view``. Writes one shot folder per pose and a
+    contact sheet ``viewer_shots.png`` under ``out_dir``; returns the sheet's path."""
+    from app.gl_headless import create_headless_context, make_current, release
+    from texvocab.imageio import contact_sheet, save_png
+
+    data = load_viewer_data(str(source), smpl=smpl)
+    cap = data.capture
+    if poses is None:
+        poses = ((str(cap.num_frames - 1),) if cap is not None else ()) + ("kick", "arms_up")
+    out = Path(out_dir)
+    ctx = create_headless_context()
+    rows, row_labels = [], []
+    try:
+        make_current(ctx)
+        for spec in poses:
+            state = ViewerState(data)
+            apply_pose(state, spec)
+            camera = cap.cameras[view] if cap is not None else parse_camera("0,10,3.0", data, state)
+            size = (camera.width, camera.height)
+            tiles = []
+            for i, (_, flags) in enumerate(DEMO_LOOKS):
+                shot = take_shot(data, state, camera, size, SceneOptions(**flags),
+                                 neural=i == 0, ctx=ctx)
+                if i == 0:
+                    write_shot(out / f"pose_{spec}", shot)
+                    neural = shot.neural
+                tiles.append(shot.view3d)
+            if neural is not None:
+                tiles.append(neural)
+            rows.append(tiles)
+            row_labels.append(f"frame {spec}" if spec.isdigit() else spec)
+    finally:
+        release(ctx)
+    cols = [label for label, _ in DEMO_LOOKS] + (["neural render"] if data.model is not None else [])
+    return save_png(out / "viewer_shots.png", contact_sheet(rows, row_labels, cols))

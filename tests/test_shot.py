@@ -116,3 +116,17 @@ def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(tiny
     inter = (neural_fg & gl_body).sum() / (neural_fg | gl_body).sum()
     print(f"silhouette IoU neural vs GL: {inter:.3f}")
     assert inter > 0.6
+
+
+def test_demo_without_a_display_writes_the_viewer_shots(tiny_checkpoint, tmp_path):
+    """What `texvocab demo` does at its end when there is no display."""
+    from app.shot import DEMO_LOOKS, demo_shots
+
+    sheet = demo_shots(tiny_checkpoint, tmp_path / "viewer", poses=("1", "kick"))
+    img = read(sheet)
+    # two rows (one per pose) of 3D-view looks plus the neural render, 64 px tiles
+    assert img.shape[0] > 2 * 64 and img.shape[1] > (len(DEMO_LOOKS) + 1) * 64
+    for pose in ("1", "kick"):
+        view, neural = read(tmp_path / "viewer" / f"pose_{pose}" / "view3d.png"), read(
+            tmp_path / "viewer" / f"pose_{pose}" / "neural.png")
+        assert view.std() > 5 and neural.std() > 1  # a body is drawn in both

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
+from pathlib import Path
 
 from texvocab.errors import TexvocabError
 
@@ -37,6 +39,18 @@ def cmd_demo(args) -> int:
         print(f"  checkpoint: {ckpt.resolve()}")
         print(f"  metrics:    {report.resolve()} (grids: {report.parent.resolve()}/grid_*.png)")
         print(report.read_text())
+    source = ckpt if args.train_minutes > 0 else root
+    if os.environ.get("DISPLAY") and not args.no_view:
+        from app.window import run_viewer
+
+        print(f"opening the viewer on {source} (close its window to finish)")
+        return run_viewer(str(source), smpl=args.smpl, size=(1280, 800))
+    from app.shot import demo_shots
+
+    t0 = time.perf_counter()
+    sheet = demo_shots(source, Path(args.out) / "viewer", smpl=args.smpl)
+    print(f"no display (or --no-view): the viewer's shots written in {time.perf_counter() - t0:.1f} s")
+    print(f"  viewer shots sheet: {sheet.resolve()}  (open the viewer: texvocab view {source})")
     return 0
 
 
@@ -114,12 +128,16 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Render the body (default, or --smpl) in six poses, front "
                                    "and side, offscreen; synthesise the default multi-view "
                                    "capture (reused if present), prepare its texture maps, "
-                                   "train a short avatar and evaluate it; write PNGs and "
-                                   "print where they are.")
+                                   "train a short avatar and evaluate it; then open the "
+                                   "viewer on it, or with no display write the viewer's "
+                                   "screenshots; write PNGs and print where they are.")
     p.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     p.add_argument("--size", type=int, default=320, help="tile size in pixels (default: 320)")
     p.add_argument("--frames", type=int, default=None,
                    help="synthesise only the first N frames of the default capture")
+    p.add_argument("--no-view", action="store_true",
+                   help="do not open the viewer at the end even with a display; write its "
+                        "screenshots instead (as without a display)")
     p.add_argument("--train-minutes", type=float, default=3.0,
                    help="train the demo avatar this long (default 3; 0 skips training)")
     _add_smpl(p)
