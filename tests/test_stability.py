@@ -197,6 +197,14 @@ def test_antipodal_quaternions_give_the_same_query_body_and_feature(body, vocab,
     x = pts.double().numpy()
     face_a, face_b = ca.index.project(x).face, cb.index.project(x).face
     assert (face_a != face_b)[differs.numpy()].all()
+    # the field's pose input does not see the sign of q: same SDF and colour (up to the
+    # feature ties above)
+    with torch.no_grad():
+        dirs = torch.nn.functional.normalize(torch.ones_like(pts), dim=-1)
+        sa, ra, _ = avatar.sdf_and_color(ca, pts, dirs)
+        sb, rb, _ = avatar.sdf_and_color(cb, pts, dirs)
+    same = ~differs
+    assert (sa - sb)[same].abs().max() < 1e-4 and (ra - rb)[same].abs().max() < 1e-4
 
 
 # --- vocabulary corner cases through the field ----------------------------------------

@@ -59,6 +59,19 @@ def laplace_density(sdf: torch.Tensor, beta: torch.Tensor) -> torch.Tensor:
     return psi / beta
 
 
+def pose_condition(pose: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
+    """The field's pose input Θ: per joint the unit quaternion of its rotation, signed so
+    that q and -q (the same rotation, e.g. θ and θ - 2π about one axis) give one input:
+    w > 0, or for |w| <= eps (θ ≈ π) the first of x, y, z beyond eps positive. Identical
+    to ``rotvec_to_quat`` for rotation vectors of norm < π (w > 0 already), so weights
+    trained before this canonicalisation keep their meaning. (J, 3) -> (J, 4)."""
+    q = rotvec_to_quat(pose)
+    key = q[..., 0]
+    for i in (1, 2, 3):
+        key = torch.where(key.abs() <= eps, q[..., i], key)
+    return torch.where((key < 0)[..., None], -q, q)
+
+
 def _mlp(d_in: int, hidden: int, layers: int, d_out: int) -> nn.Sequential:
     mods: list[nn.Module] = []
     for i in range(layers):
@@ -108,7 +121,7 @@ class AvatarField(nn.Module):
         rounding; returns (N, 1 + hidden)."""
         first = self.sdf_net[0]
         d = x.shape[1]
-        pose = rotvec_to_quat(ctx.pose.to(x.dtype)).reshape(-1)
+        pose = pose_condition(ctx.pose.to(x.dtype)).reshape(-1)
         bias = first.bias + first.weight[:, d:].contiguous() @ pose
         # contiguous copies: row-aligned operands keep BLAS results bitwise reproducible
         return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))
