@@ -28,9 +28,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from texvocab.evaluate import render_view
 from texvocab.imageio import atomic_write_bytes
 from texvocab.metrics import metrics_in_bbox, psnr
-from texvocab.render import MarchSettings, ShellGeometry, render_image
+from texvocab.render import MarchSettings
 from texvocab.settings import PRESETS, RENDER_KNOBS
 
 REFERENCE = {"coarse_samples": 64, "fine_samples": 32, "early_stop_eps": 0.0}
@@ -41,7 +42,9 @@ SWEEP: list[tuple[str, dict]] = (
     + [(f"coarse={v}", {"coarse_samples": v}) for v in (6, 9, 12, 24, 36)]
     + [(f"fine={v}", {"fine_samples": v}) for v in (0, 4, 16)]
     + [(f"eps={v:g}", {"early_stop_eps": v}) for v in (0.0, 1e-2, 5e-2)]
-    + [(f"shell={v}", {"shell_width": v}) for v in (0.02, 0.03)]
+    + [(f"shell={v}", {"shell_width": v}) for v in (0.02, 0.025, 0.03)]
+    + [("shell=0.025 8+4", {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4}),
+       ("shell=0.025 13+8", {"shell_width": 0.025, "coarse_samples": 13})]
 )
 
 
@@ -50,30 +53,13 @@ def march_of(knobs: dict, base: MarchSettings) -> MarchSettings:
     return replace(base, **{k: v for k, v in knobs.items() if k in keys})
 
 
-def render(model, pose, trans, camera, march: MarchSettings, scale: float):
-    """((H, W, 3) float32 at the camera's full size, seconds, field evaluations)."""
-    t0 = time.perf_counter()
-    with torch.no_grad():
-        ctx = model.pose_feature.context(pose, trans)
-        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    index=ctx.index)
-        cam = camera if scale == 1.0 else camera.scaled(scale)
-        out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
-                           shell=shell)
-        rgb = out.rgb
-        if scale != 1.0:
-            rgb = torch.nn.functional.interpolate(
-                rgb.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
-                align_corners=False)[0].permute(1, 2, 0).clamp(0, 1)
-    return rgb.numpy().astype(np.float32), time.perf_counter() - t0, out.stats.field_evals
-
-
 def measure(model, items, knobs: dict, base: MarchSettings, references=None) -> dict:
     march = march_of(knobs, base)
     scale = float(knobs.get("image_scale", 1.0))
     secs, evals, p_gt, s_gt, p_ref, images = [], [], [], [], [], []
     for i, (pose, trans, cam, gt, mask) in enumerate(items):
-        rgb, s, n = render(model, pose, trans, cam, march, scale)
+        rgb, stats = render_view(model, pose, trans, cam, march, scale)
+        s, n = stats.seconds, stats.field_evals
         m = metrics_in_bbox(rgb, gt, mask)
         secs.append(s)
         evals.append(n)
@@ -142,14 +128,8 @@ def size_growth(model, item, base: MarchSettings) -> list[str]:
     rows = []
     for scale in (0.25, 0.5, 1.0, 2.0):
         c = cam.scaled(scale) if scale != 1.0 else cam
-        t0 = time.perf_counter()
-        with torch.no_grad():
-            ctx = model.pose_feature.context(pose, trans)
-            shell = ShellGeometry.build(ctx.vertices, model.body.faces, base.shell_width,
-                                        index=ctx.index)
-            out = render_image(model.for_pose(ctx), c, ctx.vertices, model.body.faces, base,
-                               shell=shell)
-        rows.append((c.width, c.height, time.perf_counter() - t0, out.stats.field_evals))
+        _, stats = render_view(model, pose, trans, c, base)
+        rows.append((c.width, c.height, stats.seconds, stats.field_evals))
     ref = next(r[2] for r in rows if r[0] == cam.width)
     for w, h, s, n in rows:
         lines.append(f"| {w}×{h} | {w * h} | {s:.3f} | {n} | {s / (w * h) * 1e4:.4f} | "

@@ -111,3 +111,23 @@ def test_train_and_eval_commands(capture, tmp_path):
     proc = subprocess.run([TEXVOCAB, "eval", str(bad), str(capture)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.startswith("error: ") and "bad.pt" in proc.stderr
+
+
+def test_image_scale_renders_smaller_and_shows_it_at_full_size(capture):
+    from texvocab.evaluate import render_view
+    from texvocab.metrics import metrics_in_bbox
+    from texvocab.train import march_settings
+
+    cap = open_capture(capture)
+    s = tiny_settings()
+    model = Trainer(cap, s, capture.parent / "scale_run", progress=False).model.eval()
+    cam, t = cap.cameras[1], 0
+    full, full_stats = render_view(model, cap.poses[t], cap.trans[t], cam, march_settings(s))
+    half, half_stats = render_view(model, cap.poses[t], cap.trans[t], cam, march_settings(s), 0.5)
+    assert half.shape == full.shape == (cam.height, cam.width, 3)
+    assert half_stats.pixels == cam.scaled(0.5).width * cam.scaled(0.5).height
+    assert half_stats.field_evals < 0.5 * full_stats.field_evals
+    # the same picture, blurred: close to the full render, far from a blank one
+    mask = cap.mask(1, t)
+    assert metrics_in_bbox(half, full, mask)["psnr"] > 20
+    assert metrics_in_bbox(np.zeros_like(full), full, mask)["psnr"] < 15

@@ -185,7 +185,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     settings = render_overrides(settings, args.preset, args.overrides)
     sets = build_sets(cap, settings, args.per_set)
     t0 = time.perf_counter()
-    table, records, grids = evaluate_sets(model, sets, march_settings(settings))
+    table, records, grids = evaluate_sets(model, sets, march_settings(settings),
+                                          scale=settings.image_scale)
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     paths = write_report(out, table, records, grids,
                          {"checkpoint": str(args.checkpoint), "step": int(ck["step"]),

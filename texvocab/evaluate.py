@@ -9,6 +9,7 @@ over all rendered vs true images of a set when the Inception extractor exists.
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -19,15 +20,26 @@ from texvocab.metrics import evaluate_pair
 from texvocab.render import ShellGeometry, render_image
 
 
-def render_view(model, pose, trans, camera, march):
-    """(H, W, 3) float32 render of the avatar at a pose from a camera, and RenderStats."""
+def render_view(model, pose, trans, camera, march, scale: float = 1.0):
+    """(H, W, 3) float32 render of the avatar at a pose from a camera, and RenderStats.
+
+    ``scale`` < 1 renders ``camera.scaled(scale)`` (the ``image_scale`` knob) and resizes
+    the result bilinearly to the camera's full size, as a viewer would show it."""
+    t0 = time.perf_counter()
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
                                     march.shell_voxel, march.shell_exact, index=ctx.index)
-        out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
+        cam = camera if scale == 1.0 else camera.scaled(scale)
+        out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
                            shell=shell)
-    return out.rgb.numpy().astype(np.float32), out.stats
+        rgb = out.rgb
+        if scale != 1.0:
+            rgb = torch.nn.functional.interpolate(
+                rgb.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
+                align_corners=False)[0].permute(1, 2, 0).clamp(0, 1)
+    out.stats.seconds = time.perf_counter() - t0  # incl. pose context and shell
+    return rgb.numpy().astype(np.float32), out.stats
 
 
 def _error_image(pred, gt):
@@ -35,8 +47,10 @@ def _error_image(pred, gt):
     return np.clip(np.repeat(err, 3, -1), 0, 1)
 
 
-def evaluate_sets(model, sets: dict, march, lpips_model=None, grid_rows: int = 4):
-    """sets: name -> list of (pose, trans, camera, gt (H, W, 3), mask (H, W)).
+def evaluate_sets(model, sets: dict, march, lpips_model=None, grid_rows: int = 4,
+                  scale: float = 1.0):
+    """sets: name -> list of (pose, trans, camera, gt (H, W, 3), mask (H, W)); renders at
+    ``scale`` of each camera's size (see :func:`render_view`).
 
     Returns (table {name: mean metrics}, per-image records, grid rows per set).
     """
@@ -47,7 +61,7 @@ def evaluate_sets(model, sets: dict, march, lpips_model=None, grid_rows: int = 4
         rows, preds, gts = [], [], []
         per = []
         for i, (pose, trans, cam, gt, mask) in enumerate(items):
-            pred, stats = render_view(model, pose, trans, cam, march)
+            pred, stats = render_view(model, pose, trans, cam, march, scale)
             m = evaluate_pair(pred, gt, mask, lpips_model=lpips_model)
             m["seconds"] = stats.seconds
             per.append(m)
