@@ -2,7 +2,8 @@
 thread (:mod:`app.worker`), from the 3D view's camera, coarse to fine (1/8 .. 1), with
 the level shown and how long it took. Without a checkpoint it says why it is empty.
 
-Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render now``.
+Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render now``,
+``**/preset``.
 """
 from __future__ import annotations
 
@@ -12,15 +13,20 @@ import numpy as np
 from imgui_bundle import imgui
 
 from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
+from texvocab.settings import PRESETS
 
 
 class NeuralView:
     """The neural render's GUI state: the worker, the displayed level's GL texture, and
     the version counter bumped whenever pose, camera or resolution change."""
 
-    def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0):
+    def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0, settings=None):
         self.ctx = ctx
         self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice)
+        self.settings = settings  # the checkpoint's Settings (for the presets)
+        self.preset = "checkpoint"  # or a texvocab.settings.PRESETS name
+        self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
+        self.image_scale = 1.0
         self.live = True
         self.resolution = 256  # long side of the full-resolution level, pixels
         self.version = 0
@@ -36,16 +42,29 @@ class NeuralView:
 
     def update(self, state, camera, aspect: float, force: bool = False) -> None:
         """Submit a job when the pose, camera or size changed; upload a new level."""
-        w, h = _fit(self.resolution, aspect)
-        key = (state.version, camera_key(camera), w, h)
+        w, h = _fit(max(8, round(self.resolution * self.image_scale)), aspect)
+        key = (state.version, camera_key(camera), w, h, self.preset)
         if (self.live and key != self._key) or force:
             self._key = key
             self.version += 1
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
-                                         camera.to_texvocab_camera(w, h)))
+                                         camera.to_texvocab_camera(w, h), self.march))
         frame = self.worker.poll()
         if frame is not None:
             self._upload(frame)
+
+    def set_preset(self, name: str) -> None:
+        """Render with a speed/accuracy preset's render knobs (bench/tradeoff.py), or with
+        the checkpoint's own settings ("checkpoint")."""
+        from texvocab.settings import render_overrides
+        from texvocab.train import march_settings
+
+        self.preset = name
+        if name == "checkpoint" or self.settings is None:
+            self.march, self.image_scale = None, 1.0
+            return
+        s = render_overrides(self.settings, name, [])
+        self.march, self.image_scale = march_settings(s), s.image_scale
 
     def _upload(self, frame: RenderFrame) -> None:
         img = np.ascontiguousarray((np.clip(frame.image, 0, 1) * 255 + 0.5).astype(np.uint8))
@@ -104,6 +123,13 @@ def draw_neural_panel(viewer) -> None:
     _, nv.resolution = imgui.slider_int("resolution", nv.resolution, 64, 512, "%d px")
     imgui.same_line()
     force = imgui.button("Render now")
+    names = ["checkpoint", *PRESETS]
+    imgui.set_next_item_width(120)
+    changed, index = imgui.combo("preset", names.index(nv.preset), names)
+    if changed:
+        nv.set_preset(names[index])
+    if imgui.is_item_hovered():
+        imgui.set_tooltip("speed/accuracy preset of the render knobs (bench/tradeoff.py)")
     nv.update(viewer.state, viewer.camera, viewer.view_aspect(), force)
     imgui.text(status_line(nv.frame, nv.busy))
     for err in list(nv.worker.errors)[-1:]:

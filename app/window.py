@@ -85,7 +85,8 @@ class Viewer:
             from texvocab.train import march_settings
 
             self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
-                                     self.neural_threads, self.neural_nice)
+                                     self.neural_threads, self.neural_nice,
+                                     settings=self.data.settings)
             if self.neural_resolution:
                 self.neural.resolution = int(self.neural_resolution)
 

@@ -36,6 +36,7 @@ class RenderJob:
     pose: np.ndarray
     trans: np.ndarray
     camera: object
+    march: object = None  # MarchSettings for this job (None: the renderer's own)
 
 
 @dataclass(frozen=True)
@@ -74,14 +75,15 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     from texvocab.render import ShellGeometry, progressive_render
 
     def render(job: RenderJob, cancelled: Callable[[], bool]):
+        m = job.march or march
         with torch.no_grad():
             ctx = model.pose_feature.context(job.pose, job.trans)
             if cancelled():
                 return
-            shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                        index=ctx.index)
+            shell = ShellGeometry.build(ctx.vertices, model.body.faces, m.shell_width,
+                                        m.shell_voxel, m.shell_exact, index=ctx.index)
             field = pad_single_point_calls(model.for_pose(ctx))
-        yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, march,
+        yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
                                       levels=levels, cancelled=cancelled, shell=shell)
     return render
 

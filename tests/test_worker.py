@@ -263,3 +263,40 @@ def test_worker_thread_runs_at_the_requested_niceness():
     base = os.getpriority(os.PRIO_PROCESS, 0)
     assert os.getpriority(os.PRIO_PROCESS, worker.native_id) == min(base + 7, 19)
     assert worker.stop()
+
+
+def test_a_job_renders_with_its_own_march_settings():
+    """The viewer's preset combo sends the preset's MarchSettings with each job."""
+    from dataclasses import replace
+
+    v, f = sphere_mesh()
+    evals = []
+
+    class Ctx:
+        vertices, index = v, None
+
+    class Model:
+        class body:
+            faces = f
+
+        class pose_feature:
+            @staticmethod
+            def context(pose, trans):
+                return Ctx()
+
+        @staticmethod
+        def for_pose(ctx):
+            sphere = SphereField(radius=0.3)
+
+            def counted(points, dirs):
+                evals.append(points.shape[0])
+                return sphere(points, dirs)
+            return counted
+
+    render = model_renderer(Model, SETTINGS, (1,))
+    list(render(job(1, 32), lambda: False))
+    own, evals[:] = sum(evals), []
+    cheap = replace(SETTINGS, coarse_samples=max(2, SETTINGS.coarse_samples // 4), fine_samples=0)
+    base = job(2, 32)
+    list(render(RenderJob(2, base.pose, base.trans, base.camera, cheap), lambda: False))
+    assert 0 < sum(evals) < 0.6 * own
