@@ -12,7 +12,9 @@ def _with(name: str) -> Settings:
 
 def test_presets_are_valid_settings_and_ordered_by_cost():
     fast, balanced, quality = _with("fast"), _with("balanced"), _with("quality")
-    assert balanced == Settings()  # balanced is the documented default
+    # presets change only render knobs: a checkpoint trained with any of them is the same
+    for p in (fast, balanced, quality):
+        assert {k for k, v in p.to_dict().items() if v != Settings().to_dict()[k]} <= set(RENDER_KNOBS)
     # every knob moves monotonically from fast to quality
     for knob in ("image_scale", "coarse_samples", "fine_samples"):
         assert getattr(fast, knob) <= getattr(balanced, knob) <= getattr(quality, knob), knob

@@ -138,8 +138,8 @@ RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps
 
 # Chosen from bench/tradeoff.py on the default synthetic capture (README, "Presets").
 PRESETS: dict[str, dict] = {
-    "fast": {"image_scale": 0.5, "coarse_samples": 12, "fine_samples": 4, "early_stop_eps": 1e-2},
-    "balanced": {},
+    "fast": {"shell_width": 0.025, "coarse_samples": 6, "fine_samples": 2, "early_stop_eps": 1e-2},
+    "balanced": {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4},
     "quality": {"coarse_samples": 36, "fine_samples": 16, "early_stop_eps": 1e-4},
 }
 
