@@ -30,7 +30,9 @@ def test_unknown_preset_names_the_choices():
 def test_render_overrides_touch_only_render_knobs():
     trained = Settings(num_keys=7, k=2)
     s = render_overrides(trained, "fast", ["coarse_samples=10"])
-    assert s.coarse_samples == 10 and s.image_scale == PRESETS["fast"]["image_scale"]
+    assert s.coarse_samples == 10  # --set wins over the preset
+    assert (s.fine_samples, s.shell_width) == (PRESETS["fast"]["fine_samples"],
+                                               PRESETS["fast"]["shell_width"])
     assert (s.num_keys, s.k) == (7, 2)
     with pytest.raises(TexvocabError, match="only render knobs"):
         render_overrides(trained, None, ["num_keys=3"])
