@@ -12,23 +12,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from texvocab.capture import Camera
+from texvocab.capture.camera import look_at
 
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV camera axes -> GL camera axes
 DEFAULT_TARGET = (0.0, -0.3, 0.0)  # the default body's centre (its synthetic captures aim here)
-
-
-def look_at_cv(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV extrinsics (R (3, 3), t (3,)) of a camera at ``eye`` looking at ``target``."""
-    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(-up, z)
-    if np.linalg.norm(x) < 1e-9:
-        raise ValueError("look_at: viewing direction is parallel to up")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    return R, -R @ eye
 
 
 def gl_projection_from_K(K: np.ndarray, width: int, height: int, near: float,
@@ -97,13 +84,13 @@ class OrbitCamera:
     def pan(self, dx: float, dy: float) -> None:
         """Move the target in the image plane by fractions of the view height (dx right,
         dy up), so a drag across the view moves the scene about as far."""
-        R, _ = look_at_cv(self.eye, self.target)
+        R, _ = look_at(self.eye, self.target)
         scale = 2.0 * self.distance * np.tan(np.radians(self.fov) / 2)
         self.target = self.target + scale * (dx * R[0] - dy * R[1])
 
     def view_matrix(self) -> np.ndarray:
         """(4, 4) world -> GL camera (looks down -z, +y up)."""
-        R, t = look_at_cv(self.eye, self.target)
+        R, t = look_at(self.eye, self.target)
         extr = np.eye(4)
         extr[:3, :3], extr[:3, 3] = R, t
         return CV_TO_GL @ extr
@@ -122,7 +109,7 @@ class OrbitCamera:
 
     def to_texvocab_camera(self, width: int, height: int) -> Camera:
         """The same view as an OpenCV :class:`Camera` of ``width`` × ``height`` pixels."""
-        R, t = look_at_cv(self.eye, self.target)
+        R, t = look_at(self.eye, self.target)
         return Camera(self.intrinsics(width, height), R, t, width, height, name="orbit")
 
     @classmethod

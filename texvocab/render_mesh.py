@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from texvocab.capture.camera import look_at  # noqa: F401  (re-exported for callers here)
 from texvocab.gl_platform import ensure_offscreen
 
 ensure_offscreen()
@@ -14,20 +15,6 @@ import pyrender  # noqa: E402
 import trimesh  # noqa: E402
 
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
-
-
-def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV extrinsics (R (3, 3), t (3,)) of a camera at ``eye`` looking at ``target``."""
-    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(-up, z)  # OpenCV: x = y × z with y pointing down
-    if np.linalg.norm(x) < 1e-9:
-        raise ValueError("look_at: viewing direction is parallel to up")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    return R, -R @ eye
 
 
 def intrinsics(width: int, height: int, fov_y_deg: float) -> np.ndarray:

@@ -139,3 +139,17 @@ def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, nearest: bool 
     if image.dtype.kind == "f":
         return out.astype(image.dtype)
     return np.clip(out + 0.5, 0, 255).astype(image.dtype)
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV extrinsics (R (3, 3), t (3,)) of a camera at ``eye`` looking at ``target``."""
+    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(-up, z)  # OpenCV: x = y × z with y pointing down
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: viewing direction is parallel to up")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ eye
