@@ -207,10 +207,9 @@ def test_same_version_is_not_rendered_twice():
     assert calls == [7]
 
 
-@pytest.mark.parametrize("levels", [(4, 1)])
-def test_model_renderer_uses_the_models_pose_context(levels):
-    """model_renderer builds the per-pose context once and renders its field in levels."""
-    calls = {"context": 0, "for_pose": 0}
+def stub_model(make_field, calls=None):
+    """A stand-in avatar with the attributes model_renderer uses: the sphere mesh as the
+    posed body, ``make_field()`` as its field; counts context() calls in ``calls``."""
     v, f = sphere_mesh()
 
     class Ctx:
@@ -223,15 +222,26 @@ def test_model_renderer_uses_the_models_pose_context(levels):
         class pose_feature:
             @staticmethod
             def context(pose, trans):
-                calls["context"] += 1
+                if calls is not None:
+                    calls["context"] += 1
                 return Ctx()
 
         @staticmethod
         def for_pose(ctx):
-            calls["for_pose"] += 1
-            return SphereField(radius=0.3)
+            return make_field()
+    return Model
 
-    render = model_renderer(Model, SETTINGS, levels)
+
+@pytest.mark.parametrize("levels", [(4, 1)])
+def test_model_renderer_uses_the_models_pose_context(levels):
+    """model_renderer builds the per-pose context once and renders its field in levels."""
+    calls = {"context": 0, "for_pose": 0}
+
+    def field():
+        calls["for_pose"] += 1
+        return SphereField(radius=0.3)
+
+    render = model_renderer(stub_model(field, calls), SETTINGS, levels)
     out = list(render(job(1, 32), lambda: False))
     assert [lv for lv, _, _ in out] == list(levels)
     assert tuple(out[-1][1].shape) == (32, 32, 3)
@@ -269,31 +279,14 @@ def test_a_job_renders_with_its_own_march_settings():
     """The viewer's preset combo sends the preset's MarchSettings with each job."""
     from dataclasses import replace
 
-    v, f = sphere_mesh()
     evals = []
+    sphere = SphereField(radius=0.3)
 
-    class Ctx:
-        vertices, index = v, None
+    def counted(points, dirs):
+        evals.append(points.shape[0])
+        return sphere(points, dirs)
 
-    class Model:
-        class body:
-            faces = f
-
-        class pose_feature:
-            @staticmethod
-            def context(pose, trans):
-                return Ctx()
-
-        @staticmethod
-        def for_pose(ctx):
-            sphere = SphereField(radius=0.3)
-
-            def counted(points, dirs):
-                evals.append(points.shape[0])
-                return sphere(points, dirs)
-            return counted
-
-    render = model_renderer(Model, SETTINGS, (1,))
+    render = model_renderer(stub_model(lambda: counted), SETTINGS, (1,))
     list(render(job(1, 32), lambda: False))
     own, evals[:] = sum(evals), []
     cheap = replace(SETTINGS, coarse_samples=max(2, SETTINGS.coarse_samples // 4), fine_samples=0)
