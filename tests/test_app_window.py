@@ -14,14 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-
-from texvocab.body import default_body
-from texvocab.capture import open as open_capture
-from texvocab.capture.motion import make_sequence
-from texvocab.capture.synth import SynthSettings, synthesize
-from texvocab.field import FieldSettings
-from texvocab.settings import Settings
-from texvocab.train import Trainer
+from tiny_runs import tiny_run
 
 ROOT = Path(__file__).resolve().parent.parent
 PYTHON = sys.executable
@@ -32,16 +25,10 @@ XVFB = shutil.which("xvfb-run")
 def tiny_checkpoint(tmp_path_factory):
     """A 6-frame, 4-view 64² capture and a checkpoint after 2 steps of a tiny model (its
     vocabulary: 3 keys per part, K = 2; the field still near its body-SDF init)."""
-    root = tmp_path_factory.mktemp("viewer")
-    poses, trans = make_sequence([("walk", 4), ("arm_raise", 4)], seed=5)
-    cap = synthesize(root / "cap", poses, trans, 6, default_body(),
-                     SynthSettings(ring_views=4, raised_views=0, size=64, texture_size=128),
-                     progress=False)
-    s = Settings(texture_size=64, num_keys=3, k=2, encoder="small", rays_per_batch=128,
-                 coarse_samples=8, fine_samples=4, iterations=2, checkpoint_every=10,
-                 field=FieldSettings(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4))
-    Trainer(open_capture(cap), s, root / "run", progress=False).run()
-    return root / "run" / "checkpoint.pt"
+    return tiny_run(tmp_path_factory.mktemp("viewer"), ([("walk", 4), ("arm_raise", 4)], 5), 6, 4,
+                    dict(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4), texture_size=64,
+                    num_keys=3, k=2, rays_per_batch=128, coarse_samples=8, fine_samples=4,
+                    checkpoint_every=10)
 
 
 def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float = 150):

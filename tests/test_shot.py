@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 from scipy import ndimage
+from tiny_runs import tiny_run
 
 from texvocab.cli import main
 from texvocab.imageio import save_png
@@ -73,25 +74,10 @@ def test_shot_errors_are_one_line(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tmp_path_factory):
     """A capture of 2 frames (1 for training) x 3 views at 64 px, a 2-step run on it."""
-    from texvocab.body import default_body
-    from texvocab.capture import open as open_capture
-    from texvocab.capture.motion import make_sequence
-    from texvocab.capture.synth import SynthSettings, synthesize
-    from texvocab.field import FieldSettings
-    from texvocab.settings import Settings
-    from texvocab.train import Trainer
-
-    root = tmp_path_factory.mktemp("shot")
-    poses, trans = make_sequence([("walk", 2)], seed=2)
-    cap = synthesize(root / "cap", poses, trans, 1, default_body(),
-                     SynthSettings(ring_views=3, raised_views=0, size=64, texture_size=128),
-                     progress=False)
-    s = Settings(texture_size=32, num_keys=2, k=2, encoder="small", rays_per_batch=64,
-                 coarse_samples=8, fine_samples=4, iterations=2, checkpoint_every=2,
-                 field=FieldSettings(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2))
-    trainer = Trainer(open_capture(cap), s, root / "run", progress=False)
-    trainer.run()
-    return trainer.checkpoint_path
+    return tiny_run(tmp_path_factory.mktemp("shot"), ([("walk", 2)], 2), 1, 3,
+                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
+                    num_keys=2, k=2, rays_per_batch=64, coarse_samples=8, fine_samples=4,
+                    checkpoint_every=2)
 
 
 def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(tiny_checkpoint,
