@@ -9,15 +9,13 @@ i.e. the closest point of the whole surface (not the nearest vertex), found exac
 
 Method. :class:`SurfaceIndex` is built once per posed mesh: the faces are laid out in 2^k
 slots by a top-down median split, which makes an implicit hierarchy of axis-aligned boxes
-(``_LEAF`` faces per leaf, ``_FAN`` children per node), plus a k-d tree of the vertices.
-A query point x starts with the upper bound d_up = |x - nearest vertex| (a vertex is a
-surface point), then descends the hierarchy level by level for a whole chunk of points at
-once (numpy arrays of (point, node) pairs), dropping a node whenever the distance from x
-to its box exceeds d_up. A box contains every face below it, so no face that could be the
-closest is ever dropped: the search is exact (not a nearest-vertex approximation). Box
-tests run in float32 on outward-rounded boxes with a slack; the surviving faces get
-Ericson's closest-point region tests (Real-Time Collision Detection, 5.1.5) in float64.
-Chunks run on a thread pool (numpy releases the GIL).
+(``_LEAF`` faces per leaf, ``_FAN`` children per node). A query point x descends it depth
+first, nearest box first, keeping the best squared distance so far (starting at the
+search bound) and dropping every node whose box is farther: a box contains every face
+below it, so no face that could be the closest is ever dropped and the search is exact
+(not a nearest-vertex approximation). The surviving faces get Ericson's closest-point
+region tests (Real-Time Collision Detection, 5.1.5) in float64. The loop is compiled
+(:mod:`texvocab._nearest_jit`, numba); chunks of points run on a thread pool.
 
 Sign. Angle-weighted pseudo-normal of the closest feature (face, edge or vertex;
 Baerentzen & Aanaes 2005), used when the mesh is closed (every edge shared by exactly two
@@ -31,10 +29,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 
-_LEAF, _FAN = 4, 4  # faces per leaf box, children per inner box
-_CHUNK = 2048  # points per work item
+from texvocab._nearest_jit import nearest_faces
+
+_LEAF = _FAN = 4  # faces per leaf box, children per inner box (the kernel assumes 4)
+_CHUNK = 4096  # points per work item (a call of fewer is split evenly over the workers)
 _DEGENERATE = 1e-10  # sin² of a face's angle at corner a below which it counts as a segment
 _FEATURE_EPS = 1e-12  # a barycentric at or below this counts as zero when picking the feature
 
@@ -180,26 +179,23 @@ class SurfaceIndex:
         self._center = (corners.min(0) + corners.max(0)) / 2
         self._radius = float(np.abs(corners - self._center).max())
         empty = (self._slot_face < 0)[:, None]
-        self._levels = self._build_boxes(
-            np.where(empty, np.inf, slot_tri.min(1) - self._center),
-            np.where(empty, -np.inf, slot_tri.max(1) - self._center))
-        # surface points for the first upper bound on the distance: the used vertices
-        self._tree = cKDTree(self.vertices[np.unique(self.faces)])
-        self._max_edge = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=-1).max())
+        levels = self._build_boxes(np.where(empty, np.inf, slot_tri.min(1)),
+                                   np.where(empty, -np.inf, slot_tri.max(1)))
+        self._box_lo = np.ascontiguousarray(np.concatenate([lo for lo, _ in levels]))
+        self._box_hi = np.ascontiguousarray(np.concatenate([hi for _, hi in levels]))
+        self._box_offset = np.cumsum([0] + [len(lo) for lo, _ in levels]).astype(np.int64)
         self._pseudo_normals(tri)
 
     @staticmethod
     def _build_boxes(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Box levels (lo (3, n), hi (3, n)) in float32 rounded outwards, finest (one per
-        slot) first; node i of level l + 1 holds nodes i*fan .. i*fan+fan-1 of level l."""
-        levels, fan = [], _LEAF
+        """Box levels (lo (n, 3), hi (n, 3)), finest (one per slot) first; node i of level
+        l + 1 holds nodes i*4 .. i*4+3 of level l (empty boxes: lo = inf, hi = -inf)."""
+        levels = []
         while True:
-            levels.append((np.nextafter(lo.T.astype(np.float32), np.float32(-np.inf)),
-                           np.nextafter(hi.T.astype(np.float32), np.float32(np.inf))))
+            levels.append((lo, hi))
             if len(lo) <= _FAN:
                 return levels
-            lo, hi = lo.reshape(-1, fan, 3).min(1), hi.reshape(-1, fan, 3).max(1)
-            fan = _FAN
+            lo, hi = lo.reshape(-1, _FAN, 3).min(1), hi.reshape(-1, _FAN, 3).max(1)
 
     def _pseudo_normals(self, tri: np.ndarray) -> None:
         """Angle-weighted pseudo-normals of faces, edges and vertices; closedness test."""
@@ -235,69 +231,27 @@ class SurfaceIndex:
         """
         x = _numpy(points, np.float64).reshape(-1, 3)
         bound = np.inf if max_distance is None else float(max_distance)
-        starts = range(0, len(x), _CHUNK)
-        if self.workers > 1 and len(x) > _CHUNK:
+        chunk = min(_CHUNK, max(256, -(-len(x) // self.workers)))
+        starts = range(0, len(x), chunk)
+        if self.workers > 1 and len(x) > chunk:
             with ThreadPoolExecutor(self.workers) as pool:
-                parts = list(pool.map(lambda s: self._nearest(x[s:s + _CHUNK], bound), starts))
+                parts = list(pool.map(lambda s: self._nearest(x[s:s + chunk], bound), starts))
         else:
-            parts = [self._nearest(x[s:s + _CHUNK], bound) for s in starts]
+            parts = [self._nearest(x[s:s + chunk], bound) for s in starts]
         face = np.concatenate([p[0] for p in parts]) if parts else np.full(len(x), -1)
         bary = np.concatenate([p[1] for p in parts]) if parts else np.full((len(x), 3), np.nan)
         return self._finish(points, x, face, bary, vt, ft, weights)
 
     def _nearest(self, x: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """(face (M,), bary (M, 3)) for one chunk x (M, 3); face -1 beyond ``bound``."""
-        face = np.full(len(x), -1, np.int64)
-        bary = np.full((len(x), 3), np.nan)
-        # every surface point lies within an edge length of a vertex: beyond, d > bound
-        d_up, _ = self._tree.query(x, distance_upper_bound=bound + self._max_edge)
-        rows = np.flatnonzero(np.isfinite(d_up))
-        xt = np.ascontiguousarray(x[rows].T)
-        pt, node = self._candidates(xt, np.minimum(d_up[rows], bound))
-        g = np.empty((len(self._table), len(node)))
-        for i, row in enumerate(self._table):
-            row.take(node, out=g[i])
-        xp = xt.take(pt, axis=1)
-        v, w = _closest_vw(xp, g)
-        d2 = ((xp - g[0:3] - v * g[3:6] - w * g[6:9]) ** 2).sum(0)
-        best = np.full(len(rows), np.inf)
-        np.minimum.at(best, pt, d2)
-        winner = np.full(len(rows), -1)
-        hit = np.flatnonzero(d2 == best.take(pt))
-        winner[pt[hit]] = hit
-        ok = (winner >= 0) & (best <= bound * bound)
-        sel = winner[ok]
-        face[rows[ok]] = self._slot_face[node[sel]]
-        bary[rows[ok]] = np.column_stack([1.0 - v[sel] - w[sel], v[sel], w[sel]])
+        slot = np.empty(len(x), np.int64)
+        v, w, d2 = np.empty(len(x)), np.empty(len(x)), np.empty(len(x))
+        nearest_faces(np.ascontiguousarray(x), bound * bound, self._box_lo, self._box_hi,
+                      self._box_offset, self._table, self._slot_face, slot, v, w, d2)
+        ok = slot >= 0
+        face = np.where(ok, self._slot_face[np.maximum(slot, 0)], -1)
+        bary = np.where(ok[:, None], np.column_stack([1.0 - v - w, v, w]), np.nan)
         return face, bary
-
-    def _candidates(self, xt: np.ndarray, d_up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(point, slot) pairs whose face box lies within d_up (M,) of xt (3, M).
-
-        Pairs travel as one key point * n + node (n, the level's size, is a power of two).
-        Boxes are tested in float32, rounded outwards, against d_up plus a slack well above
-        float32 rounding, so the pruning stays conservative (exact results)."""
-        x32 = (xt - self._center[:, None]).astype(np.float32)
-        reach = d_up + 1e-6 * (d_up + np.abs(x32).max(0) + self._radius) + 1e-9
-        ub2 = np.nextafter((reach * reach).astype(np.float32), np.float32(np.inf))
-        top = self._levels[-1][0].shape[1]
-        key = np.arange(len(d_up) * top)
-        for level in range(len(self._levels) - 1, -1, -1):
-            lo, hi = self._levels[level]
-            shift = lo.shape[1].bit_length() - 1
-            pt, node = key >> shift, key & (lo.shape[1] - 1)
-            lb2 = np.zeros(len(key), np.float32)
-            for axis in range(3):
-                xa = x32[axis].take(pt)
-                gap = np.minimum(np.maximum(xa, lo[axis].take(node)), hi[axis].take(node)) - xa
-                with np.errstate(over="ignore", invalid="ignore"):  # empty boxes: infinite
-                    lb2 += gap * gap
-            key = np.compress(lb2 <= ub2.take(pt), key)  # (faster than boolean indexing)
-            if level:
-                fan = _LEAF if level == 1 else _FAN
-                key = ((key << (fan.bit_length() - 1)) + np.arange(fan)[:, None]).ravel()
-        shift = self._levels[0][0].shape[1].bit_length() - 1
-        return key >> shift, key & ((1 << shift) - 1)
 
     def _finish(self, points, x, face, bary, vt, ft, weights) -> SurfaceProjection:
         """Closest points, (signed) distances, UV and weights from face (N,), bary (N, 3)."""

@@ -34,9 +34,8 @@ import numpy as np
 import torch
 from scipy import ndimage
 
+from texvocab.render._splat_jit import splat_balls
 from texvocab.surface import SurfaceIndex
-
-_MAX_PAIRS = 2_000_000  # (ball, pixel) pairs per batch in the splat
 
 
 @dataclass
@@ -171,19 +170,20 @@ class ShellGeometry:
         rho = self.radii
         ys, xs = np.mgrid[0:H, 0:W]
         d = np.stack([xs.ravel(), ys.ravel(), np.ones(H * W)], 1) @ np.linalg.inv(camera.K).T
-        d = torch.from_numpy(d / np.linalg.norm(d, axis=1, keepdims=True))
-        near = torch.full((H * W,), torch.inf, dtype=torch.float64)
-        far = torch.full((H * W,), -torch.inf, dtype=torch.float64)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        near = np.full(H * W, np.inf)
+        far = np.full(H * W, -np.inf)
         front = p[:, 2] > rho * (1 + 1e-9)
-        for b, pix in _splat_pairs(p[front], rho[front], camera.K, W, H):
-            _reduce(near, far, d[pix], torch.from_numpy(p[front][b]),
-                    torch.from_numpy(rho[front][b]), pix)
-        near_plane = np.flatnonzero(~front & (p[:, 2] >= -rho))
-        everything = torch.arange(H * W).repeat(8)
-        for k in range(0, len(near_plane), 8):  # rare: camera inside or next to the shell
-            b = torch.from_numpy(near_plane[k:k + 8]).repeat_interleave(H * W)
-            _reduce(near, far, d.repeat(8, 1)[:len(b)], torch.from_numpy(p)[b],
-                    torch.from_numpy(rho)[b], everything[:len(b)])
+        boxes = _pixel_boxes(p[front], rho[front], camera.K, W, H)
+        # rare: balls straddling the camera plane (camera inside or next to the shell) are
+        # tested against every pixel
+        plane = np.flatnonzero(~front & (p[:, 2] >= -rho))
+        full = [np.full(len(plane), v, np.int64) for v in (0, W - 1, 0, H - 1)]
+        balls = np.concatenate([np.flatnonzero(front), plane])
+        splat_balls(np.ascontiguousarray(p[balls]), np.ascontiguousarray(rho[balls]),
+                    *(np.concatenate([a, b]) for a, b in zip(boxes, full, strict=True)),
+                    np.ascontiguousarray(d), W, near, far)
+        near, far = torch.from_numpy(near), torch.from_numpy(far)
         hit, n, f = _finish(near, far)
         return ShellBounds(hit.view(H, W), n.view(H, W), f.view(H, W))
 
@@ -194,18 +194,6 @@ def shell_bounds(vertices, faces, camera, width: float = 0.04) -> ShellBounds:
     return ShellGeometry.build(vertices, faces, width).image_bounds(camera)
 
 
-def _reduce(near: torch.Tensor, far: torch.Tensor, d: torch.Tensor, p: torch.Tensor,
-            rho: torch.Tensor, pix: torch.Tensor) -> None:
-    """Ray-sphere entry/exit of rays d (P, 3) from the origin with spheres (p (P, 3),
-    rho (P,)); min/max them into near/far (H*W,) at pixel indices pix (P,)."""
-    m = (d * p).sum(1)
-    h2 = rho * rho - ((p * p).sum(1) - m * m)
-    root = h2.clamp(min=0).sqrt()
-    ok = (h2 >= 0) & (m + root > 0)
-    near.scatter_reduce_(0, pix[ok], (m - root)[ok], reduce="amin")
-    far.scatter_reduce_(0, pix[ok], (m + root)[ok], reduce="amax")
-
-
 def _finish(near: torch.Tensor, far: torch.Tensor):
     """(hit, near clamped at 0, far) float32, zeros where not hit."""
     hit = far > near.clamp(min=0)
@@ -214,9 +202,10 @@ def _finish(near: torch.Tensor, far: torch.Tensor):
             torch.where(hit, far, zero).float())
 
 
-def _splat_pairs(p: np.ndarray, rho: np.ndarray, K: np.ndarray, width: int, height: int):
-    """Yield (ball ids, pixel ids) for every pixel centre inside each ball's projected
-    bounding box; balls p (B, 3) in the camera frame, strictly in front (z > rho)."""
+def _pixel_boxes(p: np.ndarray, rho: np.ndarray, K: np.ndarray, width: int, height: int):
+    """(x0, x1, y0, y1) int64 (B,): the pixel centres inside each ball's projected
+    bounding box, clipped to the image (empty when x1 < x0 or y1 < y0); balls p (B, 3) in
+    the camera frame, strictly in front (z > rho)."""
     lo_x, hi_x = _tangent_range(p[:, 0], p[:, 2], rho)
     lo_y, hi_y = _tangent_range(p[:, 1], p[:, 2], rho)
     skew = K[0, 1]
@@ -227,23 +216,7 @@ def _splat_pairs(p: np.ndarray, rho: np.ndarray, K: np.ndarray, width: int, heig
     y1 = np.floor(K[1, 1] * hi_y + K[1, 2] + 1e-6)
     x0, y0 = np.clip(x0, 0, width), np.clip(y0, 0, height)
     x1, y1 = np.clip(x1, -1, width - 1), np.clip(y1, -1, height - 1)
-    bw = torch.from_numpy((x1 - x0 + 1).clip(min=0)).long()
-    bh = torch.from_numpy((y1 - y0 + 1).clip(min=0)).long()
-    x0, y0 = torch.from_numpy(x0).long(), torch.from_numpy(y0).long()
-    count = bw * bh
-    ids = torch.nonzero(count > 0).squeeze(1)
-    cum = torch.cumsum(count[ids], 0)
-    start = 0
-    while start < len(ids):
-        base = int(cum[start - 1]) if start else 0
-        stop = max(int(torch.searchsorted(cum, base + _MAX_PAIRS, right=True)), start + 1)
-        batch = ids[start:stop]
-        n = count[batch]
-        b = torch.repeat_interleave(batch, n)
-        k = torch.arange(len(b)) - torch.repeat_interleave(torch.cumsum(n, 0) - n, n)
-        px, py = x0[b] + k % bw[b], y0[b] + k // bw[b]
-        yield b.numpy(), py * width + px
-        start = stop
+    return tuple(a.astype(np.int64) for a in (x0, x1, y0, y1))
 
 
 def _tangent_range(a: np.ndarray, z: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
