@@ -1,7 +1,8 @@
 """Compiled inner loop of :class:`texvocab.surface.SurfaceIndex`: the exact closest face
 of each query point, by depth-first search of the implicit box hierarchy.
 
-One function, :func:`nearest_faces`, compiled by numba (``nogil``, so the index's thread
+:func:`nearest_faces` (then :func:`closest_and_distance` and :func:`interpolate` for the
+fields of the result), compiled by numba (``nogil``, so the index's thread
 pool runs chunks truly in parallel; ``cache``, so a process loads the machine code from
 ``__pycache__`` instead of compiling it again, about 3 s the first time). Per point:
 the best squared distance starts at the search bound; nodes are visited nearest box
@@ -13,6 +14,8 @@ formulas as ``texvocab.surface._closest_vw``, with zero-area faces tested as the
 edges.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -154,3 +157,60 @@ def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_ou
                 sp += 1
         slot[i] = best_slot
         v_out[i], w_out[i], d2_out[i] = bv, bw, best
+
+
+@njit(cache=True, nogil=True)
+def closest_and_distance(x, face, bary, vertices, faces, signed, face_normal, edge_normal,
+                         vertex_normal, orientation, feature_eps, closest, distance):
+    """Closest points (M, 3) and distances (M,) from face (M,) and bary (M, 3); NaN and
+    inf where face < 0. With ``signed``, a distance is negative when x lies behind the
+    angle-weighted pseudo-normal of the feature (face, edge or vertex) holding its
+    closest point: a barycentric <= feature_eps counts as zero; edge k joins corners k
+    and k + 1; a vertex is the corner of the largest barycentric."""
+    for i in range(x.shape[0]):
+        f = face[i]
+        if f < 0:
+            closest[i, 0] = closest[i, 1] = closest[i, 2] = np.nan
+            distance[i] = np.inf
+            continue
+        d2 = 0.0
+        dot = 0.0
+        zeros, first_zero, corner = 0, -1, 0
+        for k in range(3):
+            if bary[i, k] <= feature_eps:
+                zeros += 1
+                if first_zero < 0:
+                    first_zero = k
+            if bary[i, k] > bary[i, corner]:
+                corner = k
+        for a in range(3):
+            c = (bary[i, 0] * vertices[faces[f, 0], a] + bary[i, 1] * vertices[faces[f, 1], a]
+                 + bary[i, 2] * vertices[faces[f, 2], a])
+            closest[i, a] = c
+            diff = x[i, a] - c
+            d2 += diff * diff
+            if zeros == 0:
+                n = face_normal[f, a]
+            elif zeros == 1:
+                n = edge_normal[f, (first_zero + 1) % 3, a]
+            else:
+                n = vertex_normal[faces[f, corner], a]
+            dot += diff * n * orientation
+        distance[i] = math.sqrt(d2)
+        if signed and dot < 0:
+            distance[i] = -distance[i]
+
+
+@njit(cache=True, nogil=True)
+def interpolate(values, corners, face, bary, out):
+    """out (M, C): barycentric blend of values (T, C) at corners[face] (M, 3); NaN where
+    face < 0."""
+    for i in range(face.shape[0]):
+        f = face[i]
+        if f < 0:
+            out[i, :] = np.nan
+            continue
+        a, b, c = corners[f, 0], corners[f, 1], corners[f, 2]
+        for j in range(values.shape[1]):
+            out[i, j] = (bary[i, 0] * values[a, j] + bary[i, 1] * values[b, j]
+                         + bary[i, 2] * values[c, j])

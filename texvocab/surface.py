@@ -30,7 +30,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-from texvocab._nearest_jit import nearest_faces
+from texvocab._nearest_jit import closest_and_distance, interpolate, nearest_faces
 
 _LEAF = _FAN = 4  # faces per leaf box, children per inner box (the kernel assumes 4)
 _CHUNK = 4096  # points per work item (a call of fewer is split evenly over the workers)
@@ -60,6 +60,17 @@ class SurfaceProjection:
     def valid(self) -> np.ndarray | torch.Tensor:
         """(N,) bool: rows that have a closest point."""
         return self.face >= 0
+
+
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """A process-wide thread pool of ``workers`` threads (made once: starting threads per
+    query cost more than small queries)."""
+    if workers not in _POOLS:
+        _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="texvocab-surface")
+    return _POOLS[workers]
 
 
 def _numpy(x, dtype) -> np.ndarray:
@@ -231,16 +242,31 @@ class SurfaceIndex:
         """
         x = _numpy(points, np.float64).reshape(-1, 3)
         bound = np.inf if max_distance is None else float(max_distance)
-        chunk = min(_CHUNK, max(256, -(-len(x) // self.workers)))
-        starts = range(0, len(x), chunk)
-        if self.workers > 1 and len(x) > chunk:
-            with ThreadPoolExecutor(self.workers) as pool:
-                parts = list(pool.map(lambda s: self._nearest(x[s:s + chunk], bound), starts))
+        n = len(x)
+        face, bary = np.empty(n, np.int64), np.empty((n, 3))
+        closest, distance = np.empty((n, 3)), np.empty(n)
+        with_uv = vt is not None and ft is not None
+        vt, ft = (_numpy(vt, np.float64), _numpy(ft, np.int64)) if with_uv else (None, None)
+        weights = None if weights is None else _numpy(weights, np.float64)
+        uv = np.empty((n, 2)) if with_uv else None
+        wts = None if weights is None else np.empty((n, weights.shape[1]))
+
+        def work(start: int) -> None:
+            sl = slice(start, start + chunk)
+            face[sl], bary[sl] = self._nearest(x[sl], bound)
+            self._fill(x[sl], face[sl], bary[sl], closest[sl], distance[sl], vt, ft,
+                       None if uv is None else uv[sl], weights,
+                       None if wts is None else wts[sl])
+
+        chunk = min(_CHUNK, max(256, -(-n // self.workers)))
+        starts = range(0, n, chunk)
+        if self.workers > 1 and n > chunk:
+            list(_pool(self.workers).map(work, starts))
         else:
-            parts = [self._nearest(x[s:s + chunk], bound) for s in starts]
-        face = np.concatenate([p[0] for p in parts]) if parts else np.full(len(x), -1)
-        bary = np.concatenate([p[1] for p in parts]) if parts else np.full((len(x), 3), np.nan)
-        return self._finish(points, x, face, bary, vt, ft, weights)
+            for start in starts:
+                work(start)
+        return _like(points, SurfaceProjection(face, bary, closest, distance, uv, wts,
+                                               self.closed))
 
     def _nearest(self, x: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """(face (M,), bary (M, 3)) for one chunk x (M, 3); face -1 beyond ``bound``."""
@@ -253,47 +279,25 @@ class SurfaceIndex:
         bary = np.where(ok[:, None], np.column_stack([1.0 - v - w, v, w]), np.nan)
         return face, bary
 
-    def _finish(self, points, x, face, bary, vt, ft, weights) -> SurfaceProjection:
-        """Closest points, (signed) distances, UV and weights from face (N,), bary (N, 3)."""
-        ok = face >= 0
-        f, b = face[ok], bary[ok]
-        closest = np.full_like(x, np.nan)
-        closest[ok] = np.einsum("nk,nkd->nd", b, self.vertices[self.faces[f]])
-        distance = np.full(len(x), np.inf)
-        diff = x[ok] - closest[ok]
-        distance[ok] = np.sqrt((diff ** 2).sum(1))
-        if self.closed:
-            distance[ok] *= np.where((diff * self._feature_normal(f, b)).sum(1) < 0, -1.0, 1.0)
-        uv = wts = None
-        if vt is not None and ft is not None:
-            uv = _interpolate(_numpy(vt, np.float64), _numpy(ft, np.int64), face, bary)
-        if weights is not None:
-            wts = _interpolate(_numpy(weights, np.float64), self.faces, face, bary)
-        return _like(points, SurfaceProjection(face, bary, closest, distance, uv, wts,
+    def _fill(self, x, face, bary, closest, distance, vt=None, ft=None, uv=None,
+              weights=None, wts=None) -> None:
+        """Write closest points, (signed) distances and, if given, UV (from vt (T, 2), ft)
+        and skinning weights (from weights (V, J)) of face (M,), bary (M, 3) into the
+        output arrays (NaN / inf where face < 0)."""
+        closest_and_distance(x, face, bary, self.vertices, self.faces, self.closed,
+                             self._face_normal, self._edge_normal, self._vertex_normal,
+                             self._orientation, _FEATURE_EPS, closest, distance)
+        if uv is not None:
+            interpolate(vt, ft, face, bary, uv)
+        if wts is not None:
+            interpolate(weights, self.faces, face, bary, wts)
+
+    def _finish(self, points, x, face, bary) -> SurfaceProjection:
+        """The projection of points x (N, 3) from face (N,), bary (N, 3) (no UV/weights)."""
+        closest, distance = np.empty_like(x), np.empty(len(x))
+        self._fill(x, face, bary, closest, distance)
+        return _like(points, SurfaceProjection(face, bary, closest, distance, None, None,
                                                self.closed))
-
-    def _feature_normal(self, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
-        """(M, 3) pseudo-normal of the face, edge or vertex holding each closest point."""
-        zero = bary <= _FEATURE_EPS
-        nz = zero.sum(1)
-        normal = self._face_normal[face].copy()
-        edge = nz == 1  # edge k joins corners k and k+1, i.e. lies opposite corner k+2
-        k = (zero[edge].argmax(1) + 1) % 3
-        normal[edge] = self._edge_normal[face[edge], k]
-        vert = nz >= 2
-        corner = bary[vert].argmax(1)
-        normal[vert] = self._vertex_normal[self.faces[face[vert], corner]]
-        return normal * self._orientation
-
-
-def _interpolate(values: np.ndarray, corners: np.ndarray, face: np.ndarray,
-                 bary: np.ndarray) -> np.ndarray:
-    """(N, C) barycentric blend of ``values`` (T, C) at corners[face] (N, 3); NaN if face<0."""
-    out = np.full((len(face), values.shape[1]), np.nan)
-    ok = face >= 0
-    out[ok] = np.einsum("nk,nkc->nc", bary[ok], values[corners[face[ok]]])
-    return out
-
 
 def _like(points, out: SurfaceProjection) -> SurfaceProjection:
     """Convert the numpy result to torch (points' float dtype and device) if needed."""
@@ -344,4 +348,4 @@ def project_brute_force(points, vertices, faces, chunk: int = 32) -> SurfaceProj
         pick = np.arange(len(xs)) * nf + best
         face[s:s + chunk] = best
         bary[s:s + chunk] = np.column_stack([1 - v[pick] - w[pick], v[pick], w[pick]])
-    return index._finish(points, x, face, bary, None, None, None)
+    return index._finish(points, x, face, bary)

@@ -32,3 +32,18 @@ def splat_balls(p, rho, x0, x1, y0, y1, dirs, width, near, far):
                     near[k] = m - root
                 if m + root > far[k]:
                     far[k] = m + root
+
+
+@njit(cache=True, nogil=True)
+def stamp_distance(cells, offsets, offset_d2, dist2):
+    """Bounded Euclidean distance transform: for every voxel within the given offsets
+    (O, 3) of a marked voxel cells (U, 3), min-reduce the offset's squared length
+    offset_d2 (O,) (voxel units) into dist2 (X, Y, Z) (inf elsewhere: farther than the
+    longest offset). Equals scipy's distance_transform_edt² up to that radius."""
+    nx, ny, nz = dist2.shape
+    for u in range(cells.shape[0]):
+        ci, cj, ck = cells[u, 0], cells[u, 1], cells[u, 2]
+        for o in range(offsets.shape[0]):
+            i, j, k = ci + offsets[o, 0], cj + offsets[o, 1], ck + offsets[o, 2]
+            if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and offset_d2[o] < dist2[i, j, k]:
+                dist2[i, j, k] = offset_d2[o]

@@ -32,9 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy import ndimage
 
-from texvocab.render._splat_jit import splat_balls
+from texvocab.render._splat_jit import splat_balls, stamp_distance
 from texvocab.surface import SurfaceIndex
 
 
@@ -114,10 +113,13 @@ class ShellGeometry:
         slack = h * np.sqrt(3) / 2
         origin = v.min(0) - reach - slack - r0 - 2 * h
         shape = np.ceil((v.max(0) + reach + slack + r0 + 2 * h - origin) / h).astype(np.int64)
-        surface = np.ones(tuple(shape), bool)
         ijk = np.floor((samples - origin) / h).astype(np.int64)
-        surface[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = False
-        near_voxel = ndimage.distance_transform_edt(surface) * h  # d(c) within ±(slack + r0)
+        cells = np.unique((ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2])
+        cells = np.column_stack(np.unravel_index(cells, tuple(shape)))
+        # distance from each voxel centre to the nearest voxel holding a sample, up to
+        # the farthest one used below: d(c) lies within ±(slack + r0) of it
+        near_voxel = np.sqrt(_bounded_edt2(cells, tuple(shape),
+                                           (reach + slack + r0) / h)) * h
         occupied = near_voxel <= reach - slack
         unsure = np.argwhere(~occupied & (near_voxel <= reach + slack + r0))
         if exact and len(unsure):
@@ -186,6 +188,19 @@ class ShellGeometry:
         near, far = torch.from_numpy(near), torch.from_numpy(far)
         hit, n, f = _finish(near, far)
         return ShellBounds(hit.view(H, W), n.view(H, W), f.view(H, W))
+
+
+def _bounded_edt2(cells: np.ndarray, shape: tuple[int, int, int], radius: float) -> np.ndarray:
+    """(X, Y, Z) squared distance (in voxels) from each voxel centre to the nearest of
+    ``cells`` (U, 3), exact up to ``radius`` voxels and inf beyond."""
+    r = int(np.floor(radius + 1e-9))
+    grid = np.stack(np.meshgrid(*(np.arange(-r, r + 1),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    d2 = (grid ** 2).sum(1)
+    keep = d2 <= radius * radius * (1 + 1e-9)
+    dist2 = np.full(shape, np.inf)
+    stamp_distance(np.ascontiguousarray(cells), np.ascontiguousarray(grid[keep]),
+                   d2[keep].astype(np.float64), dist2)
+    return dist2
 
 
 def shell_bounds(vertices, faces, camera, width: float = 0.04) -> ShellBounds:
