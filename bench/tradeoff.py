@@ -90,12 +90,14 @@ def pareto(rows: list[dict]) -> set[str]:
 def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
     """Two panels over seconds per frame: PSNR against the ground truth (what a user sees;
     the model's error dominates) and against the 64+32 reference render (the renderer's
-    own error). Presets are stars; the Pareto front (vs truth) is dashed; only the front,
-    the presets and the image-scale points are labelled, to keep the plot readable."""
+    own error). Presets are stars; the Pareto front (vs truth) is dashed; the dotted line
+    is the 1 s frame budget. Only the presets, the default, the reference, the image-scale
+    points (and on the right the coarse-sample sweep) are labelled, to keep it readable."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker  # noqa: F401  (matplotlib.ticker.NullFormatter below)
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), dpi=110)
     for ax, key, ylabel in ((axes[0], "psnr_gt", "PSNR vs ground truth, mask bbox (dB)"),
@@ -107,7 +109,9 @@ def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
                        marker="*" if preset else "o", zorder=3 if preset else 2,
                        color="crimson" if preset else
                        ("tab:blue" if r["label"] in front else "grey"))
-            if preset or r["label"] in front or "scale" in r["label"] or key == "psnr_ref":
+            label = r["label"]
+            if preset or "scale" in label or label.startswith(("reference", "default")) or (
+                    key == "psnr_ref" and label.startswith("coarse")):
                 ax.annotate(r["label"], (r["seconds"], r[key]), fontsize=7, xytext=(4, 3),
                             textcoords="offset points", rotation=20)
         if key == "psnr_gt":
@@ -115,7 +119,12 @@ def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "--", color="tab:blue", lw=1,
                     label="Pareto front")
             ax.legend(loc="lower right", fontsize=8)
+        ax.axvline(1.0, color="black", lw=0.8, ls=":", zorder=1)  # issue 5's frame budget
         ax.set_xscale("log")
+        ticks = [t for t in (0.25, 0.5, 1, 2, 4, 8, 16) if min(r["seconds"] for r in shown) / 1.3
+                 <= t <= max(r["seconds"] for r in shown) * 1.3]
+        ax.set_xticks(ticks, [f"{t:g} s" for t in ticks])
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("seconds per 256² frame (median, 2 CPU cores)")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)

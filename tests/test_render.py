@@ -36,6 +36,7 @@ from texvocab.render import (
 )
 from texvocab.render.analytic import MeshSDFField, SphereField
 from texvocab.render.samples import midpoint_intervals, stratified_positions
+from texvocab.render.shell import _bounded_edt2
 from texvocab.surface import SurfaceIndex
 
 DELTA = 0.04
@@ -189,6 +190,24 @@ def test_shell_bounds_keep_every_ray_that_comes_within_delta(body):
 
 
 # --- stability ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("radius", [0.0, 1.0, 2.5, 4.3])
+def test_bounded_distance_transform_equals_scipy_within_its_radius(radius):
+    """The shell grid's distance transform (a compiled stamp of offsets around the
+    voxels that hold surface samples) is scipy's exact EDT up to ``radius`` voxels,
+    including at the grid's faces, and inf beyond."""
+    rng = np.random.default_rng(int(radius * 10))
+    shape = (23, 31, 17)
+    cells = np.unique(rng.integers(0, 10**6, (150, 3)) % np.array(shape), axis=0)
+    cells = np.concatenate([cells, [[0, 0, 0], [22, 30, 16]]])
+    free = np.ones(shape, bool)
+    free[tuple(cells.T)] = False
+    ref = ndi.distance_transform_edt(free)
+    got = np.sqrt(_bounded_edt2(cells, shape, radius))
+    inside = ref <= radius
+    np.testing.assert_array_equal(got[inside], ref[inside])
+    assert np.isinf(got[~inside]).all()
+
 
 def test_rays_that_miss_everything_cost_nothing(body):
     bg = (0.2, 0.4, 0.6)
