@@ -65,6 +65,12 @@ class SurfaceProjection:
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 
 
+def _default_workers() -> int:
+    """Query threads: torch's intra-op thread count, capped by the usable CPUs."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(torch.get_num_threads(), cpus or 1))
+
+
 def _pool(workers: int) -> ThreadPoolExecutor:
     """A process-wide thread pool of ``workers`` threads (made once: starting threads per
     query cost more than small queries)."""
@@ -172,7 +178,8 @@ class SurfaceIndex:
 
     Args:
         vertices: (V, 3) posed vertices (metres). faces: (F, 3) vertex indices.
-        workers: threads for queries (default: the CPUs this process may use).
+        workers: threads for queries (default: torch's intra-op thread count, at most the
+            CPUs this process may use, so a caller that limits torch limits this too).
     """
 
     def __init__(self, vertices, faces, workers: int | None = None):
@@ -180,8 +187,7 @@ class SurfaceIndex:
         self.faces = _numpy(faces, np.int64).reshape(-1, 3)
         if not len(self.faces):
             raise ValueError("SurfaceIndex needs at least one face")
-        self.workers = workers or (len(os.sched_getaffinity(0))
-                                   if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+        self.workers = workers  # None: decided per query (_default_workers)
         tri = self.vertices[self.faces]  # (F, 3, 3)
         self._slot_face = _slot_layout(tri.mean(1))
         slot_tri = tri[np.maximum(self._slot_face, 0)]
@@ -258,10 +264,11 @@ class SurfaceIndex:
                        None if uv is None else uv[sl], weights,
                        None if wts is None else wts[sl])
 
-        chunk = min(_CHUNK, max(256, -(-n // self.workers)))
+        workers = self.workers or _default_workers()
+        chunk = min(_CHUNK, max(256, -(-n // workers)))
         starts = range(0, n, chunk)
-        if self.workers > 1 and n > chunk:
-            list(_pool(self.workers).map(work, starts))
+        if workers > 1 and n > chunk:
+            list(_pool(workers).map(work, starts))
         else:
             for start in starts:
                 work(start)
