@@ -194,7 +194,6 @@ class SurfaceIndex:
         self._table = _face_table(*(slot_tri[:, k] for k in range(3)))
         corners = tri.reshape(-1, 3)
         self._center = (corners.min(0) + corners.max(0)) / 2
-        self._radius = float(np.abs(corners - self._center).max())
         empty = (self._slot_face < 0)[:, None]
         levels = self._build_boxes(np.where(empty, np.inf, slot_tri.min(1)),
                                    np.where(empty, -np.inf, slot_tri.max(1)))
