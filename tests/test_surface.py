@@ -113,6 +113,23 @@ def test_no_point_of_the_triangle_is_closer(coords):
     assert best <= np.linalg.norm(grid - p, axis=1).min() + 1e-9
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.floats(-2, 2), min_size=12, max_size=12),
+       st.sampled_from([1.0, 1e-7, 0.0]))
+def test_compiled_search_equals_the_numpy_triangle_test(coords, flatness):
+    """The index's compiled region test (nearest_faces) against the numpy one
+    (closest_on_triangles) on random triangles, thin (corner c pulled towards the line
+    ab by ``flatness``) and exactly collinear ones included."""
+    a, b, c, p = np.array(coords).reshape(4, 3)
+    c = a + (b - a) * 0.3 + (c - a - (b - a) * 0.3) * flatness
+    out = project_to_surface(p[None], np.stack([a, b, c]), np.array([[0, 1, 2]]))
+    bary = closest_on_triangles(p[None], a, b, c)[0]
+    expect = np.linalg.norm(p - bary @ np.stack([a, b, c]))
+    assert out.face[0] == 0
+    assert abs(out.distance[0] - expect) <= 1e-12 * (1 + expect)
+    np.testing.assert_allclose(out.closest[0], bary @ np.stack([a, b, c]), atol=1e-9)
+
+
 @pytest.mark.parametrize("point, closest, bary", [
     ((-1.0, -1.0, 1.0), (0, 0, 0), (1, 0, 0)),  # vertex regions
     ((2.0, -0.5, 0.0), (1, 0, 0), (0, 1, 0)),
