@@ -192,8 +192,6 @@ class SurfaceIndex:
         self._slot_face = _slot_layout(tri.mean(1))
         slot_tri = tri[np.maximum(self._slot_face, 0)]
         self._table = _face_table(*(slot_tri[:, k] for k in range(3)))
-        corners = tri.reshape(-1, 3)
-        self._center = (corners.min(0) + corners.max(0)) / 2
         empty = (self._slot_face < 0)[:, None]
         levels = self._build_boxes(np.where(empty, np.inf, slot_tri.min(1)),
                                    np.where(empty, -np.inf, slot_tri.max(1)))
@@ -234,7 +232,8 @@ class SurfaceIndex:
         directed_key = directed[:, 0] * len(self.vertices) + directed[:, 1]
         self.closed = bool((count == 2).all()) and \
             len(np.unique(directed_key)) == len(directed_key)
-        t = tri - self._center
+        corners = tri.reshape(-1, 3)
+        t = tri - (corners.min(0) + corners.max(0)) / 2  # centred: a better-rounded volume
         volume = (t[:, 0] * np.cross(t[:, 1], t[:, 2])).sum() / 6.0
         self._orientation = -1.0 if volume < 0 else 1.0
 
