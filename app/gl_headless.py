@@ -5,7 +5,7 @@ object with ``load_opengl_function(name) -> address``; :class:`OSMesaLoader` is 
 object over libOSMesa through ctypes. The context draws into a small client-memory
 buffer; all real drawing goes into framebuffer objects, so its size does not matter.
 
-One GL platform per process (shared/notes/gl-headless.md): this coexists with PyOpenGL's
+One GL platform per process (see texvocab.io.gl_platform): this coexists with PyOpenGL's
 ``osmesa`` platform (pyrender), which uses the same libOSMesa; it must not be mixed with
 EGL or GLX contexts. pyrender makes its own context current when it renders, so code
 that interleaves the two calls :func:`make_current` (or ``with ctx:``)

@@ -1,15 +1,15 @@
-"""GLSL sources live in the repository's ``shaders/`` folder; this finds and compiles them."""
+"""GLSL sources live in the repository's ``shaders/`` folder, installed as the package
+``app.shaders`` (a package-dir mapping in pyproject.toml); this finds and compiles them."""
 from __future__ import annotations
 
-from pathlib import Path
+from importlib import resources
 
 import moderngl
 import numpy as np
 
-import app
 from texvocab.errors import TexvocabError
 
-SHADER_DIR = Path(app.__file__).resolve().parent.parent / "shaders"
+SHADER_DIR = resources.files("app.shaders")
 
 
 def shader_source(name: str) -> str:

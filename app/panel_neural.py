@@ -13,7 +13,7 @@ import numpy as np
 from imgui_bundle import imgui
 
 from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
-from texvocab.settings import PRESETS
+from texvocab.pipeline import RENDER_PRESETS as PRESETS
 
 
 class NeuralView:
@@ -24,7 +24,7 @@ class NeuralView:
         self.ctx = ctx
         self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice)
         self.settings = settings  # the checkpoint's Settings (for the presets)
-        self.preset = "checkpoint"  # or a texvocab.settings.PRESETS name
+        self.preset = "checkpoint"  # or a texvocab.pipeline.settings.PRESETS name
         self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
         self.image_scale = 1.0
         self.live = True
@@ -56,8 +56,7 @@ class NeuralView:
     def set_preset(self, name: str) -> None:
         """Render with a speed/accuracy preset's render knobs (bench/tradeoff.py), or with
         the checkpoint's own settings ("checkpoint")."""
-        from texvocab.settings import render_overrides
-        from texvocab.train import march_settings
+        from texvocab.pipeline import march_settings, render_overrides
 
         self.preset = name
         if name == "checkpoint" or self.settings is None:

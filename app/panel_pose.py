@@ -14,10 +14,9 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import imgui
 
-from texvocab.body.limits import JOINT_LIMITS_DEG
-from texvocab.body.parts import BODY_PARTS, JOINT_NAMES
-from texvocab.body.poses import PRESETS
 from texvocab.errors import TexvocabError
+from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, JOINT_NAMES
+from texvocab.pipeline import POSE_PRESETS as PRESETS
 
 AXES = ("x", "y", "z")
 
@@ -32,7 +31,7 @@ class PoseSequence:
 
     @classmethod
     def load(cls, path: str) -> PoseSequence:
-        from texvocab.capture.synth import load_pose_file
+        from texvocab.pipeline import load_pose_file
 
         poses, trans = load_pose_file(path)
         if len(poses) == 0:

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from texvocab.body.lbs import forward_kinematics, pose_feature
-from texvocab.rotations import rotvec_to_rotmat
+from texvocab.pipeline import corrective_pose_feature as pose_feature
+from texvocab.pipeline import forward_kinematics, rotvec_to_rotmat
 
 
 class BodyPoser:

@@ -3,7 +3,7 @@ offscreen framebuffer of any moderngl context (the window's, EGL or OSMesa); thi
 never creates a context.
 
 Colour modes (first that applies): ``novelty`` (each vertex coloured by the distance of
-its vocabulary part(s) to the nearest key, Eq. 2, blended by skinning attention; heat
+its vocabulary part(s) to the nearest key, Eq. 4, blended by skinning attention; heat
 scale :func:`app.colors.heat_color` over [0, ``novelty_scale``]), ``part_colors`` (the
 five body parts of Table 1), ``textured`` (the blended vocabulary texture of the pose;
 a neutral grey checker without a vocabulary). ``wireframe`` draws triangle edges over
@@ -20,8 +20,7 @@ from scipy import sparse
 from app.camera import gl_mvp
 from app.colors import PART_COLORS, heat_color
 from app.glsl import build_program, set_uniform
-from texvocab.body.parts import BODY_PARTS, part_attention
-from texvocab.capture import Camera
+from texvocab.pipeline import BODY_PARTS, Camera, part_attention
 
 
 @dataclass
@@ -34,7 +33,7 @@ class SceneOptions:
     wireframe: bool = False
     skeleton: bool = False
     lighting: bool = True
-    novelty_scale: float = 0.1  # part distance (Eq. 2) drawn fully red
+    novelty_scale: float = 0.1  # part distance (Eq. 4) drawn fully red
     background: tuple[float, float, float] = (0.13, 0.14, 0.16)
     wire_color: tuple[float, float, float] = (0.05, 0.05, 0.05)
     bone_color: tuple[float, float, float] = (1.0, 0.85, 0.1)
@@ -166,7 +165,7 @@ class SceneRenderer:
         self._texture_key = key
         if tex is None:
             return False
-        # row 0 of a texture image is v = 1 (texvocab.uv); GL's first row is t = 0, so the
+        # row 0 of a texture image is v = 1 (texvocab.geometry.uv); GL's first row is t = 0, so the
         # image goes up flipped and the shader samples at the OBJ uv unchanged
         data = (np.clip(np.flipud(tex), 0, 1) * 255 + 0.5).astype(np.uint8)
         h, w = data.shape[:2]

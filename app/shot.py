@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.arguments import parse_size
 from app.camera import DEFAULT_TARGET, OrbitCamera
 from app.scene import SceneOptions, SceneRenderer, as_camera
 from app.state import ViewerData, ViewerState, load_viewer_data
@@ -16,23 +17,10 @@ from texvocab.errors import TexvocabError
 DEFAULT_SIZE = (640, 400)
 
 
-def parse_size(spec: str) -> tuple[int, int]:
-    """'WxH' -> (W, H), both in [16, 8192]."""
-    w, sep, h = spec.lower().partition("x")
-    try:
-        size = (int(w), int(h))
-    except ValueError:
-        size = None
-    if not sep or size is None or not all(16 <= v <= 8192 for v in size):
-        raise TexvocabError(f"--size {spec!r}: expected WIDTHxHEIGHT, e.g. 1280x800 "
-                            "(16..8192 pixels each)")
-    return size
-
-
 def apply_pose(state: ViewerState, spec: str) -> None:
     """Set ``state`` from a preset name, a capture frame index (``N`` or ``frame:N``), or
     ``FILE.npz[:N]`` (poses (T, 24, 3) and optional trans (T, 3))."""
-    from texvocab.body.poses import PRESETS
+    from texvocab.pipeline import POSE_PRESETS as PRESETS
 
     cap = state.data.capture
     if spec in PRESETS:
@@ -49,7 +37,7 @@ def apply_pose(state: ViewerState, spec: str) -> None:
         return
     path, _, idx = spec.rpartition(":") if ":" in spec and not Path(spec).exists() else (spec, "", "")
     if Path(path).suffix == ".npz":
-        from texvocab.capture.synth import load_pose_file
+        from texvocab.pipeline import load_pose_file
 
         poses, trans = load_pose_file(path)
         if not idx.isdigit() and idx:
@@ -99,9 +87,7 @@ def render_neural(data: ViewerData, state: ViewerState, camera, background) -> n
     OpenCV Camera), with the checkpoint's march settings."""
     import torch
 
-    from texvocab.imageio import to_uint8
-    from texvocab.render import ShellGeometry, render_image
-    from texvocab.train import march_settings
+    from texvocab.pipeline import ShellGeometry, march_settings, render_image, to_uint8
 
     model, march = data.model, march_settings(data.settings)
     with torch.no_grad():
@@ -144,7 +130,7 @@ def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int
 
 def write_shot(out: str | Path, shot: Shot) -> list[Path]:
     """view3d.png, neural.png (if any) and shot.png (side by side, labelled) under ``out``."""
-    from texvocab.imageio import contact_sheet, save_png
+    from texvocab.pipeline import contact_sheet, save_png
 
     out = Path(out)
     paths = [save_png(out / "view3d.png", shot.view3d)]
@@ -199,7 +185,7 @@ def demo_shots(source: str | Path, out_dir: str | Path, poses: tuple[str, ...] |
     all from the capture's held-out ``view``. Writes one shot folder per pose and a
     contact sheet ``viewer_shots.png`` under ``out_dir``; returns the sheet's path."""
     from app.gl_headless import create_headless_context, make_current, release
-    from texvocab.imageio import contact_sheet, save_png
+    from texvocab.pipeline import contact_sheet, save_png
 
     data = load_viewer_data(str(source), smpl=smpl)
     cap = data.capture

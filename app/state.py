@@ -8,10 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.body.limits import JOINT_LIMITS_DEG
-from texvocab.body.parts import BODY_PARTS
 from texvocab.errors import TexvocabError
-from texvocab.settings import Settings
+from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, Settings
 
 
 @dataclass
@@ -20,11 +18,11 @@ class ViewerData:
 
     Attributes:
         body: :class:`~texvocab.body.BodyModel`.
-        vocab: :class:`~texvocab.vocab.Vocabulary` or None (no capture given).
+        vocab: :class:`~texvocab.method.vocab.Vocabulary` or None (no capture given).
         textures: (T, S, S, 3) float32 texture maps of the training frames, or None.
-        model: the trained :class:`~texvocab.field.AvatarField` or None (no checkpoint).
+        model: the trained :class:`~texvocab.method.field.AvatarField` or None (no checkpoint).
         capture: :class:`~texvocab.capture.Capture` or None.
-        settings: :class:`~texvocab.settings.Settings` (the checkpoint's, else defaults).
+        settings: :class:`~texvocab.pipeline.settings.Settings` (the checkpoint's, else defaults).
         source: what was loaded, for the window title and messages.
     """
 
@@ -38,10 +36,7 @@ class ViewerData:
 
 
 def _capture_data(path: Path, smpl: str | None) -> ViewerData:
-    from texvocab.body import load_body
-    from texvocab.capture import open as open_capture
-    from texvocab.train import load_textures
-    from texvocab.vocab import Vocabulary
+    from texvocab.pipeline import Vocabulary, load_body, load_textures, open_capture
 
     cap = open_capture(path, body=load_body(smpl))
     if cap.num_train < 1:
@@ -54,21 +49,15 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
 
 
 def _checkpoint_data(path: Path, smpl: str | None) -> ViewerData:
-    from texvocab.body import load_body
-    from texvocab.capture import open as open_capture
-    from texvocab.checkpoint import load_checkpoint
-    from texvocab.cli_method import load_model
+    from texvocab.pipeline import checkpoint_capture_path, load_avatar, load_body, open_capture
 
-    ck = load_checkpoint(path)
-    cap_path = Path(str(ck.get("capture", "")))
-    if not str(ck.get("capture", "")) or not cap_path.is_dir():
-        raise TexvocabError(f"{path}: its capture folder {str(cap_path)!r} is missing; the "
-                            "viewer needs the capture the checkpoint was trained on")
-    cap = open_capture(cap_path, body=load_body(smpl))
-    model, settings, ck = load_model(str(path), cap)
+    cap_path = checkpoint_capture_path(path)
+    avatar = load_avatar(path, open_capture(cap_path, body=load_body(smpl)))
+    model = avatar.model
     textures = model.pose_feature.textures.permute(0, 2, 3, 1).numpy()
-    return ViewerData(cap.body, model.pose_feature.vocab, textures, model, cap, settings,
-                      f"checkpoint {path} (step {int(ck['step'])}, capture {cap_path})")
+    return ViewerData(avatar.capture.body, model.pose_feature.vocab, textures, model,
+                      avatar.capture, avatar.settings,
+                      f"checkpoint {path} (step {avatar.step}, capture {cap_path})")
 
 
 def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
@@ -82,7 +71,7 @@ def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
         smpl: the user's SMPL model file/folder; default the embedded default body.
     """
     if source is None:
-        from texvocab.body import load_body
+        from texvocab.pipeline import load_body
 
         body = load_body(smpl)
         return ViewerData(body, settings=Settings(), source=body.name)
@@ -169,7 +158,8 @@ class ViewerState:
     def apply_preset(self, name: str) -> bool:
         """A named preset (texvocab.body.poses): joints 1..23 from the preset, the root
         orientation kept, translation = rest translation + the preset's offset."""
-        from texvocab.body.poses import PRESETS, preset
+        from texvocab.pipeline import POSE_PRESETS as PRESETS
+        from texvocab.pipeline import pose_preset as preset
 
         if name not in PRESETS:
             raise TexvocabError(f"unknown pose preset {name!r}; expected one of {sorted(PRESETS)}")
@@ -180,7 +170,7 @@ class ViewerState:
 
     def key_pose(self, part: str | int, key_index: int) -> tuple[tuple[int, ...], np.ndarray]:
         """(joints of the vocabulary part, their (J_p, 3) axis-angle in key ``key_index``)."""
-        from texvocab.rotations import quat_to_rotvec
+        from texvocab.pipeline import quat_to_rotvec
 
         vocab = self._require_vocab()
         p = vocab.part_names.index(part) if isinstance(part, str) else int(part)
@@ -215,7 +205,7 @@ class ViewerState:
         return self.data.vocab
 
     def query(self) -> list:
-        """Per vocabulary part a :class:`~texvocab.vocab.PartQuery` (``key_ids``,
+        """Per vocabulary part a :class:`~texvocab.method.vocab.PartQuery` (``key_ids``,
         ``frames``, ``weights`` (K,) each, ``distances`` (K,), ``novelty`` = distance to
         the nearest key); [] without a vocabulary."""
         if self.data.vocab is None:
@@ -223,17 +213,17 @@ class ViewerState:
         return self._cached("query", lambda: self.data.vocab.query(self.pose))
 
     def novelty(self) -> np.ndarray:
-        """(P,) distance of each vocabulary part to its nearest key (Eq. 2); (0,) without
+        """(P,) distance of each vocabulary part to its nearest key (Eq. 4); (0,) without
         a vocabulary."""
         return np.array([q.novelty for q in self.query()], dtype=np.float64)
 
     def blended_texture(self) -> np.ndarray | None:
-        """(S, S, 3) float32 texture of the current pose (texvocab.vocab_texture), or None
+        """(S, S, 3) float32 texture of the current pose (texvocab.method.vocab_texture), or None
         without a vocabulary and texture maps."""
         if self.data.vocab is None or self.data.textures is None:
             return None
         if self._vocab_texture is None:
-            from texvocab.vocab_texture import VocabTexture
+            from texvocab.pipeline import VocabTexture
 
             self._vocab_texture = VocabTexture(self.data.body, self.data.vocab, self.data.textures)
         return self._cached("texture", lambda: self._vocab_texture.blend(self.pose))

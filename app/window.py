@@ -4,7 +4,7 @@ in this process): Pose (left), 3D view and Neural render (centre), Vocabulary (r
 
 ``python -m app.window [SOURCE] [--size WxH]`` runs the same window; hidden flags
 ``--script NAME --report FILE.json [--screenshot FILE.png]`` drive it with the ImGui
-Test Engine or a per-frame driver (app/panel_scripts.py) for tests and benchmarks.
+Test Engine or a per-frame driver (app/drivers.py) for tests and benchmarks.
 """
 from __future__ import annotations
 
@@ -16,12 +16,8 @@ from collections import deque
 
 import numpy as np
 
+from app.arguments import NEURAL_NICE, WINDOW_MIN, add_view_arguments, parse_size
 from texvocab.errors import TexvocabError
-
-#: niceness added to the neural render thread: the UI, llvmpipe and the X server come
-#: first. bench/viewer_ui.py on a busy 2-core box: UI frame while rendering / idle 1.24-1.53
-#: at 0, 1.07-1.08 at 10; but other busy processes then also win over the render.
-NEURAL_NICE = 10
 
 
 def _choose_gl_platform() -> None:
@@ -82,7 +78,7 @@ class Viewer:
         self.scene = SceneRenderer(self.ctx, self.data)
         self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
         if self.data.model is not None:
-            from texvocab.train import march_settings
+            from texvocab.pipeline import march_settings
 
             self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
                                      self.neural_threads, self.neural_nice,
@@ -235,7 +231,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
                neural_nice: int = NEURAL_NICE) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
-    0). ``script``: a driver from app/panel_scripts.py (tests, benchmarks) writing a JSON
+    0). ``script``: a driver from app/drivers.py (tests, benchmarks) writing a JSON
     ``report`` and the last frame to ``screenshot``."""
     require_display()
     _choose_gl_platform()
@@ -258,7 +254,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     rp = _runner_params(viewer, f"texvocab - {data.source}")
     driver = None
     if script is not None:
-        from app.panel_scripts import make_driver
+        from app.drivers import make_driver
 
         driver = make_driver(script, viewer, rp)
     immapp.run(rp)
@@ -268,35 +264,19 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     return 0
 
 
-def _parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise TexvocabError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 1280x800") from None
-    if w < 320 or h < 240:
-        raise TexvocabError(f"--size {text!r}: the window needs at least 320x240")
-    return w, h
+def run_from_args(args: argparse.Namespace) -> int:
+    """Run the viewer from :func:`app.arguments.add_view_arguments`' namespace."""
+    return run_viewer(args.source, args.smpl, parse_size(args.size, WINDOW_MIN), args.script,
+                      args.report, args.screenshot, args.neural_resolution,
+                      args.neural_threads, args.poses, args.neural_nice)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m app.window", description=__doc__.split("\n")[0])
-    p.add_argument("source", nargs="?", default=None, help="checkpoint .pt or capture folder")
-    p.add_argument("--smpl", default=None, help="SMPL model file or folder")
-    p.add_argument("--size", default="1280x800", help="window size WxH (default 1280x800)")
-    p.add_argument("--poses", default=None,
-                   help="a pose sequence .npz ('poses' (T, 24, 3), optional 'trans') for the "
-                        "Pose panel's timeline")
-    p.add_argument("--script", default=None, help=argparse.SUPPRESS)
-    p.add_argument("--report", default=None, help=argparse.SUPPRESS)
-    p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)
-    p.add_argument("--neural-resolution", type=int, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--neural-threads", type=int, default=1, help=argparse.SUPPRESS)
-    p.add_argument("--neural-nice", type=int, default=NEURAL_NICE, help=argparse.SUPPRESS)
+    add_view_arguments(p)
     args = p.parse_args(argv)
     try:
-        return run_viewer(args.source, args.smpl, _parse_size(args.size), args.script,
-                          args.report, args.screenshot, args.neural_resolution,
-                          args.neural_threads, args.poses, args.neural_nice)
+        return run_from_args(args)
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -55,7 +55,7 @@ class RenderFrame:
 def pad_single_point_calls(field):
     """The field with calls of exactly one point evaluated as two (the point twice).
 
-    texvocab.feature.PoseFeature.forward indexes numpy arrays with a torch bool mask; a
+    texvocab.method.feature.PoseFeature.forward indexes numpy arrays with a torch bool mask; a
     one-element mask is read as the integer index 1 there (IndexError). The marcher
     makes such calls when a ray chunk leaves a single sample to evaluate (small images).
     """
@@ -69,10 +69,10 @@ def pad_single_point_calls(field):
 
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
-    once, then the levels (as :func:`texvocab.evaluate.render_view` does for one)."""
+    once, then the levels (as :func:`texvocab.pipeline.evaluate.render_view` does for one)."""
     import torch
 
-    from texvocab.render import ShellGeometry, progressive_render
+    from texvocab.pipeline import ShellGeometry, progressive_render
 
     def render(job: RenderJob, cancelled: Callable[[], bool]):
         m = job.march or march

@@ -1,8 +1,8 @@
-"""Closest point on the posed body (Sec. 3.4, Eq. 7): texvocab.surface vs trimesh.
+"""Closest point on the posed body (Sec. 3.4, Eq. 7): texvocab.geometry.surface vs trimesh.
 
 Poses the default body, samples points in a thin shell around it (the ray marcher's use)
 and far from it, and times ``trimesh.proximity.closest_point`` against
-:class:`texvocab.surface.SurfaceIndex` (its build time reported separately and included in
+:class:`texvocab.geometry.surface.SurfaceIndex` (its build time reported separately and included in
 the total). Prints a Markdown table; timings are the best of ``--repeats`` runs.
 
     .venv/bin/python bench/projection.py [--points 100000] [--far 10000] [--repeats 3]
@@ -22,7 +22,7 @@ import trimesh
 
 from texvocab.body import default_body
 from texvocab.body.poses import preset
-from texvocab.surface import SurfaceIndex, project_brute_force
+from texvocab.geometry.surface import SurfaceIndex, project_brute_force
 
 
 def posed_body(pose_name: str) -> tuple[np.ndarray, np.ndarray]:

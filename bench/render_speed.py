@@ -68,17 +68,15 @@ def small_capture(root: Path) -> Path:
 def load(args):
     """(model, settings, capture) from CKPT or an untrained model on a capture."""
     from texvocab.capture import open as open_capture
-    from texvocab.settings import Settings
-    from texvocab.train import build_model, load_textures
+    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.train import build_model, load_textures
 
     if args.checkpoint:
-        from texvocab.checkpoint import load_checkpoint
-        from texvocab.cli_method import load_model
+        from texvocab.pipeline import checkpoint_capture_path, load_avatar
 
-        root = args.capture or load_checkpoint(args.checkpoint)["capture"]
-        cap = open_capture(root)
-        model, settings, _ = load_model(args.checkpoint, cap, progress=False)
-        return model, settings, cap, f"checkpoint {args.checkpoint}"
+        root = args.capture or checkpoint_capture_path(args.checkpoint)
+        av = load_avatar(args.checkpoint, open_capture(root), progress=False)
+        return av.model, av.settings, av.capture, f"checkpoint {args.checkpoint}"
     root = Path(args.capture) if args.capture else small_capture(Path(tempfile.mkdtemp()))
     cap = open_capture(root)
     settings = Settings(eval_views=[v for v in (0, 1) if v < cap.num_views])
@@ -189,7 +187,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(args.threads)
 
     from texvocab.metrics import evaluate_pair
-    from texvocab.train import march_settings
+    from texvocab.pipeline.settings import march_settings
 
     model, settings, cap, what = load(args)
     base = march_settings(settings)

@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from texvocab.evaluate import render_view
-from texvocab.imageio import atomic_write_bytes
+from texvocab.io.images import atomic_write_bytes
 from texvocab.metrics import metrics_in_bbox, psnr
+from texvocab.pipeline.evaluate import render_view
+from texvocab.pipeline.settings import PRESETS, RENDER_KNOBS
 from texvocab.render import MarchSettings
-from texvocab.settings import PRESETS, RENDER_KNOBS
 
 REFERENCE = {"coarse_samples": 64, "fine_samples": 32, "early_stop_eps": 0.0}
 
@@ -157,9 +157,9 @@ def size_growth(model, item, base: MarchSettings) -> list[str]:
 
 def data_growth(capture, model) -> list[str]:
     """Costs that grow with the training set and the vocabulary."""
-    from texvocab.feature import PoseFeature
-    from texvocab.texmap import build_texture_map
-    from texvocab.vocab import Vocabulary
+    from texvocab.method.feature import PoseFeature
+    from texvocab.method.texmap import build_texture_map
+    from texvocab.method.vocab import Vocabulary
 
     poses = capture.poses[: capture.num_train]
     t0 = time.perf_counter()
@@ -199,19 +199,16 @@ def data_growth(capture, model) -> list[str]:
 
 def load_or_train(args):
     from texvocab.capture import open as open_capture
-    from texvocab.cli_method import load_model
+    from texvocab.pipeline import checkpoint_capture_path, load_avatar
 
     ckpt = Path(args.checkpoint) if args.checkpoint else Path("out/demo/avatar/checkpoint.pt")
     if not ckpt.is_file():
-        from texvocab.demo import demo_avatar, demo_capture
+        from texvocab.cli.demo import demo_avatar, demo_capture
 
         root, _ = demo_capture("out/demo")
         ckpt, _ = demo_avatar("out/demo", root, args.train_minutes)
-    from texvocab.checkpoint import load_checkpoint
-
-    cap = open_capture(args.capture or load_checkpoint(ckpt)["capture"])
-    model, settings, ck = load_model(str(ckpt), cap)
-    return ckpt, cap, model, settings, ck
+    av = load_avatar(ckpt, open_capture(args.capture or checkpoint_capture_path(ckpt)))
+    return ckpt, av.capture, av.model, av.settings, av.checkpoint
 
 
 def main(argv=None) -> int:
@@ -230,8 +227,8 @@ def main(argv=None) -> int:
         return 0
     torch.set_num_threads(2)
 
-    from texvocab.evaluate import build_sets
-    from texvocab.train import march_settings
+    from texvocab.pipeline.evaluate import build_sets
+    from texvocab.pipeline.settings import march_settings
 
     ckpt, cap, model, settings, ck = load_or_train(args)
     sets = build_sets(cap, settings, args.per_set, generated=("kick", "squat"))

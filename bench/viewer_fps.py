@@ -43,7 +43,7 @@ MODES = {
 def stand_in_data() -> ViewerData:
     """Default body, a vocabulary of 20 random poses, striped procedural texture maps."""
     from texvocab.body import default_body
-    from texvocab.vocab import Vocabulary
+    from texvocab.method.vocab import Vocabulary
 
     rng = np.random.default_rng(0)
     poses = rng.normal(0, 0.2, (20, 24, 3))

@@ -2,7 +2,7 @@
 llvmpipe) while idle and while the progressive neural render runs in its worker thread.
 
 Runs ``python -m app.window CHECKPOINT --script bench:SECONDS:RES`` under xvfb-run (the
-per-frame driver in app/panel_scripts.py: idling off, idle phase, then a phase in which
+per-frame driver in app/drivers.py: idling off, idle phase, then a phase in which
 the left shoulder moves a little whenever a render finishes, so one is always running;
 only frames while the worker is busy count there), then a phase in which the shoulder
 moves every frame as under a dragged slider. Prints a Markdown table of the wall

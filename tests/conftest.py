@@ -46,3 +46,28 @@ def toy_smpl_arrays(seed: int = 0, num_betas: int = 10) -> dict:
 @pytest.fixture
 def toy_arrays():
     return toy_smpl_arrays()
+
+
+# --- torch caches: pretrained weights present or absent, without touching the user's ---
+
+def torch_home_with(root, state_dicts: dict):
+    """``root`` as a TORCH_HOME holding ``{file name: state dict}`` in hub/checkpoints/."""
+    import torch
+
+    (root / "hub" / "checkpoints").mkdir(parents=True, exist_ok=True)
+    for name, state in state_dicts.items():
+        torch.save(state, root / "hub" / "checkpoints" / name)
+    return root
+
+
+@pytest.fixture
+def empty_torch_home(tmp_path, monkeypatch):
+    """TORCH_HOME set to an empty folder, with the once-per-process log memories cleared
+    (so each test sees its own "weights absent" line)."""
+    from texvocab.io import weights
+    from texvocab.method import encoder
+
+    monkeypatch.setenv("TORCH_HOME", str(tmp_path))
+    monkeypatch.setattr(weights, "_logged", set())
+    monkeypatch.setattr(encoder, "_fallback_logged", set())
+    return tmp_path

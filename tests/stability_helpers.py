@@ -10,12 +10,12 @@ import torch
 from torch import nn
 
 from texvocab.capture.camera import Camera
-from texvocab.encoder import build_encoder
-from texvocab.feature import PoseContext, PoseFeature
-from texvocab.field import AvatarField, FieldSettings
+from texvocab.geometry.rotations import rotvec_to_quat
+from texvocab.method.encoder import build_encoder
+from texvocab.method.feature import PoseContext, PoseFeature
+from texvocab.method.field import AvatarField, FieldSettings
+from texvocab.method.vocab import Vocabulary, knn_weights, part_distance
 from texvocab.render import MarchSettings, ShellGeometry, render_rays
-from texvocab.rotations import rotvec_to_quat
-from texvocab.vocab import Vocabulary, knn_weights, part_distance
 
 NUM_FRAMES = 6
 TEXTURE_SIZE = 32

@@ -8,9 +8,9 @@ from app.state import ViewerData, ViewerState, load_viewer_data
 from texvocab.body import default_body
 from texvocab.body.parts import BODY_PARTS
 from texvocab.errors import TexvocabError
-from texvocab.uvmap import texel_map
-from texvocab.vocab import Vocabulary
-from texvocab.vocab_texture import VocabTexture
+from texvocab.geometry.uv import texel_map
+from texvocab.method.vocab import Vocabulary
+from texvocab.method.vocab_texture import VocabTexture
 
 TEX = 32
 LEFT_SHOULDER, LEFT_KNEE = 16, 4

@@ -1,5 +1,5 @@
 """The viewer window for real: a GLFW window under Xvfb, driven by the ImGui Test Engine
-(app/panel_scripts.py). It moves a left-arm slider and clicks a vocabulary key the way a
+(app/drivers.py). It moves a left-arm slider and clicks a vocabulary key the way a
 user would; the vocabulary panel's keys and weights must follow, the screenshot must show
 the body, and the app (and its neural render worker) must exit cleanly."""
 from __future__ import annotations

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from texvocab.capture.camera import Camera
+from texvocab.capture.mesh_renderer import intrinsics, look_at
 from texvocab.errors import AssetError
-from texvocab.render_mesh import intrinsics, look_at
 
 
 @pytest.fixture

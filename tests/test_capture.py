@@ -12,7 +12,7 @@ from texvocab.capture import open as open_capture
 from texvocab.capture.motion import make_sequence
 from texvocab.capture.synth import SynthRenderer, SynthSettings, default_cameras, synthesize
 from texvocab.errors import AssetError, TexvocabError
-from texvocab.raster import rasterize_mesh
+from texvocab.geometry.raster import rasterize_mesh
 
 SETTINGS = SynthSettings(ring_views=3, raised_views=1, size=128, texture_size=256)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 from smpl_files import write_official_pickle
 
-from texvocab.cli import build_parser
+from texvocab.cli.main import build_parser
 
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
 
@@ -98,8 +98,10 @@ def test_prepare_and_vocab_commands(tmp_path):
     run("synth", str(cap), "--frames", "4", "--train-frames", "3", "--size", "64",
         "--ring-views", "2", "--raised-views", "0", "--texture-size", "128", check_rc=0)
     out = run("prepare", str(cap), "--texture-size", "32", check_rc=0).stdout
-    assert out.startswith("3 texture maps (32² texels)")
-    assert len(list((cap / "texvocab_cache" / "texmaps_32").glob("frame_*.npz"))) == 3
+    assert out.startswith("3 texture maps (32² texels, views 0)")  # view 1 is held out
+    assert len(list((cap / "texvocab_cache" / "texmaps_32_views_0").glob("frame_*.npz"))) == 3
+    out = run("prepare", str(cap), "--texture-size", "32", "--eval-views", check_rc=0).stdout
+    assert out.startswith("3 texture maps (32² texels, views 0,1)")
     out = run("vocab", str(cap), "--pose", "frame:3", "-k", "2", "--keys", "3", check_rc=0).stdout
     lines = out.strip().splitlines()
     assert "strategy=part, M=3 keys/part, K=2" in lines[1] and len(lines) == 3 + 5

@@ -2,7 +2,7 @@
 import numpy as np
 from PIL import Image
 
-from texvocab.demo import DEMO_POSES, run_demo
+from texvocab.cli.demo import DEMO_POSES, run_demo
 
 
 def _body_fraction(rgb):
@@ -35,7 +35,7 @@ def test_demo_writes_a_sheet_of_six_poses(tmp_path):
 
 
 def test_demo_capture_is_reused(tmp_path):
-    from texvocab.demo import demo_capture
+    from texvocab.cli.demo import demo_capture
 
     root, sheet = demo_capture(tmp_path, frames=2)
     assert (root / "annots.npy").is_file() and sheet.is_file()

@@ -6,10 +6,10 @@ import os
 
 import pytest
 import torch
+from conftest import torch_home_with
 
-from texvocab import encoder as enc
-from texvocab.encoder import ResNet34, build_encoder, find_resnet34_weights
 from texvocab.errors import AssetError
+from texvocab.method.encoder import ResNet34, build_encoder, find_resnet34_weights
 
 BN = ("weight", "bias", "running_mean", "running_var", "num_batches_tracked")
 
@@ -48,17 +48,8 @@ def standin_state():
 @pytest.fixture(scope="module")
 def standin_home(tmp_path_factory, standin_state):
     """A TORCH_HOME holding the stand-in as hub/checkpoints/resnet34-b627a593.pth."""
-    home = tmp_path_factory.mktemp("torch_home")
-    (home / "hub" / "checkpoints").mkdir(parents=True)
-    torch.save(standin_state, home / "hub" / "checkpoints" / "resnet34-b627a593.pth")
-    return home
-
-
-@pytest.fixture
-def empty_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("TORCH_HOME", str(tmp_path))
-    monkeypatch.setattr(enc, "_fallback_logged", set())
-    return tmp_path
+    return torch_home_with(tmp_path_factory.mktemp("torch_home"),
+                           {"resnet34-b627a593.pth": standin_state})
 
 
 def test_state_dict_matches_torchvision_resnet34_layout():
@@ -126,14 +117,14 @@ def test_old_checkpoint_explicit_path_and_name_preference(tmp_path, standin_stat
     assert find_resnet34_weights() == newer
 
 
-def test_auto_falls_back_to_pyramid_with_one_log_line(empty_home, caplog):
+def test_auto_falls_back_to_pyramid_with_one_log_line(empty_torch_home, caplog):
     with caplog.at_level(logging.INFO, logger="texvocab"):
         e = build_encoder()
         build_encoder("auto")
     assert len(caplog.records) == 1
     msg = caplog.records[0].getMessage()
     assert caplog.records[0].levelno == logging.WARNING
-    assert str(empty_home / "hub" / "checkpoints") in msg and "'pyramid'" in msg
+    assert str(empty_torch_home / "hub" / "checkpoints") in msg and "'pyramid'" in msg
     assert "resnet34-*.pth" in msg and "\n" not in msg
     assert (e.name, e.pretrained, e.trainable, e.feature_dim) == ("pyramid", False, False, 12)
     x = torch.rand(1, 3, 64, 64)
@@ -146,7 +137,7 @@ def test_auto_falls_back_to_pyramid_with_one_log_line(empty_home, caplog):
     assert torch.allclose(out[:, :3], expect, atol=1e-6)
 
 
-def test_small_encoder_trains(empty_home):
+def test_small_encoder_trains(empty_torch_home):
     e = build_encoder("small")
     assert (e.name, e.pretrained, e.trainable, e.feature_dim) == ("small", False, True, 192)
     out = e(torch.rand(1, 3, 256, 256))
@@ -155,7 +146,7 @@ def test_small_encoder_trains(empty_home):
     assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in e.parameters())
 
 
-def test_resnet34_scratch_is_trainable(empty_home, caplog):
+def test_resnet34_scratch_is_trainable(empty_torch_home, caplog):
     with caplog.at_level(logging.INFO, logger="texvocab"):
         e = build_encoder("resnet34-scratch")
     assert caplog.records == []
@@ -168,11 +159,11 @@ def test_resnet34_scratch_is_trainable(empty_home, caplog):
     assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in e.parameters())
 
 
-def test_explicit_resnet34_without_weights_names_where_it_looked(empty_home):
+def test_explicit_resnet34_without_weights_names_where_it_looked(empty_torch_home):
     with pytest.raises(AssetError, match="hub/checkpoints: no resnet34"):
         build_encoder("resnet34")
     with pytest.raises(AssetError, match="not found"):
-        build_encoder("auto", weights=empty_home / "nope.pth")
+        build_encoder("auto", weights=empty_torch_home / "nope.pth")
 
 
 def test_bad_settings_are_rejected():

@@ -7,10 +7,10 @@ from torch import nn
 
 from texvocab.body import default_body
 from texvocab.body.poses import preset
-from texvocab.encoder import build_encoder
-from texvocab.feature import PoseFeature, naive_pose_feature, sample_maps
-from texvocab.uvmap import texel_map
-from texvocab.vocab import Vocabulary
+from texvocab.geometry.uv import texel_map
+from texvocab.method.encoder import build_encoder
+from texvocab.method.feature import PoseFeature, naive_pose_feature, sample_maps
+from texvocab.method.vocab import Vocabulary
 
 
 class PassThrough(nn.Module):
@@ -132,3 +132,67 @@ def test_points_far_from_the_body_get_zero_features(setup):
     out = model(ctx, torch.tensor([[0.0, 0.0, 5.0], [0.0, 0.4, 0.05]]), max_distance=0.1)
     assert out.valid.tolist() == [False, True]
     assert torch.equal(out.features[0], torch.zeros(3)) and out.features[1].abs().sum() > 0
+
+
+def test_a_subjects_shape_is_the_same_mesh_everywhere(tmp_path):
+    """With a body that has a shape space and a capture with non-zero betas, the pose
+    feature's posed mesh (and so the shell and the field's surface index built from it)
+    is the texture maps' mesh (``Capture.posed_body``), not the template shape."""
+    from texvocab.body.model import BodyModel
+    from texvocab.capture.camera import Camera, look_at
+    from texvocab.capture.capture import Capture
+    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.train import build_model
+
+    base = default_body()
+    rng = np.random.default_rng(0)
+    v = base.num_vertices
+    joint_reg = torch.zeros(24, v, dtype=torch.float64)
+    for j in range(24):  # each joint: mean of its 8 most-weighted vertices, so it follows shape
+        joint_reg[j, torch.topk(base.weights[:, j], 8).indices] = 1 / 8
+    shaped = BodyModel(base.v_template, base.faces, base.weights, base.parents,
+                       J_regressor=joint_reg.numpy(), vt=base.vt, ft=base.ft,
+                       shapedirs=rng.normal(0, 0.03, (v, 3, 4)), name="shape stand-in")
+    poses = np.stack([preset("walk")[0], preset("squat")[0]]).astype(np.float32)
+    R, t = look_at(np.array([0.0, 0.0, 3.0]), np.zeros(3))
+    cam = Camera(K=np.array([[300.0, 0, 64], [0, 300.0, 64], [0, 0, 1]]), R=R, t=t, width=128,
+                 height=128)
+    cap = Capture(tmp_path, "zju", [cam, cam], poses, np.zeros((2, 3), np.float32),
+                  [[tmp_path / "x.png"] * 2] * 2, [[tmp_path / "m.png"] * 2] * 2, [0, 1], 2,
+                  shaped, betas=np.array([2.0, -1.5, 1.0, 0.5, 9.0]))
+    assert cap.shape().shape == (1, 4)
+    s = Settings(encoder="pyramid", texture_size=32, num_keys=2, k=1, eval_views=(1,))
+    model = build_model(cap, s, torch.rand(2, 3, 32, 32))
+    for t in range(2):
+        ctx = model.pose_feature.context(cap.poses[t], cap.trans[t])
+        truth = cap.posed_body(t).vertices[0]
+        template = shaped.forward(torch.as_tensor(poses[t])[None]).vertices[0]
+        assert torch.allclose(ctx.vertices, truth, atol=1e-5)
+        assert (template - truth).norm(dim=-1).max() > 0.05  # the shape really moves the mesh
+        on_surface = ctx.index.project(truth.double().numpy()).distance
+        assert np.abs(on_surface).max() < 1e-6
+
+
+@pytest.mark.parametrize("strategy", ["none", "part"])
+def test_none_strategy_conditions_the_field_on_the_pose_only(setup, body, strategy):
+    """The no-vocabulary baseline: the same field, its texture feature all zeros, so its
+    output does not change when the texture maps change; with a vocabulary it does."""
+    from texvocab.method.field import AvatarField, FieldSettings
+
+    _, poses = setup
+    vocab = Vocabulary.build(poses, strategy, num_keys=6, k=3)
+    assert (vocab.num_parts == 0) == (strategy == "none")
+    outs = []
+    for seed in (0, 1):
+        textures = torch.rand(12, 3, 32, 32, generator=torch.Generator().manual_seed(seed))
+        pf = PoseFeature(body, vocab, textures, PassThrough())
+        torch.manual_seed(0)
+        field = AvatarField(pf, FieldSettings(hidden=32))
+        ctx = pf.context(poses[3])
+        pts = _shell_points(body, poses[3], n=200)
+        feats = pf(ctx, pts).features
+        assert (feats.abs().sum() == 0) == (strategy == "none")
+        sdf, rgb, _ = field.sdf_and_color(ctx, pts, torch.nn.functional.normalize(pts, dim=-1))
+        outs.append(rgb)
+    assert torch.equal(outs[0], outs[1]) == (strategy == "none")
+    assert f"strategy={strategy}" in vocab.format_query(poses[3])

@@ -5,10 +5,10 @@ import torch
 
 from texvocab.body import default_body
 from texvocab.body.poses import preset
-from texvocab.encoder import build_encoder
-from texvocab.feature import PoseFeature
-from texvocab.field import AvatarField, FieldSettings, laplace_density, positional_encoding
-from texvocab.vocab import Vocabulary
+from texvocab.method.encoder import build_encoder
+from texvocab.method.feature import PoseFeature
+from texvocab.method.field import AvatarField, FieldSettings, laplace_density, positional_encoding
+from texvocab.method.vocab import Vocabulary
 
 
 @pytest.fixture(scope="module")

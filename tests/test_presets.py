@@ -2,8 +2,14 @@
 import pytest
 
 from texvocab.errors import TexvocabError
-from texvocab.settings import PRESETS, RENDER_KNOBS, Settings, preset_overrides, render_overrides
-from texvocab.train import march_settings
+from texvocab.pipeline.settings import (
+    PRESETS,
+    RENDER_KNOBS,
+    Settings,
+    march_settings,
+    preset_overrides,
+    render_overrides,
+)
 
 
 def _with(name: str) -> Settings:
@@ -19,7 +25,7 @@ def test_presets_are_valid_settings_and_ordered_by_cost():
     for knob in ("image_scale", "coarse_samples", "fine_samples"):
         assert getattr(fast, knob) <= getattr(balanced, knob) <= getattr(quality, knob), knob
     assert fast.early_stop_eps >= balanced.early_stop_eps >= quality.early_stop_eps
-    assert fast != balanced != quality
+    assert len({repr(p) for p in (fast, balanced, quality)}) == 3  # pairwise distinct
 
 
 def test_unknown_preset_names_the_choices():

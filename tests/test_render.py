@@ -18,7 +18,8 @@ from texvocab.body import default_body
 from texvocab.body.poses import preset
 from texvocab.capture.camera import Camera
 from texvocab.capture.synth import SynthSettings, default_cameras
-from texvocab.raster import rasterize_mesh
+from texvocab.geometry.raster import rasterize_mesh
+from texvocab.geometry.surface import SurfaceIndex
 from texvocab.render import (
     MarchSettings,
     RenderCancelled,
@@ -37,7 +38,6 @@ from texvocab.render import (
 from texvocab.render.analytic import MeshSDFField, SphereField
 from texvocab.render.samples import midpoint_intervals, stratified_positions
 from texvocab.render.shell import _bounded_edt2
-from texvocab.surface import SurfaceIndex
 
 DELTA = 0.04
 

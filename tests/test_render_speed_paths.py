@@ -7,12 +7,12 @@ import torch
 from texvocab.body import default_body
 from texvocab.body.poses import preset
 from texvocab.capture.synth import SynthSettings, default_cameras
-from texvocab.encoder import build_encoder
-from texvocab.feature import PoseFeature
-from texvocab.field import AvatarField, FieldSettings
+from texvocab.geometry.rotations import rotvec_to_quat
+from texvocab.method.encoder import build_encoder
+from texvocab.method.feature import PoseFeature
+from texvocab.method.field import AvatarField, FieldSettings
+from texvocab.method.vocab import Vocabulary
 from texvocab.render import MarchSettings, ShellGeometry, render_image
-from texvocab.rotations import rotvec_to_quat
-from texvocab.vocab import Vocabulary
 
 
 def _concat_hidden(field, ctx, x):

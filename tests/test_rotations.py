@@ -1,4 +1,4 @@
-"""Tests for texvocab.rotations: extreme angles, round trips, distance, validation."""
+"""Tests for texvocab.geometry.rotations: extreme angles, round trips, distance, validation."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from texvocab.rotations import (
+from texvocab.geometry.rotations import (
     as_tensor,
     quat_conjugate,
     quat_distance,

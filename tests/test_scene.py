@@ -14,8 +14,8 @@ from app.state import ViewerData, ViewerState
 from texvocab.body import default_body
 from texvocab.body.parts import BODY_PARTS
 from texvocab.capture import Camera
-from texvocab.raster import rasterize_mesh
-from texvocab.vocab import Vocabulary
+from texvocab.geometry.raster import rasterize_mesh
+from texvocab.method.vocab import Vocabulary
 
 W, H = 320, 200
 LEFT_SHOULDER = 16
@@ -79,7 +79,7 @@ def test_default_body_silhouette_matches_cpu_raster_and_pyrender(ctx, body):
         print(f"{cam.name}: IoU GL vs CPU raster {score:.4f}")
         assert score > 0.98
     # pyrender (PyOpenGL on OSMesa) in the same process, then moderngl again
-    from texvocab.render_mesh import MeshRenderer
+    from texvocab.capture.mesh_renderer import MeshRenderer
 
     with MeshRenderer(W, H) as pr:
         _, depth = pr.render(verts.numpy(), body.faces.numpy(), capture_cam.K, capture_cam.R,

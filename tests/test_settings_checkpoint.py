@@ -4,9 +4,9 @@ import os
 import pytest
 import torch
 
-from texvocab.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.errors import AssetError, TexvocabError
-from texvocab.settings import Settings
+from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
+from texvocab.pipeline.settings import Settings
 
 
 def test_settings_round_trip_and_overrides():
@@ -33,7 +33,7 @@ def test_checkpoint_round_trip_is_atomic(tmp_path):
         open(tmp, "wb").write(b"partial")
         raise OSError("disk full")
 
-    from texvocab.imageio import atomic_write_bytes
+    from texvocab.io.images import atomic_write_bytes
 
     with pytest.raises(OSError):
         atomic_write_bytes(path, explode)

@@ -9,8 +9,8 @@ from PIL import Image
 from scipy import ndimage
 from tiny_runs import tiny_run
 
-from texvocab.cli import main
-from texvocab.imageio import save_png
+from texvocab.cli.main import main
+from texvocab.io.images import save_png
 
 DATA = Path(__file__).parent / "data"
 MEAN_TOL = 2.0 / 255  # mean absolute difference, per channel

@@ -38,14 +38,14 @@ from stability_helpers import (
 
 from texvocab.body import default_body
 from texvocab.body.limits import JOINT_LIMITS_DEG
-from texvocab.feature import PoseFeature, sample_maps
-from texvocab.field import laplace_density
+from texvocab.geometry.rotations import quat_distance, rotvec_distance, rotvec_to_quat
+from texvocab.geometry.surface import SurfaceIndex
+from texvocab.geometry.uv import texel_map
+from texvocab.method.feature import PoseFeature, sample_maps
+from texvocab.method.field import laplace_density
+from texvocab.method.texmap import TexmapSettings, build_texture_map
+from texvocab.method.vocab import Vocabulary
 from texvocab.render import ShellGeometry, render_image
-from texvocab.rotations import quat_distance, rotvec_distance, rotvec_to_quat
-from texvocab.surface import SurfaceIndex
-from texvocab.texmap import TexmapSettings, build_texture_map
-from texvocab.uvmap import texel_map
-from texvocab.vocab import Vocabulary
 
 PI = math.pi
 AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)

@@ -10,7 +10,12 @@ from hypothesis import strategies as st
 
 from texvocab.body import default_body
 from texvocab.body.poses import preset
-from texvocab.surface import SurfaceIndex, closest_on_triangles, project_brute_force, project_to_surface
+from texvocab.geometry.surface import (
+    SurfaceIndex,
+    closest_on_triangles,
+    project_brute_force,
+    project_to_surface,
+)
 
 TRI = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 TET = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])

@@ -8,13 +8,13 @@ from texvocab.body import default_body
 from texvocab.capture import open as open_capture
 from texvocab.capture.garment import Garment
 from texvocab.capture.synth import SynthSettings, synthesize
-from texvocab.texmap import (
+from texvocab.geometry.uv import texel_map
+from texvocab.method.texmap import (
     TexmapSettings,
     build_texture_map,
     load_texture_map,
     prepare_texture_maps,
 )
-from texvocab.uvmap import texel_map
 
 SIZE = 128
 
@@ -79,7 +79,7 @@ def test_prepare_caches_and_resumes(unlit_capture, monkeypatch):
     paths[1].unlink()  # simulate a run killed before frame 1 was written
 
     calls = []
-    import texvocab.texmap as tm
+    import texvocab.method.texmap as tm
 
     real = tm.build_texture_map
     monkeypatch.setattr(tm, "build_texture_map", lambda c, t, st: calls.append(t) or real(c, t, st))
@@ -90,7 +90,7 @@ def test_prepare_caches_and_resumes(unlit_capture, monkeypatch):
 
 def test_texel_map_inverts_the_uv_layout():
     """Each covered texel's face and barycentrics map back to that texel's UV centre."""
-    from texvocab.uv import pixel_to_uv
+    from texvocab.geometry.uv import pixel_to_uv
 
     body = default_body()
     tmap = texel_map(body, 64)
@@ -99,3 +99,59 @@ def test_texel_map_inverts_the_uv_layout():
     centres = pixel_to_uv(torch.as_tensor(np.stack([cols, rows], 1), dtype=torch.float64), 64, 64)
     np.testing.assert_allclose(uv, centres.numpy(), atol=1e-9)
     assert np.all(tmap.bary >= -1e-9) and np.allclose(tmap.bary.sum(1), 1)
+
+
+def _maps_of(root, body, **settings):
+    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.train import load_textures
+
+    cap = open_capture(root, body=body)
+    return load_textures(cap, Settings(texture_size=64, **settings), progress=False).numpy()
+
+
+def _scramble(paths, seed):
+    from PIL import Image
+
+    rng = np.random.default_rng(seed)
+    for path in paths:
+        with Image.open(path) as im:
+            size, mode = im.size, im.mode
+        noise = rng.integers(0, 256, (size[1], size[0], len(mode)), dtype=np.uint8)
+        Image.fromarray(noise.squeeze(-1) if len(mode) == 1 else noise, mode).save(path)
+
+
+def test_held_out_views_never_enter_a_texture_map(unlit_capture, tmp_path):
+    """Honest evaluation: scrambling every pixel of the evaluation views (eval_views, the
+    same views training never samples) leaves every texture map bit-identical; scrambling a
+    training view changes them (so the comparison can fail)."""
+    import shutil
+
+    body, root = unlit_capture.body, unlit_capture.root
+    ref = _maps_of(root, body, eval_views=(1, 5))
+    for name, views, same in (("held_out", (1, 5), True), ("training", (0,), False)):
+        copy = tmp_path / name
+        shutil.copytree(root, copy, ignore=shutil.ignore_patterns("texvocab_cache"))
+        cap = open_capture(copy, body=body)
+        _scramble([cap.image_paths[t][v] for t in range(cap.num_frames) for v in views], seed=3)
+        got = _maps_of(copy, body, eval_views=(1, 5))
+        assert np.array_equal(got, ref) == same, name
+
+
+def test_texture_map_cache_is_keyed_by_view_set(unlit_capture, tmp_path):
+    """A cache built from other views (e.g. every view, as before held-out views were
+    excluded) is never reused: another view set gets its own folder."""
+    from texvocab.method.texmap import cache_dir
+    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.train import texmap_settings
+
+    cap = unlit_capture
+    all_views = cache_dir(cap, TexmapSettings(size=64))
+    train = cache_dir(cap, texmap_settings(cap, Settings(texture_size=64, eval_views=(1, 5))))
+    other = cache_dir(cap, texmap_settings(cap, Settings(texture_size=64, eval_views=(2,))))
+    assert len({all_views, train, other}) == 3
+    assert train.name == "texmaps_64_views_0-2-3-4-6-7"
+    maps = prepare_texture_maps(cap, TexmapSettings(size=64), progress=False)  # all views
+    assert all(p.parent == all_views for p in maps)
+    honest = _maps_of(cap.root, cap.body, eval_views=(1, 5))
+    leaky = np.stack([load_texture_map(p)[0] for p in maps]).transpose(0, 3, 1, 2)
+    assert not np.array_equal(honest, leaky)  # the all-view maps were not reused

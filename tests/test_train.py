@@ -13,9 +13,9 @@ from texvocab.body import default_body
 from texvocab.capture import open as open_capture
 from texvocab.capture.motion import make_sequence
 from texvocab.capture.synth import SynthSettings, synthesize
-from texvocab.field import FieldSettings
-from texvocab.settings import Settings
-from texvocab.train import Trainer
+from texvocab.method.field import FieldSettings
+from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.train import Trainer
 
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
 
@@ -114,9 +114,9 @@ def test_train_and_eval_commands(capture, tmp_path):
 
 
 def test_image_scale_renders_smaller_and_shows_it_at_full_size(capture):
-    from texvocab.evaluate import render_view
     from texvocab.metrics import metrics_in_bbox
-    from texvocab.train import march_settings
+    from texvocab.pipeline.evaluate import render_view
+    from texvocab.pipeline.settings import march_settings
 
     cap = open_capture(capture)
     s = tiny_settings()

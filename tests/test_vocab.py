@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 import torch
 
-from texvocab.rotations import rotvec_to_quat
-from texvocab.vocab import Vocabulary, farthest_point_sampling, knn_weights, part_distance
+from texvocab.geometry.rotations import rotvec_to_quat
+from texvocab.method.vocab import Vocabulary, farthest_point_sampling, knn_weights, part_distance
 
 
 def _quats(angles_deg, axis=(1.0, 0.0, 0.0)):

@@ -7,9 +7,9 @@ def tiny_run(root, segments, num_train: int, views: int, field: dict, **settings
     from texvocab.capture import open as open_capture
     from texvocab.capture.motion import make_sequence
     from texvocab.capture.synth import SynthSettings, synthesize
-    from texvocab.field import FieldSettings
-    from texvocab.settings import Settings
-    from texvocab.train import Trainer
+    from texvocab.method.field import FieldSettings
+    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.train import Trainer
 
     poses, trans = make_sequence(segments[0], seed=segments[1])
     cap = synthesize(root / "cap", poses, trans, num_train, default_body(),

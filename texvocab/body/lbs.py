@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import torch
 
-from texvocab.rotations import rotvec_to_rotmat
+from texvocab.geometry.rotations import rotvec_to_rotmat
 
 
 def forward_kinematics(

@@ -25,14 +25,15 @@ BODY_PARTS: dict[str, tuple[int, ...]] = {
     "right_arm": (14, 17, 19, 21, 23),
 }
 
-STRATEGIES = ("part", "joint", "global")
+STRATEGIES = ("part", "joint", "global", "none")
 
 
 def body_parts(strategy: str = "part") -> dict[str, tuple[int, ...]]:
     """Joint groups for a vocabulary strategy (the paper's ablation).
 
     ``part``: Table 1's five parts; ``joint``: one part per joint; ``global``: one part
-    holding all 24 joints.
+    holding all 24 joints; ``none``: no part at all (the baseline without a vocabulary:
+    the field's only condition is the pose Θ).
     """
     if strategy == "part":
         return dict(BODY_PARTS)
@@ -40,6 +41,8 @@ def body_parts(strategy: str = "part") -> dict[str, tuple[int, ...]]:
         return {name: (j,) for j, name in enumerate(JOINT_NAMES)}
     if strategy == "global":
         return {"global": tuple(range(NUM_JOINTS))}
+    if strategy == "none":
+        return {}
     raise ValueError(f"unknown vocabulary strategy {strategy!r}; expected one of {STRATEGIES}")
 
 

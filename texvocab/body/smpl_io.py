@@ -1,5 +1,5 @@
 """Read the user's official SMPL files (chumpy pickles, .npz, smpl_uv.obj) without
-chumpy, through :mod:`texvocab.safe_pickle`."""
+chumpy, through :mod:`texvocab.io.safe_pickle`."""
 from __future__ import annotations
 
 import warnings
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.assets import load_spec, name_is_accepted, require_valid, spec_ref
 from texvocab.errors import AssetError
-from texvocab.safe_pickle import read_npz, read_pickle
+from texvocab.io.safe_pickle import read_npz, read_pickle
+from texvocab.io.spec import load_spec, name_is_accepted, require_valid, spec_ref
 
 
 def read_model_arrays(path: str | Path) -> dict:

@@ -107,14 +107,20 @@ class Capture:
         m = read_mask(self.mask_paths[frame][view])
         return self.cameras[view].undistort_image(m.astype(np.uint8), nearest=True) > 0
 
+    def shape(self) -> torch.Tensor | None:
+        """(1, S) the subject's shape coefficients as the body takes them (the first
+        ``body.num_betas``), or None when the capture has none or the body no shape space.
+        Everything that poses this subject's body uses it (texture maps, pose feature,
+        shell, field), so they all see the same mesh."""
+        if self.betas is None or not self.body.num_betas:
+            return None
+        n = min(len(self.betas), self.body.num_betas)
+        return torch.as_tensor(np.asarray(self.betas[:n]))[None]
+
     def posed_body(self, frame: int):
         """:class:`~texvocab.body.BodyOutput` of one frame (batch of 1)."""
-        betas = None
-        if self.betas is not None and self.body.num_betas:
-            n = min(len(self.betas), self.body.num_betas)
-            betas = torch.as_tensor(self.betas[:n])[None]
         return self.body.forward(torch.as_tensor(self.poses[frame])[None],
-                                 torch.as_tensor(self.trans[frame])[None], betas)
+                                 torch.as_tensor(self.trans[frame])[None], self.shape())
 
     @property
     def synthetic(self) -> dict | None:

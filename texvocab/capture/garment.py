@@ -15,8 +15,8 @@ import numpy as np
 import torch
 
 from texvocab.body.poses import J
-from texvocab.rotations import quat_multiply, quat_to_rotmat, rotvec_to_quat
-from texvocab.uvmap import texel_map
+from texvocab.geometry.rotations import quat_multiply, quat_to_rotmat, rotvec_to_quat
+from texvocab.geometry.uv import texel_map
 
 SKIN = np.array([0.86, 0.66, 0.53])
 HAIR = np.array([0.16, 0.10, 0.07])

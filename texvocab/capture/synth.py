@@ -40,7 +40,7 @@ class SynthSettings:
 
 def default_cameras(s: SynthSettings) -> list[Camera]:
     """``ring_views`` cameras at chest height on a ring, ``raised_views`` higher up."""
-    from texvocab.render_mesh import intrinsics, look_at
+    from texvocab.capture.mesh_renderer import intrinsics, look_at
 
     K = intrinsics(s.size, s.size, s.fov_deg)
     target = np.array([0.0, s.target_y, 0.0])
@@ -70,7 +70,7 @@ class SynthRenderer:
 
     def __init__(self, body, settings: SynthSettings | None = None):
         from texvocab.capture.garment import Garment
-        from texvocab.gl_platform import ensure_offscreen
+        from texvocab.io.gl_platform import ensure_offscreen
 
         ensure_offscreen()
         import pyrender
@@ -106,7 +106,7 @@ class SynthRenderer:
         verts = out.vertices[0].double().numpy()
         normals = trimesh.Trimesh(verts, self.body.faces.numpy(), process=False).vertex_normals
         tex = self.garment.texture(pose if texture_pose is None else texture_pose)
-        # pyrender samples row 0 at v = 1, the project's convention (texvocab.uv).
+        # pyrender samples row 0 at v = 1, the project's convention (texvocab.geometry.uv).
         texture = pr.Texture(source=(tex * 255 + 0.5).astype(np.uint8), source_channels="RGB")
         material = pr.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0,
                                                 roughnessFactor=0.9)
@@ -122,7 +122,7 @@ class SynthRenderer:
             x /= np.linalg.norm(x)
             light_pose[:3, :3] = np.stack([x, np.cross(z, x), z], 1)
             scene.add(pr.DirectionalLight(color=np.ones(3), intensity=intensity), pose=light_pose)
-        from texvocab.render_mesh import gl_camera_pose, gl_principal_point
+        from texvocab.capture.mesh_renderer import gl_camera_pose, gl_principal_point
 
         results = []
         cam_node = None
@@ -225,7 +225,7 @@ def ground_truth_renderer(capture) -> tuple[SynthRenderer, list[Camera]]:
 def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Poses (T, 24, 3) and trans (T, 3) from an .npz with ``poses`` ((T, 24, 3) or
     (T, 72)) and optional ``trans`` (T, 3)."""
-    from texvocab.safe_pickle import read_npz
+    from texvocab.io.safe_pickle import read_npz
 
     path = Path(path)
     data = read_npz(path, "pose file (an .npz with 'poses' (T, 24, 3))")

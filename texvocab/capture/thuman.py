@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.assets import require_valid
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture
 from texvocab.errors import AssetError
-from texvocab.imageio import atomic_write_bytes, to_uint8
-from texvocab.safe_pickle import read_npz
+from texvocab.io.images import atomic_write_bytes, to_uint8
+from texvocab.io.safe_pickle import read_npz
+from texvocab.io.spec import require_valid
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 

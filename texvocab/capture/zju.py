@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from texvocab.assets import require_valid, spec_ref
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture
 from texvocab.errors import AssetError
-from texvocab.imageio import save_png
-from texvocab.rotations import quat_multiply, quat_to_rotvec, rotvec_to_quat, rotvec_to_rotmat
-from texvocab.safe_pickle import read_npy_object
+from texvocab.geometry.rotations import quat_multiply, quat_to_rotvec, rotvec_to_quat, rotvec_to_rotmat
+from texvocab.io.images import save_png
+from texvocab.io.safe_pickle import read_npy_object
+from texvocab.io.spec import require_valid, spec_ref
 
 MASK_DIRS = ("mask_cihp", "mask")
 PARAM_DIRS = ("new_params", "params")

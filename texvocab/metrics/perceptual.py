@@ -36,7 +36,7 @@ import torch
 from torch import nn
 
 from texvocab.errors import AssetError
-from texvocab.weights import load_state_dict, log_once, package_dir, torch_checkpoint_dir
+from texvocab.io.weights import load_state_dict, log_once, package_dir, torch_checkpoint_dir
 
 VGG16_CFG = (64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512, "M", 512, 512, 512, "M")
 LPIPS_TAPS = (3, 8, 15, 22, 29)  # indices in vgg16.features of relu1_2 ... relu5_3

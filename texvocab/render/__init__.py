@@ -1,6 +1,6 @@
 """CPU volume renderer: shell bounds around the posed body, coarse-to-fine marcher with
 early termination, progressive levels, and a uniform reference marcher."""
-from texvocab.render.march import Field, Marched, coarse_pass, evaluate_field, march_until_opaque
+from texvocab.render.coarse import Field, Marched, coarse_pass, evaluate_field, march_until_opaque
 from texvocab.render.marcher import (
     MarchSettings,
     RayResult,

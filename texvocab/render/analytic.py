@@ -1,6 +1,6 @@
 """Analytic fields with the marcher's interface, for tests and benchmarks (no network).
 
-Both turn a signed distance into a VolSDF density (Yariv et al. 2021, Eq. 2-3, as the
+Both turn a signed distance into a VolSDF density (Yariv et al. 2021's Laplace CDF, as the
 avatar field does) and colour points by a smooth function of position.
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ import torch
 import torch.nn.functional as F
 from scipy import ndimage
 
-from texvocab.surface import SurfaceIndex
+from texvocab.geometry.surface import SurfaceIndex
 
 _FAR = 1.0  # |sdf| given to grid points beyond the exact band (metres; density ~ 0 there)
 
@@ -55,7 +55,7 @@ class SphereField:
 class MeshSDFField:
     """VolSDF density of a closed posed mesh, the body's own shape.
 
-    The exact signed distance (:class:`~texvocab.surface.SurfaceIndex`) is sampled once
+    The exact signed distance (:class:`~texvocab.geometry.surface.SurfaceIndex`) is sampled once
     on a grid of side ``voxel`` and interpolated trilinearly (so a call is cheap, like a
     field lookup). Grid points beyond ``band`` from the surface get ±1 m: they form
     connected regions walled off by the band (wider than half a voxel), and one exact

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import torch
 
-from texvocab.render.march import Field, absorb, coarse_pass, evaluate_field
+from texvocab.render.coarse import Field, absorb, coarse_pass, evaluate_field
 from texvocab.render.samples import (
     RaySamples,
     composite,
@@ -138,6 +138,33 @@ def _on_path(path: ShellPath, u: torch.Tensor) -> RaySamples:
     return RaySamples(u, starts, ends, path.to_t(torch.minimum(u, path.length[:, None])))
 
 
+def fine_pass(field: Field, path: ShellPath, coarse: RaySamples, sigma_c: torch.Tensor,
+              rgb_c: torch.Tensor, weights: torch.Tensor, o: torch.Tensor, d: torch.Tensor,
+              s: MarchSettings, generator: torch.Generator | None = None):
+    """The importance pass of rays whose coarse pass saw some opacity (F of them).
+
+    ``s.fine_samples`` positions by inverse CDF of the (dilated) coarse ``weights`` (F, N)
+    over the coarse bins; the field evaluated there; the sorted union of coarse and fine
+    samples composited again. Returns opacity (F,), colour (F, 3), weighted depth (F,)
+    (not yet divided by opacity) and the number of field evaluations.
+    """
+    edges = torch.cat([coarse.starts, coarse.ends[:, -1:]], 1)
+    if s.dilate:
+        weights = dilate_weights(weights) * (edges[:, 1:] > edges[:, :-1])
+    u_f = sample_pdf(edges, weights, s.fine_samples, generator)
+    t_f = path.to_t(u_f)
+    d_f = d[:, None].expand(-1, s.fine_samples, -1).reshape(-1, 3)
+    sigma_f, rgb_f = evaluate_field(field, (o[:, None] + t_f[..., None] * d[:, None])
+                                    .reshape(-1, 3), d_f, s.chunk_points)
+    u, order = torch.cat([coarse.u, u_f], 1).sort(1)
+    both = _on_path(path, u)
+    sigma = torch.cat([sigma_c, sigma_f.view(len(u), -1)], 1).gather(1, order)
+    rgb = torch.cat([rgb_c, rgb_f.view(len(u), -1, 3)], 1)
+    rgb = rgb.gather(1, order[..., None].expand(-1, -1, 3))
+    w, acc, color = composite(sigma, rgb, both.deltas)
+    return acc, color, (w * both.t).sum(1), len(sigma_f)
+
+
 def render_rays(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: torch.Tensor,
                 far: torch.Tensor, settings: MarchSettings | None = None,
                 generator: torch.Generator | None = None, shell: ShellGeometry | None = None,
@@ -176,30 +203,17 @@ def render_rays(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: t
     marched = coarse_pass(field, coarse, path.length, o, d, s.early_stop_eps, s.segment,
                           s.chunk_points, s.scout_threshold)
     coarse, sigma_c, rgb_c, evals = marched.samples, marched.sigma, marched.rgb, marched.evals
-    edges = torch.cat([coarse.starts, coarse.ends[:, -1:]], 1)
     w_c, acc, color = composite(sigma_c, rgb_c, coarse.deltas)
     depth = (w_c * coarse.t).sum(1)
     fine = torch.nonzero(acc.detach() >= max(s.empty_opacity, 1e-12)).squeeze(1)
     if s.fine_samples > 0 and len(fine):
-        part = path.rows(fine)
-        weights = w_c[fine].detach()
-        if s.dilate:
-            weights = dilate_weights(weights) * (edges[fine, 1:] > edges[fine, :-1])
-        u_f = sample_pdf(edges[fine], weights, s.fine_samples, generator)
-        t_f = part.to_t(u_f)
-        d_f = d[fine, None].expand(-1, s.fine_samples, -1).reshape(-1, 3)
-        sigma_f, rgb_f = evaluate_field(field, (o[fine, None] + t_f[..., None] * d[fine, None])
-                                        .reshape(-1, 3), d_f, s.chunk_points)
-        evals += len(sigma_f)
-        u, order = torch.cat([coarse.u[fine], u_f], 1).sort(1)
-        both = _on_path(part, u)
-        sigma = torch.cat([sigma_c[fine], sigma_f.view(len(fine), -1)], 1).gather(1, order)
-        rgb = torch.cat([rgb_c[fine], rgb_f.view(len(fine), -1, 3)], 1)
-        rgb = rgb.gather(1, order[..., None].expand(-1, -1, 3))
-        w, acc_f, color_f = composite(sigma, rgb, both.deltas)
+        acc_f, color_f, depth_f, n = fine_pass(field, path.rows(fine), coarse.rows(fine),
+                                               sigma_c[fine], rgb_c[fine], w_c[fine].detach(),
+                                               o[fine], d[fine], s, generator)
+        evals += n
         acc = acc.index_put((fine,), acc_f)
         color = color.index_put((fine,), color_f)
-        depth = depth.index_put((fine,), (w * both.t).sum(1))
+        depth = depth.index_put((fine,), depth_f)
     acc, color, depth = absorb(marched, acc, color, depth)
     rgb_live = color + (1 - acc)[:, None] * bg
     return RayResult(bg.repeat(R, 1).index_put((live,), rgb_live),

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 
 import torch
 
-from texvocab.render.march import Field
+from texvocab.render.coarse import Field
 from texvocab.render.marcher import MarchSettings, RenderCancelled, render_image
 from texvocab.render.shell import ShellGeometry
 

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import torch
 
-from texvocab.render.march import Field, evaluate_field
+from texvocab.render.coarse import Field, evaluate_field
 from texvocab.render.marcher import RenderResult, RenderStats
 from texvocab.render.samples import midpoint_intervals, sample_pdf, stratified_positions
 

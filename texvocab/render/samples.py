@@ -38,6 +38,10 @@ class RaySamples:
         """(R, S) bool: real samples (padding has an empty interval)."""
         return self.ends > self.starts
 
+    def rows(self, idx: torch.Tensor) -> RaySamples:
+        """The samples of rays ``idx`` (K,)."""
+        return RaySamples(self.u[idx], self.starts[idx], self.ends[idx], self.t[idx])
+
 
 def stratified_positions(length: torch.Tensor, step: float | None, count: int,
                          generator: torch.Generator | None = None

@@ -22,7 +22,7 @@ within δ of the surface is ever skipped. Two structures, built once per posed m
   marked voxel, and every shell point is within s/2 of a kept step's midpoint. d(c) is
   bracketed by a Euclidean distance transform of the voxels holding surface samples
   (error at most h√3/2 + r0); the voxels it cannot decide get the exact distance of
-  their centre (:class:`~texvocab.surface.SurfaceIndex`), or are all marked when
+  their centre (:class:`~texvocab.geometry.surface.SurfaceIndex`), or are all marked when
   ``exact=False``. :func:`trace_path` walks each ray from near to far and returns its
   *path*: the kept steps, gaps removed.
 """
@@ -33,8 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from texvocab.geometry.surface import SurfaceIndex
 from texvocab.render._splat_jit import splat_balls, stamp_distance
-from texvocab.surface import SurfaceIndex
 
 
 @dataclass

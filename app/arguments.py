@@ -1,0 +1,50 @@
+"""Command-line arguments of the viewer, shared by ``texvocab view``/``shot`` and
+``python -m app.window``: one size parser, one ``view`` argument set. Light: no GL, no
+torch (the ``texvocab`` parser imports it to build its ``--help``)."""
+from __future__ import annotations
+
+import argparse
+
+from texvocab.errors import TexvocabError
+
+#: niceness added to the neural render thread: the UI, llvmpipe and the X server come
+#: first. bench/viewer_ui.py on a busy 2-core box: UI frame while rendering / idle 1.24-1.53
+#: at 0, 1.07-1.08 at 10; but other busy processes then also win over the render.
+NEURAL_NICE = 10
+
+#: smallest window the docked panels fit in; smallest offscreen image
+WINDOW_MIN = (320, 240)
+IMAGE_MIN = (16, 16)
+
+
+def parse_size(spec: str, minimum: tuple[int, int] = IMAGE_MIN) -> tuple[int, int]:
+    """'WxH' -> (W, H), each within [minimum, 8192]; TexvocabError naming --size otherwise."""
+    w, sep, h = spec.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        size = None
+    if not sep or size is None or not all(lo <= v <= 8192 for v, lo in zip(size, minimum)):
+        raise TexvocabError(f"--size {spec!r}: expected WIDTHxHEIGHT, e.g. 1280x800 "
+                            f"({minimum[0]}..8192 x {minimum[1]}..8192 pixels)")
+    return size
+
+
+def add_view_arguments(p: argparse.ArgumentParser) -> None:
+    """The viewer's arguments (``texvocab view`` and ``python -m app.window``)."""
+    p.add_argument("source", nargs="?", default=None,
+                   help="checkpoint.pt or capture folder (default: the body alone)")
+    p.add_argument("--size", default="1280x800", metavar="WxH",
+                   help="window size (default 1280x800, at least 320x240)")
+    p.add_argument("--poses", default=None, metavar="FILE.npz",
+                   help="a pose sequence .npz ('poses' (T, 24, 3) or (T, 72), optional "
+                        "'trans') for the Pose panel's timeline")
+    p.add_argument("--smpl", metavar="PATH", default=None,
+                   help="your SMPL model file or folder (see assets_spec/README.md); "
+                        "default: the embedded default body")
+    p.add_argument("--script", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--report", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--neural-resolution", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--neural-threads", type=int, default=1, help=argparse.SUPPRESS)
+    p.add_argument("--neural-nice", type=int, default=NEURAL_NICE, help=argparse.SUPPRESS)

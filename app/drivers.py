@@ -1,0 +1,330 @@
+"""Scripted runs of the viewer window for tests, screenshots and benchmarks (``python -m
+app.window SOURCE --script NAME --report R.json [--screenshot S.png]``).
+
+Scripts that act like a user run inside the ImGui Test Engine (they move sliders and
+click widgets by their IDs, as a person would with the mouse); the benchmark uses a
+per-frame driver instead so the engine adds nothing to the frame times. Every script
+writes a JSON report and exits the app; the last frame goes to ``--screenshot``.
+"""
+from __future__ import annotations
+
+import json
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+from imgui_bundle import imgui
+
+LEFT_ARM_MOVE = ("**/left_shoulder/##z", -70.0)  # lower the left arm from the T-pose
+
+
+def snapshot(viewer) -> dict:
+    """What the vocabulary panel last drew, per part: [(key id, frame, weight)], and the
+    parts' nearest-key distances."""
+    return {"keys": {p: [list(k) for k in v] for p, v in viewer.drawn_keys.items()},
+            "novelty": {q.part: float(q.novelty) for q in viewer.state.query()}}
+
+
+def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
+    """Yield frames until the neural render reached full resolution (or ``timeout``)."""
+    if viewer.neural is None:
+        return
+    from imgui_bundle import hello_imgui
+
+    t0 = time.perf_counter()
+    ctx.yield_(2)
+    while (viewer.neural.busy or viewer.neural.frame is None) and \
+            time.perf_counter() - t0 < timeout:
+        ctx.yield_()
+    ctx.yield_(2)
+    log = list(viewer.idling_log)  # (worker busy, idling enabled) per frame so far
+    report["idling_while_busy"] = sorted({idle for busy, idle in log if busy})
+    report["idling_when_done"] = bool(hello_imgui.get_runner_params().fps_idling.enable_idling)
+    f = viewer.neural.frame
+    report["neural"] = None if f is None else {
+        "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2]),
+        "delivered": [list(d) for d in viewer.neural.worker.delivered],
+        "errors": list(viewer.neural.worker.errors),
+        "traceback": viewer.neural.worker.last_traceback}
+
+
+def script_slider(ctx, viewer, report: dict) -> None:
+    """Move a left-arm slider; record the vocabulary panel before and after."""
+    ctx.yield_(6)
+    report["before"] = snapshot(viewer)
+    report["version_before"] = viewer.state.version
+    ctx.set_ref("Pose")
+    ctx.item_input_value(*LEFT_ARM_MOVE)
+    ctx.yield_(4)
+    report["after"] = snapshot(viewer)
+    report["version_after"] = viewer.state.version
+    report["left_shoulder_deg"] = viewer.state.joint_deg(16).tolist()
+    shown = {}
+    ctx.set_ref("Vocabulary")
+    for key_id, _, _ in viewer.drawn_keys.get("left_arm", []):
+        shown[str(key_id)] = bool(ctx.item_exists(f"left_arm/keys/key{key_id}"))
+    report["left_arm_buttons_found"] = shown
+    far_key = report["after"]["keys"]["left_arm"][-1][0]  # the farthest selected key
+    ctx.item_click(f"left_arm/keys/key{far_key}")
+    ctx.yield_(3)
+    report["clicked_key"] = far_key
+    report["after_click"] = snapshot(viewer)
+    _camera_steps(ctx, viewer, report)
+    if viewer.sequence_path:
+        _sequence_steps(ctx, viewer, report)
+    wait_neural(ctx, viewer, report)
+
+
+def _camera(viewer) -> dict:
+    c = viewer.camera
+    return {"yaw": c.yaw, "pitch": c.pitch, "distance": c.distance, "target": c.target.tolist()}
+
+
+def _camera_steps(ctx, viewer, report: dict) -> None:
+    """Orbit (left drag), zoom (wheel) and pan (right drag) in the 3D view."""
+    ctx.set_ref("3D view")
+    report["camera_start"] = _camera(viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_drag_with_delta(imgui.ImVec2(60, 0))
+    report["camera_orbited"] = _camera(viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_wheel_y(2)
+    ctx.yield_(2)
+    report["camera_zoomed"] = _camera(viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_drag_with_delta(imgui.ImVec2(0, 40), imgui.MouseButton_.right)
+    report["camera_panned"] = _camera(viewer)
+    ctx.item_click("**/Reset camera")
+    ctx.yield_(2)
+    report["camera_reset"] = _camera(viewer)
+
+
+def _sequence_steps(ctx, viewer, report: dict) -> None:
+    """Load the pose file given by --poses and scrub its timeline to frame 2."""
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_click("**/Sequence/Load")
+    ctx.yield_(2)
+    report["sequence_error"] = viewer.sequence_error
+    if viewer.sequence is None:
+        return
+    report["sequence_frames"] = len(viewer.sequence.poses)
+    ctx.item_input_value("**/Sequence/frame", 2)
+    ctx.yield_(2)
+    report["sequence_frame"] = viewer.sequence.frame
+    report["pose_at_frame"] = viewer.state.pose.tolist()
+    report["trans_at_frame"] = viewer.state.trans.tolist()
+    ctx.item_click("**/Sequence/Play")
+    seq = viewer.sequence
+    t0 = time.perf_counter()
+    while seq.frame == 2 and time.perf_counter() - t0 < 10:
+        ctx.yield_()
+    report["played_to"] = seq.frame
+    report["played_pose_matches"] = bool(np.allclose(viewer.state.pose, seq.poses[seq.frame]))
+    ctx.item_click("**/Sequence/Pause")
+    paused_at = seq.frame
+    ctx.yield_(5)
+    report["paused"] = not seq.playing and seq.frame == paused_at
+
+
+def script_shot_default(ctx, viewer, report: dict) -> None:
+    ctx.yield_(6)
+    wait_neural(ctx, viewer, report)
+
+
+def script_shot_left_arm(ctx, viewer, report: dict) -> None:
+    ctx.yield_(4)
+    ctx.set_ref("Pose")
+    ctx.item_input_value(*LEFT_ARM_MOVE)
+    ctx.item_input_value("**/left_elbow/##y", -60.0)
+    ctx.yield_(4)
+    report["after"] = snapshot(viewer)
+    wait_neural(ctx, viewer, report)
+
+
+def script_shot_novelty(ctx, viewer, report: dict) -> None:
+    ctx.yield_(4)
+    ctx.set_ref("Pose")
+    ctx.item_input_value("**/left_shoulder/##z", 60.0)  # raise the left arm
+    ctx.item_input_value("**/right_hip/##x", -90.0)
+    ctx.set_ref("3D view")
+    ctx.item_click("**/Novelty")
+    ctx.item_click("**/Skeleton")
+    ctx.item_click("**/Reset camera")  # frame the new pose
+    ctx.yield_(4)
+    report["novelty_on"] = bool(viewer.options.novelty)
+    report["skeleton_on"] = bool(viewer.options.skeleton)
+    report["after"] = snapshot(viewer)
+    wait_neural(ctx, viewer, report)
+
+
+ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
+                  "shot-left-arm": script_shot_left_arm, "shot-novelty": script_shot_novelty}
+
+
+class Driver:
+    """Common end of a scripted run: the report and the final frame."""
+
+    def __init__(self, name: str, viewer):
+        self.name, self.viewer = name, viewer
+        self.report: dict = {"script": name, "ok": False}
+
+    def finish(self, report_path: str | None, screenshot_path: str | None, shot) -> int:
+        from texvocab.pipeline import atomic_write_bytes, save_png
+
+        v = self.viewer
+        self.report["view_rect"] = list(v.view_rect)
+        self.report["window"] = list(v.size)
+        if v.neural is not None:
+            self.report["worker_stopped"] = not v.neural.worker.alive
+        if screenshot_path and shot is not None and shot.size:
+            self.report["screenshot"] = str(save_png(Path(screenshot_path), shot[..., :3]))
+            self.report["screenshot_shape"] = list(shot.shape)
+        if report_path:
+            blob = json.dumps(self.report, indent=1)
+            atomic_write_bytes(Path(report_path), lambda t: Path(t).write_text(blob))
+        return 0 if self.report.get("ok") else 1
+
+
+class EngineDriver(Driver):
+    """Runs one script as an ImGui Test Engine test, then exits the app."""
+
+    def __init__(self, name: str, viewer, rp):
+        super().__init__(name, viewer)
+        self.script = ENGINE_SCRIPTS[name]
+        rp.use_imgui_test_engine = True
+        rp.callbacks.register_tests = self._register
+
+    def _register(self) -> None:
+        from imgui_bundle import hello_imgui, imgui
+
+        engine = hello_imgui.get_imgui_test_engine()
+        io = imgui.test_engine.get_io(engine)
+        io.config_run_speed = imgui.test_engine.TestRunSpeed.fast
+        io.config_log_to_tty = True
+        self.test = imgui.test_engine.register_test(engine, "texvocab", self.name)
+        self.test.test_func = self._run
+        imgui.test_engine.queue_test(engine, self.test)
+
+    def _run(self, ctx) -> None:
+        from imgui_bundle import hello_imgui
+
+        try:
+            self.script(ctx, self.viewer, self.report)
+            self.report["ok"] = not ctx.is_error()
+        except BaseException:  # noqa: BLE001 - reported, then the app exits
+            self.report["error"] = traceback.format_exc()
+        finally:
+            self.report["engine_log"] = self.test.output.log.get_text()[-4000:]
+            hello_imgui.get_runner_params().app_shall_exit = True
+
+
+class BenchDriver(Driver):
+    """UI frame times while idle and while the neural render runs (bench/viewer_ui.py).
+
+    Idling is off throughout so every phase draws every frame. Phase "idle": the pose
+    and camera stay still. Phase "rendering": whenever the worker is done, the left
+    shoulder moves a little, so a new progressive render is always running; only
+    frames while the worker is busy count. Phase "dragging": the left shoulder moves
+    every frame, as under a dragged slider (new vocabulary query, blended texture,
+    posed mesh and 3D view each frame; each change restarts the neural render).
+    """
+
+    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256):
+        super().__init__("bench", viewer)
+        self.seconds, self.resolution = seconds, resolution
+        self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
+        self.times: dict[str, list[float]] = {"idle": [], "rendering": [], "dragging": []}
+        self.cpu: dict[str, list[float]] = {"idle": [], "rendering": [], "dragging": []}
+        self._last = None
+        self._nudge = 0
+        previous = rp.callbacks.pre_new_frame
+        rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
+
+    def _tick(self) -> None:
+        from imgui_bundle import hello_imgui
+
+        v = self.viewer
+        rp = hello_imgui.get_runner_params()
+        rp.fps_idling.enable_idling = False
+        now = time.perf_counter()
+        dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
+        self.count += 1
+        cpu = v.frame_cpu_ms[-1] if v.frame_cpu_ms else None
+        if self.phase == "warmup":
+            if self.count > 30:
+                self.phase, self.t0 = "idle", now
+            return
+        if self.phase == "idle":
+            if dt is not None and cpu is not None:
+                self.times["idle"].append(dt)
+                self.cpu["idle"].append(cpu)
+            if now - self.t0 > self.seconds:
+                if v.neural is None:
+                    self._done(rp, "no neural render: the source is not a checkpoint")
+                    return
+                v.neural.resolution = self.resolution
+                self.phase, self.t0 = "rendering", now
+            return
+        if self.phase == "dragging":
+            if dt is not None and cpu is not None:
+                self.times["dragging"].append(dt)
+                self.cpu["dragging"].append(cpu)
+            self._nudge += 1
+            z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
+            v.state.set_joint(16, (0.0, 0.0, z))
+            if now - self.t0 > self.seconds:
+                self._done(rp)
+            return
+        nv = v.neural
+        if nv.busy and dt is not None and cpu is not None:
+            self.times["rendering"].append(dt)
+            self.cpu["rendering"].append(cpu)
+        elif not nv.busy:
+            self._nudge += 1
+            v.state.set_joint(16, v.state.joint_deg(16) + (0, 0, 2.0 if self._nudge % 2 else -2.0))
+        if now - self.t0 > self.seconds:
+            self.phase, self.t0, self._nudge = "dragging", now, 0
+
+    def _done(self, rp, error: str | None = None) -> None:
+        v = self.viewer
+        self.report["ok"] = error is None
+        if error:
+            self.report["error"] = error
+        self.report["frame_ms"] = self.times
+        self.report["window"] = list(v.size)
+        if v.neural is not None:
+            w = v.neural.worker
+            self.report["levels_delivered"] = len(w.delivered)
+            self.report["levels"] = [[int(a), int(b), float(c), float(d), [int(x) for x in e]]
+                                     for a, b, c, d, e in v.neural.history]
+            self.report["resolution"] = self.resolution
+            f = v.neural.frame
+            self.report["last_level"] = None if f is None else {
+                "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2])}
+        self.report["frame_cpu_ms"] = self.cpu
+        self.report["summary"] = {k: _stats(t) for k, t in self.times.items() if t}
+        self.report["summary_cpu"] = {k: _stats(t) for k, t in self.cpu.items() if t}
+        rp.app_shall_exit = True
+
+
+def _stats(ms: list[float]) -> dict:
+    a = np.asarray(ms)
+    return {"frames": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)),
+            "max": float(a.max())}
+
+
+def make_driver(name: str, viewer, rp) -> Driver:
+    """The driver for ``--script NAME``: an engine script or ``bench[:SECONDS[:RES]]``."""
+    from texvocab.errors import TexvocabError
+
+    if name.startswith("bench"):
+        parts = name.split(":")
+        seconds = float(parts[1]) if len(parts) > 1 else 8.0
+        res = int(parts[2]) if len(parts) > 2 else 256
+        return BenchDriver(viewer, rp, seconds, res)
+    if name not in ENGINE_SCRIPTS:
+        raise TexvocabError(f"--script {name!r}: expected one of {sorted(ENGINE_SCRIPTS)} or "
+                            "bench[:SECONDS[:RESOLUTION]]")
+    return EngineDriver(name, viewer, rp)

@@ -1,0 +1,106 @@
+"""The package layout: layers in data-flow order (import-linter), a light top-level
+import, the public API the viewer uses, the paper's equation numbering."""
+import ast
+import re
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+
+
+def test_import_contracts_hold():
+    """Each texvocab layer imports only from those below it; app only texvocab.pipeline."""
+    exe = Path(sys.executable).with_name("lint-imports")
+    r = subprocess.run([str(exe), "--no-cache"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+    assert "2 kept, 0 broken" in r.stdout
+
+
+def test_contract_lists_every_subpackage():
+    layers = PYPROJECT["tool"]["importlinter"]["contracts"][0]["layers"]
+    subpackages = {f"texvocab.{p.name}" for p in (ROOT / "texvocab").iterdir()
+                   if (p / "__init__.py").is_file()}
+    assert subpackages == {name for name in layers if name != "texvocab.errors"}
+
+
+def test_at_most_ten_modules_at_the_top_of_the_package():
+    top = [p.name for p in (ROOT / "texvocab").glob("*.py")]
+    assert len(top) <= 10, top
+
+
+def test_packages_listed_for_the_wheel_are_the_folders():
+    listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for pkg in ("texvocab", "app")
+             for p in (ROOT / pkg).rglob("__init__.py") if "__pycache__" not in p.parts}
+    mapped = set(PYPROJECT["tool"]["setuptools"]["package-dir"])
+    assert listed == found | mapped, listed ^ (found | mapped)
+
+
+def test_importing_texvocab_and_its_public_api_loads_neither_torch_nor_gl():
+    code = ("import sys, texvocab, texvocab.pipeline, texvocab.errors\n"
+            "heavy = [m for m in ('torch', 'moderngl', 'OpenGL', 'pyrender', 'imgui_bundle')"
+            " if m in sys.modules]\nprint(','.join(heavy))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == ""
+
+
+def test_every_public_name_resolves():
+    import texvocab.pipeline as api
+
+    for name in api.__all__:
+        assert getattr(api, name) is not None, name
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        api.nope  # noqa: B018
+
+
+def _docstrings():
+    for path in sorted((ROOT / "texvocab").rglob("*.py")) + sorted((ROOT / "app").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+                doc = ast.get_docstring(node)
+                if doc:
+                    yield path.relative_to(ROOT), doc
+
+
+def test_docstrings_cite_the_papers_own_equation_numbers_and_nothing_outside_the_repo():
+    """The paper numbers its equations 1-10 in LaTeX source order (README's paper map);
+    a LaTeX label (eqA, eqNA0, ...) or a path outside the repository means nothing to a
+    reader of the installed package."""
+    bad = []
+    for path, doc in _docstrings():
+        for n in re.findall(r"\bEqs?\. ?(\d+)", doc):
+            if not 1 <= int(n) <= 10:
+                bad.append(f"{path}: Eq. {n}")
+        if re.search(r"\beq(A|NA\d|:\w+)\b|Eq\. ?[A-Z]\b|shared/", doc):
+            bad.append(f"{path}: {doc[:80]!r}")
+    assert not bad, bad
+
+
+def test_readme_paper_map_names_functions_that_exist():
+    """Every `module.function` in README's equation table resolves."""
+    import importlib
+
+    text = (ROOT / "README.md").read_text()
+    table = text[text.index("### The paper's equations"):].split("\n## ")[0]
+    refs = re.findall(r"`(texvocab\.[\w.]+)`", table)
+    assert len(refs) >= 10
+    for ref in refs:
+        parts = ref.split(".")
+        cut = 1
+        while cut < len(parts):
+            try:
+                importlib.import_module(".".join(parts[:cut + 1]))
+            except ImportError:
+                break
+            cut += 1
+        obj = importlib.import_module(".".join(parts[:cut]))
+        for name in parts[cut:]:
+            obj = getattr(obj, name)

@@ -1,0 +1,118 @@
+"""``texvocab synth`` and capture-related subcommands."""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+
+def add_synth_parser(sub, add_smpl) -> None:
+    p = sub.add_parser(
+        "synth", help="render a synthetic multi-view capture with ground truth",
+        description="Render the default body (or --smpl) wearing procedural, pose-dependent "
+                    "clothing from a ring of cameras, written as a ZJU-MoCap (default) or "
+                    "THUman4.0 capture folder. With --poses, render any pose sequence "
+                    "(novel poses); with --like, reuse another synthetic capture's cameras "
+                    "and settings so the images are its ground truth.")
+    p.add_argument("out", help="capture folder to create")
+    p.add_argument("--layout", choices=("zju", "thuman"), default="zju")
+    p.add_argument("--motion", choices=("default", "compositional"), default="default",
+                   help="default: walk, arm raises, squat, twist, random poses (72 training "
+                        "frames), then 30 novel frames of the same kinds; compositional: "
+                        "five whole-body combinations of part motions train, and 30 novel "
+                        "frames recombine those part poses in ways never seen together "
+                        "(the body-part vocabulary's case; README, 'Captures')")
+    p.add_argument("--poses", metavar="FILE.npz", default=None,
+                   help="poses (T, 24, 3) or (T, 72) [+ trans (T, 3)] instead of the default "
+                        "procedural motion")
+    p.add_argument("--like", metavar="CAPTURE", default=None,
+                   help="copy cameras and settings from this synthetic capture")
+    p.add_argument("--frames", type=int, default=None,
+                   help="use only the first N frames of the motion")
+    p.add_argument("--train-frames", type=int, default=None,
+                   help="leading frames used for training (default: the motion's training "
+                        "part; with --poses: all frames, or none with --like, i.e. a "
+                        "novel-pose ground-truth set)")
+    p.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
+    p.add_argument("--ring-views", type=int, default=8)
+    p.add_argument("--raised-views", type=int, default=2)
+    p.add_argument("--texture-size", type=int, default=1024)
+    p.add_argument("--seed", type=int, default=0, help="motion seed (default 0)")
+    p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    add_smpl(p)
+    p.set_defaults(func=cmd_synth)
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    from texvocab.body import load_body
+    from texvocab.capture.motion import default_motion
+    from texvocab.capture.synth import SynthSettings, load_pose_file, settings_of, synthesize
+
+    body = load_body(args.smpl)
+    cameras = None
+    if args.like:
+        from texvocab.capture import open as open_capture
+
+        settings, cameras = settings_of(open_capture(args.like, body=body))
+    else:
+        settings = SynthSettings(ring_views=args.ring_views, raised_views=args.raised_views,
+                                 size=args.size, texture_size=args.texture_size, seed=args.seed)
+    if args.poses:
+        poses, trans = load_pose_file(args.poses)
+        num_train = 0 if args.like else len(poses)
+    elif args.motion == "compositional":
+        from texvocab.capture.compositional import compositional_motion
+
+        poses, trans, num_train = compositional_motion(args.seed)
+    else:
+        poses, trans, num_train = default_motion(args.seed)
+    if args.frames:
+        poses, trans = poses[: args.frames], trans[: args.frames]
+    if args.train_frames is not None:
+        num_train = args.train_frames
+    num_train = min(num_train, len(poses))
+    t0 = time.perf_counter()
+    out = synthesize(args.out, poses, trans, num_train, body, settings, args.layout, cameras,
+                     overwrite=args.overwrite, body_source=args.smpl or "default")
+    n_views = len(cameras) if cameras else settings.ring_views + settings.raised_views
+    print(f"wrote {len(poses)} frames x {n_views} views ({args.layout} layout, "
+          f"{num_train} training frames) to {Path(out).resolve()} in "
+          f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def add_sheet_parser(sub) -> None:
+    p = sub.add_parser("contact-sheet", help="write a views x frames PNG of a capture",
+                       description="Tile a capture's images (rows: views, columns: frames) "
+                                   "into one PNG to look at.")
+    p.add_argument("capture", help="capture folder (ZJU-MoCap or THUman4.0 layout)")
+    p.add_argument("--out", default=None, help="PNG path (default: CAPTURE/contact_sheet.png)")
+    p.add_argument("--frames", default=None,
+                   help="comma-separated frame indices (default: 8 spread over the sequence)")
+    p.add_argument("--masks", action="store_true", help="tile the masks instead of images")
+    p.set_defaults(func=cmd_sheet)
+
+
+def cmd_sheet(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from texvocab.capture import open as open_capture
+    from texvocab.io.images import contact_sheet, save_png
+
+    cap = open_capture(args.capture)
+    if args.frames:
+        frames = [int(f) for f in args.frames.split(",")]
+    else:
+        frames = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
+    bad = [f for f in frames if not 0 <= f < cap.num_frames]
+    if bad:
+        from texvocab.errors import TexvocabError
+
+        raise TexvocabError(f"--frames {bad}: the capture has frames 0..{cap.num_frames - 1}")
+    get = (lambda v, t: cap.mask(v, t).astype(np.float32)) if args.masks else cap.image
+    rows = [[get(v, t) for t in frames] for v in range(cap.num_views)]
+    labels = [f"{'train' if t < cap.num_train else 'novel'} {t}" for t in frames]
+    out = Path(args.out) if args.out else Path(args.capture) / "contact_sheet.png"
+    save_png(out, contact_sheet(rows, [c.name for c in cap.cameras], labels))
+    print(f"contact sheet ({cap.num_views} views x {len(frames)} frames): {out.resolve()}")
+    return 0

@@ -1,0 +1,1 @@
+"""Files in and out: images, restricted unpickling, weights, checkpoints, asset specs, the GL platform."""

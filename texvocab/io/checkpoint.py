@@ -1,0 +1,47 @@
+"""Checkpoints: written atomically (temp file + rename), read with ``weights_only=True``
+(tensors and plain Python containers only: loading one never runs code).
+
+Layout (see assets_spec/checkpoint.md): {"format": "texvocab-checkpoint", "version": 1,
+"step": int, "settings": dict, "capture": str, "num_train": int, "model": state_dict,
+"optimizer": state_dict, "vocab": {...}, "rng": {"torch": ByteTensor}}.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from texvocab.errors import AssetError
+from texvocab.io.images import atomic_write_bytes
+
+FORMAT = "texvocab-checkpoint"
+VERSION = 1
+REQUIRED = ("format", "version", "step", "settings", "model")
+
+
+def save_checkpoint(path: str | Path, payload: dict) -> Path:
+    """Atomically write ``payload`` (plus format/version tags) to ``path``."""
+    data = {"format": FORMAT, "version": VERSION, **payload}
+    return atomic_write_bytes(path, lambda tmp: torch.save(data, tmp))
+
+
+def load_checkpoint(path: str | Path) -> dict:
+    """Read a checkpoint safely; one clear error for anything that is not one."""
+    path = Path(path)
+    if not path.is_file():
+        raise AssetError(f"checkpoint not found: {path}")
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # unpickling refused / truncated / not a torch file
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise AssetError(f"{path}: not a loadable texvocab checkpoint ({msg})") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise AssetError(f"{path}: not a texvocab checkpoint (no format tag {FORMAT!r}); see "
+                         "assets_spec/checkpoint.md")
+    missing = [k for k in REQUIRED if k not in data]
+    if missing:
+        raise AssetError(f"{path}: checkpoint lacks {missing}; see assets_spec/checkpoint.md")
+    if data["version"] > VERSION:
+        raise AssetError(f"{path}: checkpoint version {data['version']} is newer than this "
+                         f"texvocab understands ({VERSION})")
+    return data

@@ -1,0 +1,1 @@
+"""TexVocab itself: texture maps, vocabulary, encoder, pose feature, avatar field."""

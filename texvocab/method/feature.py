@@ -1,0 +1,177 @@
+"""The pose feature f(Θ, x) of Sec. 3.4:
+
+    f(Θ_t, x) = Σ_p Ω(x, p) · h(x_uv, F_{p,t}),   F_{p,t} = Σ_k ŵ_{p,k} F̂_k   (Eqs. 5, 7–9)
+
+x is projected onto the posed body (observation space, as the paper does, not x_c) to
+get its UV x_uv and interpolated skinning weights ω, which give the attention Ω. Since
+bilinear sampling h is linear in the feature map, h(x_uv, Σ_k ŵ F̂_k) = Σ_k ŵ h(x_uv, F̂_k):
+we never blend whole maps. Per pose, the vocabulary query turns into one coefficient per
+(part, training frame); per point, Ω mixes those into one coefficient per frame, and each
+referenced frame's features are sampled only at the points whose coefficient is non-zero
+— parts with zero attention cost nothing. The per-pose work (posed mesh, surface index,
+query, feature maps) lives in a :class:`PoseContext` reused by every ray of a frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from texvocab.body.parts import part_membership
+from texvocab.geometry.surface import SurfaceIndex
+from texvocab.geometry.uv import uv_to_grid
+
+
+def sample_maps(maps: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
+    """Bilinear samples h(uv, F) of one map per point.
+
+    Args:
+        maps: (C, H, W) feature map (row 0 = v = 1, see texvocab.geometry.uv); uv: (N, 2).
+
+    Returns:
+        (N, C). Border texels extend outwards (texture maps fill unused atlas texels with
+        the nearest chart texel, so seams never blend in background).
+    """
+    grid = uv_to_grid(uv.to(maps.dtype)).view(1, 1, -1, 2)
+    out = F.grid_sample(maps[None], grid, mode="bilinear", padding_mode="border",
+                        align_corners=False)
+    return out[0, :, 0].T
+
+
+@dataclass
+class PoseContext:
+    """Everything about one pose that every ray of a frame shares."""
+
+    pose: torch.Tensor  # (24, 3)
+    vertices: torch.Tensor  # (V, 3) posed
+    transforms: torch.Tensor  # (J, 4, 4) rest -> posed per joint (inverse LBS uses them)
+    index: SurfaceIndex
+    frames: torch.Tensor  # (U,) training frames the pose's keys point to
+    part_coef: torch.Tensor  # (P, U) Σ_k ŵ_{p,k} over keys of part p pointing to frame u
+    features: torch.Tensor  # (U, C, H, W) feature maps of those frames
+    stats: dict = field(default_factory=dict)
+
+
+@dataclass
+class FeatureOutput:
+    features: torch.Tensor  # (N, C) f(Θ, x); zero for invalid points
+    uv: torch.Tensor  # (N, 2)
+    skin_weights: torch.Tensor  # (N, J) of the closest surface point
+    distance: torch.Tensor  # (N,) signed distance to the posed body (negative inside)
+    closest: torch.Tensor  # (N, 3) closest point on the posed body
+    valid: torch.Tensor  # (N,) bool: within max_distance of the body
+
+
+class PoseFeature(nn.Module):
+    """f(Θ, x) for a body, a vocabulary, the training texture maps and an encoder.
+
+    Args:
+        body: :class:`~texvocab.body.BodyModel` with UVs.
+        vocab: :class:`~texvocab.method.vocab.Vocabulary` built from the same training frames.
+        textures: (T, 3, S, S) texture maps U_t in [0, 1], indexed like the vocabulary's
+            key frames.
+        encoder: a :class:`~texvocab.method.encoder.TextureEncoder`; a frozen one's feature maps
+            are computed once per frame and cached, a trainable one's on every context.
+        betas: (1, S) the subject's shape (``Capture.shape()``), or None: every pose is
+            posed with it, as the texture maps were.
+    """
+
+    def __init__(self, body, vocab, textures: torch.Tensor, encoder: nn.Module,
+                 betas: torch.Tensor | None = None):
+        super().__init__()
+        self.body = body
+        self.betas = None if betas is None else torch.as_tensor(betas).reshape(1, -1)
+        self.vocab = vocab
+        self.encoder = encoder
+        self.register_buffer("textures", torch.as_tensor(textures, dtype=torch.float32))
+        self.register_buffer("membership", part_membership(vocab.part_joints,
+                                                           body.num_joints))
+        self._frozen_cache: dict[int, torch.Tensor] = {}
+
+    @property
+    def feature_dim(self) -> int:
+        return int(self.encoder.feature_dim)
+
+    def feature_maps(self, frames: torch.Tensor) -> torch.Tensor:
+        """(U, C, H, W) encoder features of the given training frames."""
+        if getattr(self.encoder, "trainable", True):
+            return self.encoder(self.textures[frames])
+        missing = [int(f) for f in frames if int(f) not in self._frozen_cache]
+        if missing:
+            with torch.no_grad():
+                feats = self.encoder(self.textures[missing])
+            self._frozen_cache.update(zip(missing, feats, strict=True))
+        return torch.stack([self._frozen_cache[int(f)] for f in frames])
+
+    def context(self, pose, trans=None) -> PoseContext:
+        """Per-pose work: posed body, its surface index, the vocabulary query, features."""
+        pose = torch.as_tensor(np.asarray(pose), dtype=torch.float32).reshape(24, 3)
+        trans = torch.zeros(3) if trans is None else torch.as_tensor(np.asarray(trans),
+                                                                     dtype=torch.float32)
+        posed = self.body.forward(pose[None], trans.reshape(1, 3), self.betas)
+        verts = posed.vertices[0]
+        index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy())
+        part_frames, part_weights, _ = self.vocab.query_tensors(pose.double())
+        if not part_frames:  # strategy "none": no vocabulary, no texture feature (zeros)
+            return PoseContext(pose, verts, posed.transforms[0], index,
+                               torch.zeros(0, dtype=torch.long), torch.zeros(0, 0),
+                               torch.zeros(0, self.feature_dim, 1, 1))
+        all_frames = torch.cat([f[0] for f in part_frames])
+        frames, inverse = torch.unique(all_frames, return_inverse=True)
+        coef = torch.zeros(self.vocab.num_parts, len(frames), dtype=torch.float64)
+        start = 0
+        for p, w in enumerate(part_weights):
+            k = w.shape[-1]
+            coef[p].index_add_(0, inverse[start:start + k], w[0])
+            start += k
+        return PoseContext(pose, verts, posed.transforms[0], index, frames, coef.float(),
+                           self.feature_maps(frames))
+
+    def forward(self, ctx: PoseContext, points: torch.Tensor,
+                max_distance: float | None = None) -> FeatureOutput:
+        """f(Θ, x) at points (N, 3) in the observation space of ``ctx``'s pose."""
+        proj = ctx.index.project(points.detach().double().cpu().numpy(), self.body.vt.numpy(),
+                                 self.body.ft.numpy(), self.body.weights.numpy(),
+                                 max_distance=max_distance)
+        ok = proj.face >= 0  # numpy mask for the numpy arrays (a one-element torch bool
+        valid = torch.from_numpy(ok)  # tensor would index numpy as the integer 0 or 1)
+        n = points.shape[0]
+        uv = torch.zeros(n, 2, dtype=points.dtype)
+        skin = torch.zeros(n, self.body.num_joints, dtype=points.dtype)
+        uv[valid] = torch.as_tensor(proj.uv[ok], dtype=points.dtype)
+        skin[valid] = torch.as_tensor(proj.weights[ok], dtype=points.dtype)
+        dist = torch.as_tensor(proj.distance, dtype=points.dtype)
+        closest = torch.zeros(n, 3, dtype=points.dtype)
+        closest[valid] = torch.as_tensor(proj.closest[ok], dtype=points.dtype)
+        total = skin.sum(-1, keepdim=True)
+        omega = (skin @ self.membership.to(skin)) / torch.where(total > 0, total,
+                                                                torch.ones_like(total))
+        coef = omega @ ctx.part_coef.to(omega)  # (N, U): Ω-weighted key weight per frame
+        feats = torch.zeros(n, ctx.features.shape[1], dtype=ctx.features.dtype)
+        sampled = 0
+        for u in range(coef.shape[1]):
+            idx = torch.nonzero(coef[:, u] > 0).squeeze(1)
+            if idx.numel() == 0:
+                continue  # no point attends to a part whose keys use this frame
+            h = sample_maps(ctx.features[u], uv[idx])
+            feats.index_add_(0, idx, h * coef[idx, u, None].to(h))
+            sampled += idx.numel()
+        ctx.stats = {"frames": int(coef.shape[1]), "samples": sampled, "points": n}
+        return FeatureOutput(feats.to(points.dtype), uv, skin, dist, closest, valid)
+
+
+def naive_pose_feature(model: PoseFeature, ctx: PoseContext, points: torch.Tensor) -> torch.Tensor:
+    """Reference: blend whole maps per part (Eq. 5), sample each at the projection's UV
+    (Eq. 7), Ω-weighted sum (Eqs. 8–9)."""
+    out = model(ctx, points)
+    omega = out.skin_weights @ model.membership.to(out.skin_weights)
+    omega = omega / out.skin_weights.sum(-1, keepdim=True).clamp(min=1e-12)
+    total = torch.zeros_like(out.features)
+    for p in range(ctx.part_coef.shape[0]):
+        blended = torch.einsum("u,uchw->chw", ctx.part_coef[p].to(ctx.features),
+                               ctx.features)
+        total = total + omega[:, p:p + 1] * sample_maps(blended, out.uv)
+    return total * out.valid[:, None]

@@ -1,0 +1,159 @@
+"""Texture maps U_t (Sec. 3.2, Eq. 2): every training view back-projected onto the posed
+body and gathered in the body's UV domain, averaged over views.
+
+Eq. 2 pairs each foreground pixel with the surface point (face f*, barycentrics u*, v*)
+that projects onto it. We rasterise the posed mesh in each view (face id + depth per
+pixel: the depth test means occluded surface receives nothing) and pair texels with
+pixels from the texel side: each covered texel is a surface point (its face and
+barycentrics are fixed by the UV layout), projected into the view; it takes the view's
+colour when the rasteriser says that pixel sees this very surface point (depth within
+``depth_tol``) and the pixel is foreground. This is Eq. 2's pixel↔surface pairing with
+bilinear resampling, and leaves no holes when the texture is finer than the image.
+
+Uncovered texels (no view saw them) keep coverage 0; their colour is copied from the
+nearest covered texel so the CNN sees no artificial black seams. Both the colour and the
+coverage are stored, so later stages can weight or mask by coverage.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from texvocab.capture.camera import sample_image
+from texvocab.geometry.raster import rasterize_mesh
+from texvocab.geometry.uv import texel_map
+from texvocab.io.images import atomic_write_bytes
+
+
+@dataclass
+class TexmapSettings:
+    """``size``: texture side in texels; ``views``: the camera views back-projected (the
+    training views: held-out views never enter a texture map; None: every view, for
+    tests and tools only); ``min_cos``: skip views seeing a texel at a more grazing angle
+    than this (cosine between surface normal and view ray); ``depth_tol``: metres a texel
+    may lie behind the rasterised surface and still count as visible."""
+
+    size: int = 256
+    views: tuple[int, ...] | None = None
+    min_cos: float = 0.15
+    depth_tol: float = 0.01
+
+
+def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    tri = verts[faces]
+    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    vn = np.zeros_like(verts)
+    for k in range(3):
+        np.add.at(vn, faces[:, k], fn)
+    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
+
+
+def build_texture_map(capture, frame: int, settings: TexmapSettings | None = None,
+                      views: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """U_t of one frame from ``views`` (default ``settings.views``; None there: all).
+
+    Returns:
+        texture (S, S, 3) float32 in [0, 1] (uncovered texels filled from the nearest
+        covered one), coverage (S, S) float32: number of views that saw each texel.
+    """
+    s = settings or TexmapSettings()
+    body = capture.body
+    tmap = texel_map(body, s.size)
+    faces = body.faces.numpy()
+    verts = capture.posed_body(frame).vertices[0].double().numpy()
+    points = tmap.points(verts, faces)
+    normals = tmap.interpolate(_vertex_normals(verts, faces), faces)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    acc = np.zeros((len(points), 3))
+    count = np.zeros(len(points))
+    views = views if views is not None else settings_views(s, capture)
+    for v in views:
+        cam = capture.cameras[v]
+        pix, z = cam.project(points)
+        to_cam = cam.center - points
+        cos = np.einsum("nc,nc->n", normals, to_cam) / np.linalg.norm(to_cam, axis=1)
+        raster = rasterize_mesh(torch.as_tensor(verts), body.faces, cam)
+        zbuf = raster.depth.numpy()
+        xi, yi = np.rint(pix[:, 0]).astype(int), np.rint(pix[:, 1]).astype(int)
+        inside = (xi >= 0) & (xi < cam.width) & (yi >= 0) & (yi < cam.height) & (z > 0)
+        ok = inside & (cos > s.min_cos)
+        ok[ok] &= z[ok] <= zbuf[yi[ok], xi[ok]] + s.depth_tol  # depth test: occluded -> nothing
+        mask = capture.mask(v, frame)
+        ok[ok] &= mask[yi[ok], xi[ok]]  # foreground pixels only
+        if not ok.any():
+            continue
+        # texels whose nearest pixel is inside may sit up to half a pixel past the outer
+        # pixel centres; clamp there so bilinear sampling never blends in the zero outside
+        x = np.clip(pix[ok, 0], 0, cam.width - 1)
+        y = np.clip(pix[ok, 1], 0, cam.height - 1)
+        acc[ok] += sample_image(capture.image(v, frame), x, y)
+        count[ok] += 1
+    color = acc / np.maximum(count, 1)[:, None]
+    if (count > 0).any():
+        # unseen texels take the nearest seen texel's colour (in UV space)
+        seen = np.zeros((s.size, s.size), bool)
+        seen[tmap.covered] = count > 0
+        from scipy import ndimage
+
+        img = tmap.to_image(color, fill=False)
+        _, nearest = ndimage.distance_transform_edt(~seen, return_indices=True)
+        texture = img[nearest[0], nearest[1]]
+    else:
+        texture = np.zeros((s.size, s.size, 3))
+    return texture.astype(np.float32), tmap.to_image(count.astype(np.float32), fill=False)
+
+
+def settings_views(settings: TexmapSettings, capture) -> list[int]:
+    """The views a texture map is built from (every view when ``settings.views`` is None)."""
+    return list(range(capture.num_views)) if settings.views is None else list(settings.views)
+
+
+def cache_dir(capture, settings: TexmapSettings) -> Path:
+    """Where ``texvocab prepare`` keeps the texture maps of a capture: keyed by texture
+    size and by the set of views back-projected, so maps built from other views (a cache
+    from before held-out views were excluded, or another train/eval split) are never
+    reused."""
+    views = "-".join(str(v) for v in settings_views(settings, capture))
+    return Path(capture.root) / "texvocab_cache" / f"texmaps_{settings.size}_views_{views}"
+
+
+def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:
+    return cache_dir(capture, settings) / f"frame_{capture.frame_ids[frame]:06d}.npz"
+
+
+def load_texture_map(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    with np.load(path, allow_pickle=False) as npz:
+        return npz["texture"].astype(np.float32) / 255.0, npz["coverage"].astype(np.float32)
+
+
+def prepare_texture_maps(capture, settings: TexmapSettings | None = None,
+                         frames=None, progress: bool = True) -> list[Path]:
+    """Build and cache U_t for every training frame; resumable (existing files are kept).
+
+    Returns the cache file of each frame, in frame order.
+    """
+    s = settings or TexmapSettings()
+    frames = list(capture.train_frames if frames is None else frames)
+    paths = [texture_map_path(capture, t, s) for t in frames]
+    todo = [(t, p) for t, p in zip(frames, paths, strict=True) if not p.is_file()]
+    it = todo
+    if progress and todo:
+        from tqdm import tqdm
+
+        it = tqdm(todo, desc=f"texture maps {s.size}²", unit="frame")
+    for t, path in it:
+        texture, coverage = build_texture_map(capture, t, s)
+        tex8 = (np.clip(texture, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+        def write(tmp, tex8=tex8, coverage=coverage):
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, texture=tex8, coverage=coverage.astype(np.uint8))
+                fh.flush()
+                os.fsync(fh.fileno())
+
+        atomic_write_bytes(path, write)
+    return paths

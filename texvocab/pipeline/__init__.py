@@ -1,0 +1,68 @@
+"""Runs of the method (settings, training, evaluation, loading an avatar) and the public
+API that the viewer (``app/``), the benchmarks and users' scripts import.
+
+``from texvocab.pipeline import NAME`` resolves NAME lazily (PEP 562): importing this
+package loads neither torch nor GL until a name is used. The import contract in
+pyproject.toml (``[tool.importlinter]``) holds ``app`` to this module and
+:mod:`texvocab.errors`.
+"""
+from __future__ import annotations
+
+import importlib
+
+#: public name -> (module, attribute there)
+_API: dict[str, tuple[str, str]] = {
+    # body model (data flow step 1)
+    "load_body": ("texvocab.body", "load_body"),
+    "BODY_PARTS": ("texvocab.body.parts", "BODY_PARTS"),
+    "JOINT_NAMES": ("texvocab.body.parts", "JOINT_NAMES"),
+    "part_attention": ("texvocab.body.parts", "part_attention"),
+    "JOINT_LIMITS_DEG": ("texvocab.body.limits", "JOINT_LIMITS_DEG"),
+    "POSE_PRESETS": ("texvocab.body.poses", "PRESETS"),
+    "pose_preset": ("texvocab.body.poses", "preset"),
+    "forward_kinematics": ("texvocab.body.lbs", "forward_kinematics"),
+    "corrective_pose_feature": ("texvocab.body.lbs", "pose_feature"),
+    "rotvec_to_rotmat": ("texvocab.geometry.rotations", "rotvec_to_rotmat"),
+    "quat_to_rotvec": ("texvocab.geometry.rotations", "quat_to_rotvec"),
+    # captures (step 2)
+    "Camera": ("texvocab.capture", "Camera"),
+    "look_at": ("texvocab.capture.camera", "look_at"),
+    "open_capture": ("texvocab.capture", "open"),
+    "load_pose_file": ("texvocab.capture.synth", "load_pose_file"),
+    # the method (steps 3-6)
+    "Vocabulary": ("texvocab.method.vocab", "Vocabulary"),
+    "VocabTexture": ("texvocab.method.vocab_texture", "VocabTexture"),
+    # rendering (step 7)
+    "ShellGeometry": ("texvocab.render", "ShellGeometry"),
+    "render_image": ("texvocab.render", "render_image"),
+    "progressive_render": ("texvocab.render", "progressive_render"),
+    # runs
+    "Settings": ("texvocab.pipeline.settings", "Settings"),
+    "RENDER_PRESETS": ("texvocab.pipeline.settings", "PRESETS"),
+    "march_settings": ("texvocab.pipeline.settings", "march_settings"),
+    "render_overrides": ("texvocab.pipeline.settings", "render_overrides"),
+    "load_textures": ("texvocab.pipeline.train", "load_textures"),
+    "Avatar": ("texvocab.pipeline.avatar", "Avatar"),
+    "load_avatar": ("texvocab.pipeline.avatar", "load_avatar"),
+    "checkpoint_capture_path": ("texvocab.pipeline.avatar", "checkpoint_capture_path"),
+    # files
+    "save_png": ("texvocab.io.images", "save_png"),
+    "to_uint8": ("texvocab.io.images", "to_uint8"),
+    "contact_sheet": ("texvocab.io.images", "contact_sheet"),
+    "atomic_write_bytes": ("texvocab.io.images", "atomic_write_bytes"),
+}
+
+__all__ = sorted(_API)
+
+
+def __getattr__(name: str):
+    if name not in _API:
+        raise AttributeError(f"module 'texvocab.pipeline' has no attribute {name!r}")
+    module, attr = _API[name]
+    value = getattr(importlib.import_module(module), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_API))

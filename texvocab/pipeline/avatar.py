@@ -1,0 +1,61 @@
+"""A trained avatar loaded back from its checkpoint: the model rebuilt on its capture, the
+settings it was trained with, and the capture seen with the checkpoint's training split.
+
+Nothing the caller passes is changed: the capture returned is a shallow copy whose
+``num_train`` is the checkpoint's (the split its vocabulary and texture maps were built
+from), so evaluation and the viewer see the frames the avatar was trained on as training
+frames, whatever split the folder's metadata gives today.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from pathlib import Path
+
+from texvocab.errors import TexvocabError
+from texvocab.io.checkpoint import load_checkpoint
+from texvocab.method.field import AvatarField
+from texvocab.method.vocab import Vocabulary
+from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.train import build_model, load_textures
+
+
+@dataclass
+class Avatar:
+    """``model`` (eval mode), ``settings``, the raw ``checkpoint`` dict and ``capture`` (a
+    copy of the given capture with the checkpoint's training split)."""
+
+    model: AvatarField
+    settings: Settings
+    checkpoint: dict
+    capture: object
+
+    @property
+    def step(self) -> int:
+        return int(self.checkpoint["step"])
+
+
+def checkpoint_capture_path(checkpoint: str | Path) -> Path:
+    """The capture folder a checkpoint was trained on; TexvocabError when it is gone."""
+    ck = load_checkpoint(checkpoint)
+    cap_path = Path(str(ck.get("capture", "")))
+    if not str(ck.get("capture", "")) or not cap_path.is_dir():
+        raise TexvocabError(f"{checkpoint}: its capture folder {str(cap_path)!r} is missing; "
+                            "the avatar needs the capture it was trained on")
+    return cap_path
+
+
+def load_avatar(checkpoint: str | Path, capture, progress: bool = True) -> Avatar:
+    """Rebuild the avatar of ``checkpoint`` on ``capture`` (the one it was trained on)."""
+    ck = load_checkpoint(checkpoint)
+    settings = Settings.from_dict(ck["settings"])
+    capture = copy.copy(capture)
+    capture.num_train = int(ck.get("num_train", capture.num_train))
+    textures = load_textures(capture, settings, progress)
+    model = build_model(capture, settings, textures, Vocabulary.from_dict(ck["vocab"]))
+    missing, unexpected = model.load_state_dict(ck["model"], strict=False)
+    if unexpected or [k for k in missing if not k.startswith("pose_feature.textures")]:
+        raise TexvocabError(f"{checkpoint}: weights do not fit this model (missing "
+                            f"{missing[:3]}, unexpected {unexpected[:3]})")
+    model.eval()
+    return Avatar(model, settings, ck, capture)

@@ -1,0 +1,177 @@
+"""One settings object for every knob that trades speed for accuracy (and the rest of a
+training run). Each field has a documented default; the CLI maps ``--set key=value``
+onto it and checkpoints store it as a plain dict.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+
+from texvocab.body.parts import STRATEGIES
+from texvocab.errors import TexvocabError
+from texvocab.method.field import FieldSettings
+from texvocab.render import MarchSettings
+
+
+@dataclass
+class Settings:
+    """Knobs, grouped. Speed/accuracy trade-offs are marked (S/A)."""
+
+    # data
+    texture_size: int = 256  # (S/A) texels per side of U_t; encoder cost grows with its square
+    train_views: tuple[int, ...] | None = None  # None: every view not in eval_views
+    eval_views: tuple[int, ...] = (1, 5)  # held-out views for evaluation
+    # vocabulary (Sec. 3.3-3.4)
+    strategy: str = "part"  # part | joint | global (the paper's ablation) | none (no texture)
+    num_keys: int = 20  # (S/A) M keys per part
+    k: int = 3  # (S/A) K nearest keys blended per part
+    weighting: str = "paper"  # paper (J_p - d) | inverse (1/d)
+    encoder: str = "auto"  # (S/A) auto | resnet34 | resnet34-scratch | small
+    # field
+    field: FieldSettings = field(default_factory=FieldSettings)
+    # rendering (S/A)
+    coarse_samples: int = 18  # per 2δ of in-shell path (see MarchSettings)
+    fine_samples: int = 8
+    early_stop_eps: float = 1e-3
+    image_scale: float = 1.0  # render at this fraction of the capture's resolution
+    shell_width: float | None = None  # marcher δ (m); None: the field's shell_width
+    # training
+    iterations: int = 2000
+    rays_per_batch: int = 1024
+    fg_fraction: float = 0.8  # share of rays drawn inside the mask
+    lr: float = 5e-4
+    lambda_color: float = 1.0
+    lambda_mask: float = 0.1
+    lambda_eikonal: float = 0.05
+    lambda_perceptual: float = 0.05  # used only when LPIPS weights are present
+    patch_size: int = 24  # square patches for the perceptual term
+    checkpoint_every: int = 250
+    max_minutes: float | None = None  # stop (with a checkpoint) after this much training time
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        """Refuse values the method cannot run with, naming the setting and the range."""
+        checks = [
+            ("texture_size", self.texture_size >= 8, ">= 8"),
+            ("num_keys", self.num_keys >= 1, ">= 1"),
+            ("k", self.k >= 1, ">= 1"),
+            ("strategy", self.strategy in STRATEGIES, "part, joint, global or none"),
+            ("weighting", self.weighting in ("paper", "inverse"), "paper or inverse"),
+            ("coarse_samples", self.coarse_samples >= 1, ">= 1"),
+            ("fine_samples", self.fine_samples >= 0, ">= 0"),
+            ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),
+            ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
+            ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
+            ("iterations", self.iterations >= 0, ">= 0"),
+            ("rays_per_batch", self.rays_per_batch >= 1, ">= 1"),
+            ("fg_fraction", 0 <= self.fg_fraction <= 1, "in [0, 1]"),
+            # float32 VolSDF density and its gradients break down for beta below ~1e-17
+            ("field.beta_min", self.field.beta_min >= 1e-8, ">= 1e-8"),
+            ("field.beta_init", self.field.beta_init >= self.field.beta_min, ">= field.beta_min"),
+            ("field.shell_width", 0 < self.field.shell_width <= 1, "in (0, 1] m"),
+        ]
+        for name, ok, expected in checks:
+            if not ok:
+                value = self.field.to_dict()[name[6:]] if name.startswith("field.") else getattr(
+                    self, name)
+                raise TexvocabError(f"setting {name}={value!r}: expected {expected}")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["train_views"] = None if self.train_views is None else list(self.train_views)
+        d["eval_views"] = list(self.eval_views)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Settings:
+        d = dict(d)
+        d["field"] = FieldSettings(**d.get("field", {}))
+        for key in ("train_views", "eval_views"):
+            if d.get(key) is not None:
+                d[key] = tuple(d[key])
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise TexvocabError(f"unknown settings {sorted(unknown)}")
+        return cls(**d)
+
+    def with_overrides(self, items: list[str]) -> Settings:
+        """Apply ``key=value`` strings (``field.hidden=64`` reaches nested settings)."""
+        d = self.to_dict()
+        for item in items:
+            key, sep, raw = item.partition("=")
+            if not sep:
+                raise TexvocabError(f"--set {item!r}: expected key=value")
+            target, name = d, key
+            if "." in key:
+                head, name = key.split(".", 1)
+                if head not in d or not isinstance(d[head], dict):
+                    raise TexvocabError(f"--set {item!r}: no settings group {head!r}")
+                target = d[head]
+            if name not in target:
+                raise TexvocabError(f"--set {item!r}: unknown setting {key!r}")
+            target[name] = _parse(raw, target[name], key)
+        return Settings.from_dict(d)
+
+
+def _parse(raw: str, current, key: str):
+    try:
+        if isinstance(current, bool):
+            if raw.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(raw)
+            return raw.lower() in ("true", "1")
+        if isinstance(current, int):
+            return int(raw)
+        if isinstance(current, float):
+            return float(raw)
+        if raw.lower() == "none" and (current is None or key.endswith("views")):
+            return None
+        if isinstance(current, list) or "views" in key:
+            return [int(v) for v in raw.split(",") if v]
+        if current is None:
+            return float(raw)
+    except ValueError:
+        raise TexvocabError(f"--set {key}={raw}: expected a {type(current).__name__}") from None
+    return raw
+
+
+# Render knobs: a preset or ``--set`` may change these on a trained checkpoint (the rest
+# is baked into the weights). See bench/tradeoff.py for what each costs and buys.
+RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps", "shell_width")
+
+# Chosen from bench/tradeoff.py on the default synthetic capture (README, "Presets").
+PRESETS: dict[str, dict] = {
+    "fast": {"shell_width": 0.025, "coarse_samples": 6, "fine_samples": 2, "early_stop_eps": 1e-2},
+    "balanced": {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4},
+    "quality": {"coarse_samples": 36, "fine_samples": 16, "early_stop_eps": 1e-4},
+}
+
+
+def preset_overrides(name: str, render_only: bool = False) -> list[str]:
+    """``key=value`` strings of preset ``name`` (only the render knobs if ``render_only``)."""
+    if name not in PRESETS:
+        raise TexvocabError(f"preset {name!r}: expected one of {', '.join(PRESETS)}")
+    return [f"{k}={v}" for k, v in PRESETS[name].items() if not render_only or k in RENDER_KNOBS]
+
+
+def render_overrides(settings: Settings, preset: str | None, items: list[str]) -> Settings:
+    """A trained checkpoint's settings with a preset and ``--set`` items applied; only the
+    render knobs may change (the rest is baked into the weights)."""
+    bad = [i for i in items if i.partition("=")[0] not in RENDER_KNOBS]
+    if bad:
+        raise TexvocabError(f"--set {bad[0]!r}: only render knobs ({', '.join(RENDER_KNOBS)}) "
+                            "can change on a trained checkpoint")
+    pre = preset_overrides(preset, render_only=True) if preset else []
+    return settings.with_overrides(pre + list(items))
+
+
+def march_settings(s: Settings, training: bool = False) -> MarchSettings:
+    """Marcher knobs from the settings. Training evaluates all coarse samples in one field
+    call (no scouting, one segment): each call's backward through the texture-feature
+    sampling costs a dense pass over the feature maps, so few large calls are far cheaper
+    than the many small ones that early termination favours at render time."""
+    width = s.field.shell_width if training or s.shell_width is None else s.shell_width
+    m = MarchSettings(shell_width=width, coarse_samples=s.coarse_samples,
+                      fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps)
+    if training:
+        m.segment, m.scout_threshold = m.max_coarse, None
+    return m

@@ -1,0 +1,243 @@
+"""``texvocab train``: fit the avatar to a capture (Sec. 3.5).
+
+Each step picks a training frame and views, draws rays inside the shell around the posed
+body (``fg_fraction`` of them inside the mask), renders them with the coarse-to-fine
+marcher and minimises λ_c·MSE(colour) + λ_m·MAE(opacity, mask) + λ_e·eikonal
+(+ λ_p·LPIPS on patches when the VGG weights are present; otherwise off, said once).
+Checkpoints are written atomically every ``checkpoint_every`` steps and at the end;
+``--resume`` continues from the last one with the same random stream, so a killed run
+ends with the same weights as an uninterrupted one.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from texvocab.errors import TexvocabError
+from texvocab.geometry.raster import rasterize_mesh
+from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
+from texvocab.method.encoder import build_encoder
+from texvocab.method.feature import PoseFeature
+from texvocab.method.field import AvatarField
+from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
+from texvocab.method.vocab import Vocabulary
+from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.render import ShellGeometry, render_rays
+
+log = logging.getLogger("texvocab")
+
+
+def train_views(capture, s: Settings) -> list[int]:
+    if s.train_views is not None:
+        views = list(s.train_views)
+    else:
+        views = [v for v in range(capture.num_views) if v not in s.eval_views]
+    bad = [v for v in views if not 0 <= v < capture.num_views]
+    if bad or not views:
+        raise TexvocabError(f"train views {views}: the capture has views 0..{capture.num_views - 1}")
+    return views
+
+
+def texmap_settings(capture, s: Settings) -> TexmapSettings:
+    """Texture-map settings of a run: its texture size and its training views."""
+    return TexmapSettings(size=s.texture_size, views=tuple(train_views(capture, s)))
+
+
+def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
+    """(T, 3, S, S) texture maps of the training frames, back-projected from the training
+    views only (prepared and cached if needed)."""
+    paths = prepare_texture_maps(capture, texmap_settings(capture, s), progress=progress)
+    return torch.stack([torch.from_numpy(load_texture_map(p)[0]).permute(2, 0, 1) for p in paths])
+
+
+def build_model(capture, s: Settings, textures: torch.Tensor, vocab: Vocabulary | None = None,
+                encoder_weights=None) -> AvatarField:
+    """The avatar field for a capture's training frames (vocabulary rebuilt unless given)."""
+    vocab = vocab or Vocabulary.build(capture.poses[: capture.num_train], s.strategy,
+                                      s.num_keys, s.k, s.weighting)
+    encoder = build_encoder(s.encoder, weights=encoder_weights)
+    return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()),
+                       s.field)
+
+
+@dataclass
+class FrameData:
+    """Per-frame cache: pose context (geometry), shell, and per-view images/masks/bounds."""
+
+    ctx: object
+    shell: ShellGeometry
+    views: dict = field(default_factory=dict)
+
+
+class Trainer:
+    """Owns the model, the optimiser, the random stream and the per-frame caches."""
+
+    def __init__(self, capture, settings: Settings, out_dir: str | Path, progress: bool = True):
+        self.capture, self.s, self.out = capture, settings, Path(out_dir)
+        if capture.num_train < 1:
+            raise TexvocabError(f"{capture.root}: no training frames")
+        self.views = train_views(capture, settings)
+        self.textures = load_textures(capture, settings, progress)
+        with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
+            torch.manual_seed(settings.seed)
+            self.model = build_model(capture, settings, self.textures)
+        self.optim = torch.optim.Adam([p for p in self.model.parameters() if p.requires_grad],
+                                      lr=settings.lr)
+        self.gen = torch.Generator().manual_seed(settings.seed)
+        self.step = 0
+        self.march = march_settings(settings, training=True)
+        self.frames: dict[int, FrameData] = {}
+        self.progress = progress
+        self.lpips = self._perceptual()
+
+    def _perceptual(self):
+        if self.s.lambda_perceptual <= 0:
+            return None
+        from texvocab.metrics import LPIPS, lpips_available
+
+        if not lpips_available():
+            log.warning("perceptual loss off: LPIPS-VGG weights are not in the torch cache")
+            return None
+        return LPIPS()
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.out / "checkpoint.pt"
+
+    def _frame(self, t: int) -> FrameData:
+        if t not in self.frames:
+            pf = self.model.pose_feature
+            ctx = pf.context(self.capture.poses[t], self.capture.trans[t])
+            shell = ShellGeometry.build(ctx.vertices.detach(), self.capture.body.faces,
+                                        self.s.field.shell_width, index=ctx.index)
+            self.frames[t] = FrameData(ctx, shell)
+        return self.frames[t]
+
+    def _view(self, fd: FrameData, t: int, v: int):
+        """Image, mask and per-pixel ray bounds of a view (cached). Rays that hit the body
+        end δ behind its first surface: the interior is opaque, so nothing behind it can
+        contribute, and training then evaluates no samples there."""
+        if v not in fd.views:
+            cam = self.capture.cameras[v]
+            img = torch.from_numpy(self.capture.image(v, t)).view(-1, 3)
+            mask = torch.from_numpy(self.capture.mask(v, t)).view(-1)
+            b = fd.shell.image_bounds(cam)
+            far = b.far.view(-1).clone()
+            depth = rasterize_mesh(fd.ctx.vertices.detach(), self.capture.body.faces, cam).depth
+            _, dirs = cam.pixel_rays()
+            t_hit = depth.view(-1) / (dirs.double() @ torch.as_tensor(cam.R[2])).float()
+            first = torch.isfinite(t_hit)
+            far[first] = torch.minimum(far[first], t_hit[first] + self.s.field.shell_width)
+            fd.views[v] = (img, mask, b.hit.view(-1), b.near.view(-1), far)
+        return fd.views[v]
+
+    def _rays(self, fd: FrameData, t: int, v: int, n: int):
+        img, mask, hit, near, far = self._view(fd, t, v)
+        fg = torch.nonzero(hit & mask).squeeze(1)
+        bg = torch.nonzero(hit & ~mask).squeeze(1)
+        n_fg = min(len(fg), round(n * self.s.fg_fraction)) if len(bg) else min(len(fg), n)
+        picks = [fg[torch.randint(len(fg), (n_fg,), generator=self.gen)]] if len(fg) else []
+        if len(bg):
+            picks.append(bg[torch.randint(len(bg), (n - n_fg,), generator=self.gen)])
+        pix = torch.cat(picks)
+        cam = self.capture.cameras[v]
+        w = cam.width
+        o, d = cam.pixel_rays(torch.stack([pix % w, pix // w], 1).numpy())
+        return o, d, near[pix], far[pix], img[pix], mask[pix].float()
+
+    def _eikonal(self, fd: FrameData, n: int) -> torch.Tensor:
+        verts = fd.ctx.vertices.detach()
+        idx = torch.randint(len(verts), (n,), generator=self.gen)
+        noise = torch.randn(n, 3, generator=self.gen) * (self.s.field.shell_width / 2)
+        pts = (verts[idx] + noise).requires_grad_(True)
+        sdf, _, valid = self.model.sdf_and_color(fd.ctx, pts, torch.nn.functional.normalize(
+            noise, dim=-1))
+        (grad,) = torch.autograd.grad(sdf.sum(), pts, create_graph=True)
+        return ((grad[valid].norm(dim=-1) - 1) ** 2).mean() if valid.any() else sdf.sum() * 0
+
+    def train_step(self) -> dict:
+        s = self.s
+        t = int(torch.randint(self.capture.num_train, (1,), generator=self.gen))
+        fd = self._frame(t)
+        if getattr(self.model.pose_feature.encoder, "trainable", False):
+            fd.ctx.features = self.model.pose_feature.feature_maps(fd.ctx.frames)
+        vs = [self.views[int(i)] for i in torch.randint(len(self.views), (2,), generator=self.gen)]
+        batch = [self._rays(fd, t, v, s.rays_per_batch // 2) for v in vs]
+        o, d, near, far, gt, m = (torch.cat(x) for x in zip(*batch, strict=True))
+        out = render_rays(self.model.for_pose(fd.ctx), o, d, near, far, self.march, self.gen,
+                          fd.shell)
+        mse = ((out.rgb - gt) ** 2).mean()
+        loss = s.lambda_color * mse + s.lambda_mask * (out.opacity - m).abs().mean()
+        eik = self._eikonal(fd, 512) if s.lambda_eikonal > 0 else torch.zeros(())
+        loss = loss + s.lambda_eikonal * eik
+        self.optim.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optim.step()
+        if getattr(self.model.pose_feature.encoder, "trainable", False):
+            fd.ctx.features = fd.ctx.features.detach()
+        self.step += 1
+        psnr = float(-10 * torch.log10(mse.detach().clamp(min=1e-10)))
+        return {"loss": float(loss.detach()), "psnr": psnr, "eikonal": float(eik.detach()),
+                "beta": float(self.model.beta.detach()), "evals": out.field_evals}
+
+    def state(self) -> dict:
+        return {"step": self.step, "settings": self.s.to_dict(), "capture": str(self.capture.root),
+                "num_train": self.capture.num_train, "model": self.model.state_dict(),
+                "optimizer": self.optim.state_dict(),
+                "vocab": self.model.pose_feature.vocab.to_dict(),
+                "rng": {"torch": self.gen.get_state()}}
+
+    def save(self) -> Path:
+        return save_checkpoint(self.checkpoint_path, self.state())
+
+    def resume(self) -> bool:
+        """Load the last checkpoint in the output folder, if any; True when resumed."""
+        if not self.checkpoint_path.is_file():
+            return False
+        ck = load_checkpoint(self.checkpoint_path)
+        if Settings.from_dict(ck["settings"]) != self.s:
+            raise TexvocabError(f"{self.checkpoint_path}: written with other settings; resume "
+                                "with the same ones or choose another --out")
+        self.model.load_state_dict(ck["model"])
+        self.optim.load_state_dict(ck["optimizer"])
+        self.gen.set_state(ck["rng"]["torch"])
+        self.step = int(ck["step"])
+        return True
+
+    def run(self, until: int | None = None) -> list[dict]:
+        """Train to ``settings.iterations`` (or ``until``); returns per-step logs."""
+        end = self.s.iterations if until is None else until
+        logs = []
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
+        t0 = time.perf_counter()
+        budget = None if self.s.max_minutes is None else 60.0 * self.s.max_minutes
+        while self.step < end:
+            if budget is not None and time.perf_counter() - t0 > budget:
+                log.info("time budget of %.1f min reached at step %d", self.s.max_minutes,
+                         self.step)
+                break
+            rec = self.train_step()
+            logs.append(rec)
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
+                                beta=f"{rec['beta']:.4f}")
+            if self.step % self.s.checkpoint_every == 0 or self.step == end:
+                self.save()
+        if bar is not None:
+            bar.close()
+        if logs and self.step % self.s.checkpoint_every:
+            self.save()  # stopped by the time budget, or at an end between intervals
+        if logs:
+            log.info("trained %d steps in %.1f s", len(logs), time.perf_counter() - t0)
+        return logs
+
+
