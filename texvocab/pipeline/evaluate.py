@@ -176,8 +176,10 @@ def format_table(table: dict[str, dict], checkpoint: str = "") -> str:
     """metrics.md: the header says what ± means; one row per set with its image count."""
     lines = [f"# texvocab eval: {checkpoint} (mean ± standard error of the mean, std/√n)", "",
              "Each cell is the mean over the set's n images ± its standard error (sample std "
-             "with ddof 1 / √n). PSNR (dB) / SSIM inside the mask bounding box (AniNeRF style) "
-             "and on the full frame; LPIPS (VGG, box crop) when its weights exist; FID (from "
+             "with ddof 1 / √n; it treats the images as independent, but the views of one frame "
+             "and neighbouring frames are correlated, so it likely understates the spread). "
+             "PSNR (dB) / SSIM inside the mask bounding box (AniNeRF style) and on the full "
+             "frame; LPIPS (VGG, box crop) when its weights exist; FID (from "
              f"{frechet.FID_MIN_IMAGES} images per set) and KID (unbiased, polynomial kernel, "
              "from 2 images; sd = std over random subsets when the set is subsampled) between "
              "the set's true and rendered images when the Inception extractor is installed, "
