@@ -14,7 +14,10 @@ import traceback
 from pathlib import Path
 
 import numpy as np
-from imgui_bundle import imgui
+from imgui_bundle import hello_imgui, imgui
+
+from texvocab.errors import TexvocabError
+from texvocab.pipeline import atomic_write_bytes, save_png
 
 LEFT_ARM_MOVE = ("**/left_shoulder/##z", -70.0)  # lower the left arm from the T-pose
 
@@ -30,8 +33,6 @@ def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
     """Yield frames until the neural render reached full resolution (or ``timeout``)."""
     if viewer.neural is None:
         return
-    from imgui_bundle import hello_imgui
-
     t0 = time.perf_counter()
     ctx.yield_(2)
     while (viewer.neural.busy or viewer.neural.frame is None) and \
@@ -171,8 +172,6 @@ class Driver:
         self.report: dict = {"script": name, "ok": False}
 
     def finish(self, report_path: str | None, screenshot_path: str | None, shot) -> int:
-        from texvocab.pipeline import atomic_write_bytes, save_png
-
         v = self.viewer
         self.report["view_rect"] = list(v.view_rect)
         self.report["window"] = list(v.size)
@@ -197,8 +196,6 @@ class EngineDriver(Driver):
         rp.callbacks.register_tests = self._register
 
     def _register(self) -> None:
-        from imgui_bundle import hello_imgui, imgui
-
         engine = hello_imgui.get_imgui_test_engine()
         io = imgui.test_engine.get_io(engine)
         io.config_run_speed = imgui.test_engine.TestRunSpeed.fast
@@ -208,8 +205,6 @@ class EngineDriver(Driver):
         imgui.test_engine.queue_test(engine, self.test)
 
     def _run(self, ctx) -> None:
-        from imgui_bundle import hello_imgui
-
         try:
             self.script(ctx, self.viewer, self.report)
             self.report["ok"] = not ctx.is_error()
@@ -243,8 +238,6 @@ class BenchDriver(Driver):
         rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
 
     def _tick(self) -> None:
-        from imgui_bundle import hello_imgui
-
         v = self.viewer
         rp = hello_imgui.get_runner_params()
         rp.fps_idling.enable_idling = False
@@ -317,8 +310,6 @@ def _stats(ms: list[float]) -> dict:
 
 def make_driver(name: str, viewer, rp) -> Driver:
     """The driver for ``--script NAME``: an engine script or ``bench[:SECONDS[:RES]]``."""
-    from texvocab.errors import TexvocabError
-
     if name.startswith("bench"):
         parts = name.split(":")
         seconds = float(parts[1]) if len(parts) > 1 else 8.0

@@ -14,6 +14,7 @@ from imgui_bundle import imgui
 
 from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 from texvocab.pipeline import RENDER_PRESETS as PRESETS
+from texvocab.pipeline import march_settings, render_overrides
 
 
 class NeuralView:
@@ -56,8 +57,6 @@ class NeuralView:
     def set_preset(self, name: str) -> None:
         """Render with a speed/accuracy preset's render knobs (bench/tradeoff.py), or with
         the checkpoint's own settings ("checkpoint")."""
-        from texvocab.pipeline import march_settings, render_overrides
-
         self.preset = name
         if name == "checkpoint" or self.settings is None:
             self.march, self.image_scale = None, 1.0

@@ -15,7 +15,7 @@ import numpy as np
 from imgui_bundle import imgui
 
 from texvocab.errors import TexvocabError
-from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, JOINT_NAMES
+from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, JOINT_NAMES, load_pose_file
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 
 AXES = ("x", "y", "z")
@@ -31,8 +31,6 @@ class PoseSequence:
 
     @classmethod
     def load(cls, path: str) -> PoseSequence:
-        from texvocab.pipeline import load_pose_file
-
         poses, trans = load_pose_file(path)
         if len(poses) == 0:
             raise TexvocabError(f"{path}: 'poses' holds no frames")

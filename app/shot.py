@@ -3,16 +3,29 @@ the same camera) for one pose, written as PNGs with no display (moderngl over OS
 from __future__ import annotations
 
 import argparse
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from app.arguments import parse_size
 from app.camera import DEFAULT_TARGET, OrbitCamera
+from app.gl_headless import create_headless_context, make_current, release
 from app.scene import SceneOptions, SceneRenderer, as_camera
 from app.state import ViewerData, ViewerState, load_viewer_data
 from texvocab.errors import TexvocabError
+from texvocab.pipeline import POSE_PRESETS as PRESETS
+from texvocab.pipeline import (
+    ShellGeometry,
+    contact_sheet,
+    load_pose_file,
+    march_settings,
+    render_image,
+    save_png,
+    to_uint8,
+)
 
 DEFAULT_SIZE = (640, 400)
 
@@ -20,8 +33,6 @@ DEFAULT_SIZE = (640, 400)
 def apply_pose(state: ViewerState, spec: str) -> None:
     """Set ``state`` from a preset name, a capture frame index (``N`` or ``frame:N``), or
     ``FILE.npz[:N]`` (poses (T, 24, 3) and optional trans (T, 3))."""
-    from texvocab.pipeline import POSE_PRESETS as PRESETS
-
     cap = state.data.capture
     if spec in PRESETS:
         state.apply_preset(spec)
@@ -37,8 +48,6 @@ def apply_pose(state: ViewerState, spec: str) -> None:
         return
     path, _, idx = spec.rpartition(":") if ":" in spec and not Path(spec).exists() else (spec, "", "")
     if Path(path).suffix == ".npz":
-        from texvocab.pipeline import load_pose_file
-
         poses, trans = load_pose_file(path)
         if not idx.isdigit() and idx:
             raise TexvocabError(f"--pose {spec}: expected FILE.npz:N with a frame number N")
@@ -85,10 +94,6 @@ class Shot:
 def render_neural(data: ViewerData, state: ViewerState, camera, background) -> np.ndarray:
     """(H, W, 3) uint8 render of the trained field at the state's pose, ``camera`` (an
     OpenCV Camera), with the checkpoint's march settings."""
-    import torch
-
-    from texvocab.pipeline import ShellGeometry, march_settings, render_image, to_uint8
-
     model, march = data.model, march_settings(data.settings)
     with torch.no_grad():
         ctx = model.pose_feature.context(state.pose, state.trans)
@@ -103,10 +108,6 @@ def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int
               options: SceneOptions, neural: bool, ctx=None) -> Shot:
     """Render the 3D view (on ``ctx``, or a fresh OSMesa context released afterwards) and,
     when ``neural`` and a model is loaded, the neural render from the same camera."""
-    import time
-
-    from app.gl_headless import create_headless_context, make_current, release
-
     own = ctx is None
     ctx = create_headless_context() if own else ctx
     t0 = time.perf_counter()
@@ -130,8 +131,6 @@ def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int
 
 def write_shot(out: str | Path, shot: Shot) -> list[Path]:
     """view3d.png, neural.png (if any) and shot.png (side by side, labelled) under ``out``."""
-    from texvocab.pipeline import contact_sheet, save_png
-
     out = Path(out)
     paths = [save_png(out / "view3d.png", shot.view3d)]
     tiles, labels = [shot.view3d], ["3D view (GL)"]
@@ -184,9 +183,6 @@ def demo_shots(source: str | Path, out_dir: str | Path, poses: tuple[str, ...] |
     with part colours and with the novelty overlay, and the neural render (checkpoints),
     all from the capture's held-out ``view``. Writes one shot folder per pose and a
     contact sheet ``viewer_shots.png`` under ``out_dir``; returns the sheet's path."""
-    from app.gl_headless import create_headless_context, make_current, release
-    from texvocab.pipeline import contact_sheet, save_png
-
     data = load_viewer_data(str(source), smpl=smpl)
     cap = data.capture
     if poses is None:

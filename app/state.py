@@ -8,8 +8,23 @@ from pathlib import Path
 
 import numpy as np
 
+from app.posing import BodyPoser
 from texvocab.errors import TexvocabError
-from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, Settings
+from texvocab.pipeline import (
+    BODY_PARTS,
+    JOINT_LIMITS_DEG,
+    Settings,
+    VocabTexture,
+    Vocabulary,
+    checkpoint_capture_path,
+    load_avatar,
+    load_body,
+    load_textures,
+    open_capture,
+    quat_to_rotvec,
+)
+from texvocab.pipeline import POSE_PRESETS as PRESETS
+from texvocab.pipeline import pose_preset as preset
 
 
 @dataclass
@@ -36,8 +51,6 @@ class ViewerData:
 
 
 def _capture_data(path: Path, smpl: str | None) -> ViewerData:
-    from texvocab.pipeline import Vocabulary, load_body, load_textures, open_capture
-
     cap = open_capture(path, body=load_body(smpl))
     if cap.num_train < 1:
         raise TexvocabError(f"{path}: the capture has no training frames to build a vocabulary")
@@ -49,8 +62,6 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
 
 
 def _checkpoint_data(path: Path, smpl: str | None) -> ViewerData:
-    from texvocab.pipeline import checkpoint_capture_path, load_avatar, load_body, open_capture
-
     cap_path = checkpoint_capture_path(path)
     avatar = load_avatar(path, open_capture(cap_path, body=load_body(smpl)))
     model = avatar.model
@@ -71,8 +82,6 @@ def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
         smpl: the user's SMPL model file/folder; default the embedded default body.
     """
     if source is None:
-        from texvocab.pipeline import load_body
-
         body = load_body(smpl)
         return ViewerData(body, settings=Settings(), source=body.name)
     path = Path(source).expanduser()
@@ -158,9 +167,6 @@ class ViewerState:
     def apply_preset(self, name: str) -> bool:
         """A named preset (texvocab.body.poses): joints 1..23 from the preset, the root
         orientation kept, translation = rest translation + the preset's offset."""
-        from texvocab.pipeline import POSE_PRESETS as PRESETS
-        from texvocab.pipeline import pose_preset as preset
-
         if name not in PRESETS:
             raise TexvocabError(f"unknown pose preset {name!r}; expected one of {sorted(PRESETS)}")
         p, t = preset(name)
@@ -170,8 +176,6 @@ class ViewerState:
 
     def key_pose(self, part: str | int, key_index: int) -> tuple[tuple[int, ...], np.ndarray]:
         """(joints of the vocabulary part, their (J_p, 3) axis-angle in key ``key_index``)."""
-        from texvocab.pipeline import quat_to_rotvec
-
         vocab = self._require_vocab()
         p = vocab.part_names.index(part) if isinstance(part, str) else int(part)
         if not 0 <= p < vocab.num_parts:
@@ -223,8 +227,6 @@ class ViewerState:
         if self.data.vocab is None or self.data.textures is None:
             return None
         if self._vocab_texture is None:
-            from texvocab.pipeline import VocabTexture
-
             self._vocab_texture = VocabTexture(self.data.body, self.data.vocab, self.data.textures)
         return self._cached("texture", lambda: self._vocab_texture.blend(self.pose))
 
@@ -232,8 +234,6 @@ class ViewerState:
         """(vertices (V, 3), joints (24, 3)) float32 of the current pose, world space."""
         def make():
             if self._poser is None:
-                from app.posing import BodyPoser
-
                 self._poser = BodyPoser(self.data.body)
             verts, joints = self._poser(self.pose, self.trans)
             return verts.astype(np.float32), joints.astype(np.float32)

@@ -14,10 +14,24 @@ import sys
 import time
 from collections import deque
 
+# None of these imports PyOpenGL (imgui_bundle and moderngl do not), so run_viewer can
+# still choose its platform first (_choose_gl_platform).
+import moderngl
 import numpy as np
+from imgui_bundle import hello_imgui, imgui, immapp
 
 from app.arguments import NEURAL_NICE, WINDOW_MIN, add_view_arguments, parse_size
+from app.camera import OrbitCamera
+from app.colors import heat_color
+from app.drivers import make_driver
+from app.panel_neural import NeuralView, camera_key, draw_neural_panel
+from app.panel_pose import PoseSequence, draw_pose_panel, tick_sequence
+from app.panel_view import draw_view_panel
+from app.panel_vocab import ThumbnailCache, draw_vocab_panel
+from app.scene import SceneOptions, SceneRenderer
+from app.state import ViewerState, load_viewer_data
 from texvocab.errors import TexvocabError
+from texvocab.pipeline import march_settings
 
 
 def _choose_gl_platform() -> None:
@@ -40,10 +54,6 @@ class Viewer:
 
     def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1,
                  neural_nice: int = NEURAL_NICE):
-        from app.camera import OrbitCamera
-        from app.scene import SceneOptions
-        from app.state import ViewerState
-
         self.data, self.size = data, size
         self.state = ViewerState(data)
         self.camera = OrbitCamera()
@@ -68,18 +78,10 @@ class Viewer:
 
     # -- lifecycle (hello_imgui callbacks) ---------------------------------------------
     def post_init(self) -> None:
-        import moderngl
-
-        from app.panel_neural import NeuralView
-        from app.panel_vocab import ThumbnailCache
-        from app.scene import SceneRenderer
-
         self.ctx = moderngl.create_context()  # attaches to the window's current context
         self.scene = SceneRenderer(self.ctx, self.data)
         self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
         if self.data.model is not None:
-            from texvocab.pipeline import march_settings
-
             self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
                                      self.neural_threads, self.neural_nice,
                                      settings=self.data.settings)
@@ -95,10 +97,6 @@ class Viewer:
             self.scene.release()
 
     def pre_new_frame(self) -> None:
-        from imgui_bundle import hello_imgui
-
-        from app.panel_pose import tick_sequence
-
         now, cpu = time.perf_counter(), time.thread_time()
         if self._last_frame is not None:
             self.frame_ms.append((now - self._last_frame[0]) * 1000)
@@ -128,8 +126,6 @@ class Viewer:
         """The 3D view's texture at ``size``, redrawn only when something changed."""
         if self.scene is None:
             return None
-        from app.panel_neural import camera_key
-
         o = self.options
         key = (self.state.version, camera_key(self.camera), tuple(size), o.textured,
                o.part_colors, o.novelty, o.wireframe, o.skeleton)
@@ -149,8 +145,6 @@ class Viewer:
         return f"{fps}   left drag: orbit   wheel: zoom   right drag: pan"
 
     def novelty_colours(self, n: int) -> np.ndarray:
-        from app.colors import heat_color
-
         return heat_color(np.linspace(0.0, 1.0, n))
 
     def novelty_range(self) -> tuple[float, float]:
@@ -170,8 +164,6 @@ def _cheap_backgrounds(rp, default_style):
     Under Mesa llvmpipe every full-window blended layer costs CPU (measured: the viewer's
     frame went from 55 to 35 ms of rasterisation on one core); the docked panels tile the
     window, so their backgrounds were one such layer on top of the clear."""
-    from imgui_bundle import imgui
-
     def setup() -> None:
         default_style()
         style = imgui.get_style()
@@ -182,13 +174,6 @@ def _cheap_backgrounds(rp, default_style):
 
 
 def _runner_params(viewer: Viewer, title: str):
-    from imgui_bundle import hello_imgui, imgui
-
-    from app.panel_neural import draw_neural_panel
-    from app.panel_pose import draw_pose_panel
-    from app.panel_view import draw_view_panel
-    from app.panel_vocab import draw_vocab_panel
-
     rp = hello_imgui.RunnerParams()
     rp.app_window_params.window_title = title
     rp.app_window_params.window_geometry.size = viewer.size
@@ -235,10 +220,6 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     ``report`` and the last frame to ``screenshot``."""
     require_display()
     _choose_gl_platform()
-    from imgui_bundle import hello_imgui, immapp
-
-    from app.state import load_viewer_data
-
     data = load_viewer_data(source, smpl)
     viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice)
     if data.vocab is not None and data.textures is not None:
@@ -246,16 +227,12 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
         viewer.state.blended_texture()  # its one-off setup (~2 s) before the window opens
     viewer.neural_resolution = neural_resolution
     if poses:
-        from app.panel_pose import PoseSequence
-
         viewer.sequence_path = poses
         viewer.sequence = PoseSequence.load(poses)
         viewer.state.set_pose(viewer.sequence.poses[0], viewer.sequence.trans[0])
     rp = _runner_params(viewer, f"texvocab - {data.source}")
     driver = None
     if script is not None:
-        from app.drivers import make_driver
-
         driver = make_driver(script, viewer, rp)
     immapp.run(rp)
     if driver is not None:

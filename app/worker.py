@@ -16,12 +16,16 @@ from __future__ import annotations
 import os
 import threading
 import time
+import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
+
+from texvocab.pipeline import ShellGeometry, progressive_render
 
 #: render(job, cancelled) -> iterator of (level, rgb (H_l, W_l, 3), seconds)
 LevelRenderer = Callable[["RenderJob", Callable[[], bool]], Iterator[tuple[int, object, float]]]
@@ -70,10 +74,6 @@ def pad_single_point_calls(field):
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
     once, then the levels (as :func:`texvocab.pipeline.evaluate.render_view` does for one)."""
-    import torch
-
-    from texvocab.pipeline import ShellGeometry, progressive_render
-
     def render(job: RenderJob, cancelled: Callable[[], bool]):
         m = job.march or march
         with torch.no_grad():
@@ -163,8 +163,6 @@ class ProgressiveWorker:
     # --- worker thread ----------------------------------------------------------------
     def _run(self) -> None:
         if self._threads is not None:
-            import torch
-
             torch.set_num_threads(self._threads)
         self.native_id = threading.get_native_id()
         if self._nice:
@@ -198,8 +196,6 @@ class ProgressiveWorker:
                     self._frame, self._fresh = frame, True
                     self.delivered.append((job.version, int(level)))
         except Exception as exc:  # shown in the panel; the worker keeps serving
-            import traceback
-
             where = traceback.extract_tb(exc.__traceback__)[-1]
             self.last_traceback = traceback.format_exc()
             with self._lock:

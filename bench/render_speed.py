@@ -80,7 +80,10 @@ def load(args):
     root = Path(args.capture) if args.capture else small_capture(Path(tempfile.mkdtemp()))
     cap = open_capture(root)
     settings = Settings(eval_views=[v for v in (0, 1) if v < cap.num_views])
-    model = build_model(cap, settings, load_textures(cap, settings, progress=False))
+    textures = load_textures(cap, settings, progress=False)
+    with torch.random.fork_rng():  # seeded weights: PSNR comparable between runs
+        torch.manual_seed(0)
+        model = build_model(cap, settings, textures)
     model.eval()
     return model, settings, cap, f"untrained model (geometric init) on {root}"
 

@@ -107,3 +107,21 @@ def test_prepare_and_vocab_commands(tmp_path):
     assert "strategy=part, M=3 keys/part, K=2" in lines[1] and len(lines) == 3 + 5
     err = run("vocab", str(cap), "--pose", "frame:9", check_rc=2).stderr
     assert "the capture has frames 0..3" in err
+
+
+def test_synth_compositional_motion_writes_that_motion(tmp_path):
+    """--motion compositional: the capture's poses are compositional_motion's, not the
+    default motion's."""
+    import numpy as np
+
+    from texvocab.capture import open as open_capture
+    from texvocab.capture.compositional import compositional_motion
+    from texvocab.capture.motion import default_motion
+
+    cap = tmp_path / "comp"
+    run("synth", str(cap), "--motion", "compositional", "--frames", "5", "--size", "32",
+        "--ring-views", "1", "--raised-views", "0", "--texture-size", "64", check_rc=0)
+    got = open_capture(cap)
+    want, _, num_train = compositional_motion(0)
+    assert np.allclose(got.poses, want[:5], atol=1e-5) and got.num_train == 5 <= num_train
+    assert not np.allclose(got.poses, default_motion(0)[0][:5], atol=1e-3)

@@ -56,7 +56,7 @@ def test_marcher_shell_width_is_a_render_knob_but_training_keeps_the_fields():
     ("field.beta_min=0", "field.beta_min=0.0: expected >= 1e-8"),
     ("image_scale=0", "image_scale=0.0: expected in (0, 4]"),
     ("k=0", "k=0: expected >= 1"),
-    ("strategy=parts", "strategy='parts': expected part, joint or global"),
+    ("strategy=parts", "strategy='parts': expected part, joint, global or none"),
     ("early_stop_eps=1", "early_stop_eps=1.0: expected in [0, 1)"),
 ])
 def test_out_of_range_settings_name_the_setting_and_the_range(item, message):

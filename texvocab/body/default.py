@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from texvocab.body.model import BodyModel
+
 DEFAULT_BODY_PATH = Path(__file__).resolve().parent / "data" / "default_body.npz"
 DEFAULT_BODY_KEYS = ("v_template", "faces", "vt", "ft", "joints", "parents", "weights")
 
@@ -20,8 +22,6 @@ def default_body_arrays() -> dict[str, np.ndarray]:
 
 def default_body():
     """A :class:`~texvocab.body.model.BodyModel` of the default body (no shape space)."""
-    from texvocab.body.model import BodyModel
-
     a = default_body_arrays()
     return BodyModel(v_template=a["v_template"], faces=a["faces"], weights=a["weights"],
                      parents=a["parents"], joints=a["joints"], vt=a["vt"], ft=a["ft"],

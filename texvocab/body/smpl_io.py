@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from texvocab.body.model import BodyModel
 from texvocab.errors import AssetError
 from texvocab.io.safe_pickle import read_npz, read_pickle
 from texvocab.io.spec import load_spec, name_is_accepted, require_valid, spec_ref
@@ -77,8 +78,6 @@ def parents_from_kintree(kintree: np.ndarray) -> np.ndarray:
 
 def load_smpl(path: str | Path, uv_path: str | Path | None = None):
     """A :class:`~texvocab.body.model.BodyModel` from the user's SMPL model (+ UV file)."""
-    from texvocab.body.model import BodyModel
-
     path = resolve_model_path(path)
     if not name_is_accepted(path, load_spec("smpl_model")):
         warnings.warn(f"{path.name} is not an official SMPL file name; loading it anyway",

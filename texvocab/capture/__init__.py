@@ -2,18 +2,19 @@
 writers, and synthetic captures with ground truth at any pose."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+from texvocab.body import load_body
 from texvocab.capture.camera import Camera
-from texvocab.capture.capture import Capture
+from texvocab.capture.capture import SYNTH_META, Capture
+from texvocab.capture.thuman import is_thuman, read_thuman
+from texvocab.capture.zju import is_zju, read_zju
 from texvocab.errors import AssetError
 
 
 def detect_layout(path: str | Path) -> str:
     """``zju`` or ``thuman`` for a capture folder; raises AssetError naming what is missing."""
-    from texvocab.capture.thuman import is_thuman
-    from texvocab.capture.zju import is_zju
-
     root = Path(path)
     if not root.is_dir():
         raise AssetError(f"capture folder not found: {root}")
@@ -34,13 +35,6 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
         num_train: number of leading training frames; default: the synthetic capture's
             recorded split, else 70 % of the frames.
     """
-    import json
-
-    from texvocab.body import load_body
-    from texvocab.capture.capture import SYNTH_META
-    from texvocab.capture.thuman import read_thuman
-    from texvocab.capture.zju import read_zju
-
     root = Path(path)
     layout = detect_layout(root)
     if num_train is None and (root / SYNTH_META).is_file():  # the generator's split

@@ -14,10 +14,17 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
+from texvocab.body.parts import JOINT_NAMES
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META
+from texvocab.capture.garment import Garment
+from texvocab.capture.thuman import ThumanWriter
+from texvocab.capture.zju import ZjuWriter
 from texvocab.errors import AssetError
+from texvocab.io.gl_platform import ensure_offscreen
+from texvocab.io.safe_pickle import read_npz
 
 LAYOUTS = ("zju", "thuman")
 
@@ -40,6 +47,7 @@ class SynthSettings:
 
 def default_cameras(s: SynthSettings) -> list[Camera]:
     """``ring_views`` cameras at chest height on a ring, ``raised_views`` higher up."""
+    # late: mesh_renderer imports pyrender, binding PyOpenGL to OSMesa; load_pose_file (viewer) must not
     from texvocab.capture.mesh_renderer import intrinsics, look_at
 
     K = intrinsics(s.size, s.size, s.fov_deg)
@@ -69,11 +77,8 @@ class SynthRenderer:
     """Renders the clothed body at any pose from any camera (ground truth for evaluation)."""
 
     def __init__(self, body, settings: SynthSettings | None = None):
-        from texvocab.capture.garment import Garment
-        from texvocab.io.gl_platform import ensure_offscreen
-
         ensure_offscreen()
-        import pyrender
+        import pyrender  # late: PyOpenGL binds its platform at first import, after ensure_offscreen
 
         self._pr = pyrender
         self.body = body
@@ -99,7 +104,7 @@ class SynthRenderer:
         ``texture_pose`` (tests, inspection): take the clothing's folds from another pose
         while keeping this pose's geometry.
         """
-        import trimesh
+        import trimesh  # late: ~1 s to import, needed only with pyrender (not by load_pose_file)
 
         pr = self._pr
         out = self.body.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
@@ -122,6 +127,7 @@ class SynthRenderer:
             x /= np.linalg.norm(x)
             light_pose[:3, :3] = np.stack([x, np.cross(z, x), z], 1)
             scene.add(pr.DirectionalLight(color=np.ones(3), intensity=intensity), pose=light_pose)
+        # late: mesh_renderer imports pyrender (see default_cameras)
         from texvocab.capture.mesh_renderer import gl_camera_pose, gl_principal_point
 
         results = []
@@ -158,9 +164,6 @@ def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train:
         poses: (T, 24, 3) axis-angle; trans: (T, 3).
         num_train: frames [0, num_train) are training frames (recorded in the metadata).
     """
-    from texvocab.capture.thuman import ThumanWriter
-    from texvocab.capture.zju import ZjuWriter
-
     settings = settings or SynthSettings()
     out = Path(out)
     if layout not in LAYOUTS:
@@ -181,8 +184,6 @@ def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train:
         writer = (ZjuWriter if layout == "zju" else ThumanWriter)(tmp, cameras, body)
         frames = range(len(poses))
         if progress:
-            from tqdm import tqdm
-
             frames = tqdm(frames, desc=f"synth {out.name}", unit="frame")
         for t in frames:
             writer.add_frame(t, poses[t], trans[t], renderer.render(poses[t], trans[t], cameras))
@@ -225,8 +226,6 @@ def ground_truth_renderer(capture) -> tuple[SynthRenderer, list[Camera]]:
 def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Poses (T, 24, 3) and trans (T, 3) from an .npz with ``poses`` ((T, 24, 3) or
     (T, 72)) and optional ``trans`` (T, 3)."""
-    from texvocab.io.safe_pickle import read_npz
-
     path = Path(path)
     data = read_npz(path, "pose file (an .npz with 'poses' (T, 24, 3))")
     if "poses" not in data:
@@ -242,8 +241,6 @@ def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise AssetError(f"{path}: 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
     bad = ~np.isfinite(poses).all(-1)
     if bad.any():
-        from texvocab.body.parts import JOINT_NAMES
-
         t, j = (int(i) for i in np.argwhere(bad)[0])
         raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) is not finite")
     if not np.isfinite(trans).all():

@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture
@@ -103,8 +104,6 @@ class ThumanWriter:
         self.trans: list[np.ndarray] = []
 
     def add_frame(self, t: int, pose, trans, renders) -> None:
-        from PIL import Image
-
         for name, (rgb, mask) in zip(self.names, renders):
             for sub, arr in (("images", to_uint8(rgb)), ("masks", mask.astype(np.uint8) * 255)):
                 img = Image.fromarray(arr)

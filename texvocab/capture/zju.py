@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from PIL import Image
 
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture
@@ -79,8 +80,6 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
         if found < len(ims):
             raise AssetError(f"{d}: {found} images but {annots_path.name} lists {len(ims)} frames "
                              "(frame count mismatch between views)")
-    from PIL import Image
-
     with Image.open(root / ims[0][0]) as im:
         size = im.size
     cameras = _cameras(annots, annots_path, num_views, size)

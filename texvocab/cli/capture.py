@@ -1,9 +1,16 @@
-"""``texvocab synth`` and capture-related subcommands."""
+"""``texvocab synth`` and capture-related subcommands.
+
+build_parser imports this module, so the commands import what they run (torch, PIL)
+inside their functions: ``texvocab --help`` stays light."""
 from __future__ import annotations
 
 import argparse
 import time
 from pathlib import Path
+
+import numpy as np
+
+from texvocab.errors import TexvocabError
 
 
 def add_synth_parser(sub, add_smpl) -> None:
@@ -44,6 +51,7 @@ def add_synth_parser(sub, add_smpl) -> None:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    # late: torch; `texvocab --help` stays light (module docstring)
     from texvocab.body import load_body
     from texvocab.capture.motion import default_motion
     from texvocab.capture.synth import SynthSettings, load_pose_file, settings_of, synthesize
@@ -51,7 +59,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     body = load_body(args.smpl)
     cameras = None
     if args.like:
-        from texvocab.capture import open as open_capture
+        from texvocab.capture import open as open_capture  # late: as above
 
         settings, cameras = settings_of(open_capture(args.like, body=body))
     else:
@@ -61,7 +69,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         poses, trans = load_pose_file(args.poses)
         num_train = 0 if args.like else len(poses)
     elif args.motion == "compositional":
-        from texvocab.capture.compositional import compositional_motion
+        from texvocab.capture.compositional import compositional_motion  # late: as above
 
         poses, trans, num_train = compositional_motion(args.seed)
     else:
@@ -94,8 +102,7 @@ def add_sheet_parser(sub) -> None:
 
 
 def cmd_sheet(args: argparse.Namespace) -> int:
-    import numpy as np
-
+    # late: torch and PIL; `texvocab --help` stays light (module docstring)
     from texvocab.capture import open as open_capture
     from texvocab.io.images import contact_sheet, save_png
 
@@ -106,8 +113,6 @@ def cmd_sheet(args: argparse.Namespace) -> int:
         frames = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
     bad = [f for f in frames if not 0 <= f < cap.num_frames]
     if bad:
-        from texvocab.errors import TexvocabError
-
         raise TexvocabError(f"--frames {bad}: the capture has frames 0..{cap.num_frames - 1}")
     get = (lambda v, t: cap.mask(v, t).astype(np.float32)) if args.masks else cap.image
     rows = [[get(v, t) for t in frames] for v in range(cap.num_views)]

@@ -9,6 +9,13 @@ import numpy as np
 
 from texvocab.body import load_body
 from texvocab.body.poses import preset
+from texvocab.capture import open as open_capture
+from texvocab.capture.motion import default_motion
+from texvocab.capture.synth import synthesize
+from texvocab.io.images import contact_sheet, save_png
+from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
+from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.pipeline.train import Trainer
 
 DEMO_POSES = ("t_pose", "arms_down", "walk", "squat", "arms_up", "kick")
 
@@ -18,8 +25,8 @@ def render_pose_sheet(body, size: int = 320, poses=DEMO_POSES) -> tuple[np.ndarr
 
     Returns the sheet and the individual renders {(pose, view): rgb float (H, W, 3)}.
     """
+    # late: mesh_renderer imports pyrender, binding PyOpenGL to OSMesa (texvocab.io.gl_platform)
     from texvocab.capture.mesh_renderer import MeshRenderer, intrinsics, look_at
-    from texvocab.io.images import contact_sheet
 
     K = intrinsics(size, size, fov_y_deg=40.0)
     views = {"front": look_at((0, -0.25, 3.6), (0, -0.25, 0)),
@@ -38,8 +45,6 @@ def render_pose_sheet(body, size: int = 320, poses=DEMO_POSES) -> tuple[np.ndarr
 
 def run_demo(out_dir: str | Path, smpl: str | None = None, size: int = 320) -> list[Path]:
     """Write the body-pose PNGs under ``out_dir``; return their paths (sheet first)."""
-    from texvocab.io.images import save_png
-
     out_dir = Path(out_dir)
     body = load_body(smpl)
     sheet, renders = render_pose_sheet(body, size)
@@ -53,11 +58,6 @@ def demo_capture(out_dir: str | Path, smpl: str | None = None,
                  frames: int | None = None) -> tuple[Path, Path]:
     """Synthesise the default capture under ``out_dir/capture`` (reused when present) and
     write its contact sheet; returns (capture folder, sheet path)."""
-    from texvocab.capture import open as open_capture
-    from texvocab.capture.motion import default_motion
-    from texvocab.capture.synth import synthesize
-    from texvocab.io.images import contact_sheet, save_png
-
     out_dir = Path(out_dir)
     root = out_dir / "capture"
     body = load_body(smpl)
@@ -81,11 +81,6 @@ def demo_avatar(out_dir: str | Path, capture_root: Path, minutes: float = 3.0,
     later runs until it has had that long) and evaluate it on the full default test sets
     (every novel frame and as many training frames, each from every evaluation view, with
     a progress bar); returns (checkpoint, report)."""
-    from texvocab.capture import open as open_capture
-    from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
-    from texvocab.pipeline.settings import Settings, march_settings
-    from texvocab.pipeline.train import Trainer
-
     run = Path(out_dir) / "avatar"
     cap = open_capture(capture_root, body=load_body(smpl))
     settings = Settings(iterations=100000, max_minutes=minutes, checkpoint_every=100)

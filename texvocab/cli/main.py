@@ -8,6 +8,9 @@ import sys
 import time
 from pathlib import Path
 
+from app.arguments import add_view_arguments
+from texvocab.cli.capture import add_sheet_parser, add_synth_parser
+from texvocab.cli.method import add_method_parsers, add_train_parsers
 from texvocab.errors import TexvocabError
 
 
@@ -18,7 +21,8 @@ def _add_smpl(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_demo(args) -> int:
-    from texvocab.cli.demo import demo_capture, run_demo
+    # late: torch and GL; `texvocab --help` stays light
+    from texvocab.cli.demo import demo_avatar, demo_capture, run_demo
 
     t0 = time.perf_counter()
     paths = run_demo(args.out, smpl=args.smpl, size=args.size)
@@ -31,8 +35,6 @@ def cmd_demo(args) -> int:
     print(f"  capture (ZJU-MoCap layout): {root.resolve()}")
     print(f"  views x frames sheet:       {sheet.resolve()}")
     if args.train_minutes > 0:
-        from texvocab.cli.demo import demo_avatar
-
         t0 = time.perf_counter()
         ckpt, report = demo_avatar(args.out, root, args.train_minutes, args.smpl)
         print(f"avatar trained and evaluated in {time.perf_counter() - t0:.1f} s")
@@ -41,11 +43,11 @@ def cmd_demo(args) -> int:
         print(report.read_text())
     source = ckpt if args.train_minutes > 0 else root
     if os.environ.get("DISPLAY") and not args.no_view:
-        from app.window import run_viewer
+        from app.window import run_viewer  # late: the viewer loads imgui_bundle, moderngl, torch
 
         print(f"opening the viewer on {source} (close its window to finish)")
         return run_viewer(str(source), smpl=args.smpl, size=(1280, 800))
-    from app.shot import demo_shots
+    from app.shot import demo_shots  # late: moderngl and torch
 
     t0 = time.perf_counter()
     sheet = demo_shots(source, Path(args.out) / "viewer", smpl=args.smpl)
@@ -55,7 +57,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_check_assets(args) -> int:
-    from texvocab.cli.assets import check_path
+    from texvocab.cli.assets import check_path  # late: torch (texvocab.body)
 
     lines = check_path(args.path)
     print("\n".join(lines))
@@ -63,13 +65,13 @@ def cmd_check_assets(args) -> int:
 
 
 def cmd_shot(args) -> int:
-    from app.shot import cmd_shot as run_shot
+    from app.shot import cmd_shot as run_shot  # late: moderngl and torch
 
     return run_shot(args)
 
 
 def cmd_view(args) -> int:
-    from app.window import run_from_args
+    from app.window import run_from_args  # late: imgui_bundle, moderngl and torch
 
     return run_from_args(args)
 
@@ -83,8 +85,6 @@ def add_viewer_parsers(sub) -> None:
                        description="Open the viewer window on a checkpoint (its avatar, "
                                    "vocabulary and capture), a capture folder (its vocabulary "
                                    "and texture maps) or, with no SOURCE, the body alone.")
-    from app.arguments import add_view_arguments
-
     add_view_arguments(p)
     p.set_defaults(func=cmd_view)
 
@@ -146,12 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 "capture folder")
     p.set_defaults(func=cmd_check_assets)
 
-    from texvocab.cli.capture import add_sheet_parser, add_synth_parser
-
     add_synth_parser(sub, _add_smpl)
     add_sheet_parser(sub)
-
-    from texvocab.cli.method import add_method_parsers, add_train_parsers
 
     add_method_parsers(sub, _add_smpl)
     add_train_parsers(sub, _add_smpl)

@@ -1,4 +1,7 @@
-"""``texvocab prepare`` (texture maps, Sec. 3.2) and ``texvocab vocab`` (Sec. 3.3–3.4)."""
+"""``texvocab prepare`` (texture maps, Sec. 3.2) and ``texvocab vocab`` (Sec. 3.3–3.4).
+
+build_parser imports this module, so the commands import what they run (torch) inside
+their functions: ``texvocab --help`` stays light."""
 from __future__ import annotations
 
 import argparse
@@ -45,6 +48,7 @@ def add_method_parsers(sub, add_smpl) -> None:
 
 
 def _open(args):
+    # late: torch; `texvocab --help` stays light (module docstring)
     from texvocab.body import load_body
     from texvocab.capture import open as open_capture
 
@@ -53,6 +57,7 @@ def _open(args):
 
 
 def cmd_prepare(args: argparse.Namespace) -> int:
+    # late: torch (module docstring)
     from texvocab.method.texmap import cache_dir, prepare_texture_maps
     from texvocab.pipeline.settings import Settings
     from texvocab.pipeline.train import texmap_settings
@@ -74,6 +79,7 @@ def cmd_prepare(args: argparse.Namespace) -> int:
 
 def parse_pose(spec: str, capture) -> np.ndarray:
     """A (24, 3) pose from a preset name, 'frame:N' or 'FILE.npz[:N]'."""
+    # late: torch (module docstring)
     from texvocab.body.poses import PRESETS, preset
     from texvocab.capture.synth import load_pose_file
 
@@ -97,7 +103,7 @@ def parse_pose(spec: str, capture) -> np.ndarray:
 
 
 def cmd_vocab(args: argparse.Namespace) -> int:
-    from texvocab.method.vocab import Vocabulary
+    from texvocab.method.vocab import Vocabulary  # late: torch (module docstring)
 
     cap = _open(args)
     if cap.num_train == 0:
@@ -149,6 +155,7 @@ def add_train_parsers(sub, add_smpl) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    # late: torch (module docstring)
     from texvocab.pipeline.settings import Settings, preset_overrides
     from texvocab.pipeline.train import Trainer
 
@@ -168,6 +175,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
+    # late: torch (module docstring)
     from texvocab.pipeline.avatar import load_avatar
     from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
     from texvocab.pipeline.settings import march_settings, render_overrides

@@ -19,6 +19,7 @@ def ensure_offscreen(default: str = "osmesa") -> str:
     """
     chosen = os.environ.setdefault("PYOPENGL_PLATFORM", default)
     if "OpenGL" in sys.modules:
+        # late: only once OpenGL is loaded; importing it here would bind its platform
         import OpenGL.platform as glp  # noqa: PLC0415
 
         bound = type(glp.PLATFORM).__name__.lower()

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy import ndimage
+from tqdm import tqdm
 
 from texvocab.capture.camera import sample_image
 from texvocab.geometry.raster import rasterize_mesh
@@ -97,8 +99,6 @@ def build_texture_map(capture, frame: int, settings: TexmapSettings | None = Non
         # unseen texels take the nearest seen texel's colour (in UV space)
         seen = np.zeros((s.size, s.size), bool)
         seen[tmap.covered] = count > 0
-        from scipy import ndimage
-
         img = tmap.to_image(color, fill=False)
         _, nearest = ndimage.distance_transform_edt(~seen, return_indices=True)
         texture = img[nearest[0], nearest[1]]
@@ -142,8 +142,6 @@ def prepare_texture_maps(capture, settings: TexmapSettings | None = None,
     todo = [(t, p) for t, p in zip(frames, paths, strict=True) if not p.is_file()]
     it = todo
     if progress and todo:
-        from tqdm import tqdm
-
         it = tqdm(todo, desc=f"texture maps {s.size}²", unit="frame")
     for t, path in it:
         texture, coverage = build_texture_map(capture, t, s)

@@ -17,7 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
+from texvocab.body.poses import preset
+from texvocab.capture.synth import ground_truth_renderer
 from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 from texvocab.metrics import evaluate_pair, frechet
@@ -126,8 +129,6 @@ def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=Non
     record per image ({set, index[, frame, view], metrics}); grid rows
     [truth, render, error] (the first ``grid_rows`` items) per set.
     """
-    from tqdm import tqdm
-
     extractor = frechet.inception_extractor() if any(len(v) >= 2 for v in sets.values()) else None
     table, records, grids = {}, [], {}
     with tqdm(total=sum(len(v) for v in sets.values()), desc="eval", unit="img",
@@ -269,9 +270,6 @@ def build_sets(capture, settings, per_set: int | None = None,
         if frames:
             sets[name] = CaptureItems(capture, [(t, v) for t in frames for v in views])
     if capture.synthetic and generated:
-        from texvocab.body.poses import preset
-        from texvocab.capture.synth import ground_truth_renderer
-
         renderer, cams = ground_truth_renderer(capture)
         items = []
         for name in generated:

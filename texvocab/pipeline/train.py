@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
+from tqdm import tqdm
 
 from texvocab.errors import TexvocabError
 from texvocab.geometry.raster import rasterize_mesh
@@ -25,6 +26,7 @@ from texvocab.method.feature import PoseFeature
 from texvocab.method.field import AvatarField
 from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
 from texvocab.method.vocab import Vocabulary
+from texvocab.metrics import LPIPS, lpips_available
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.render import ShellGeometry, render_rays
 
@@ -97,8 +99,6 @@ class Trainer:
     def _perceptual(self):
         if self.s.lambda_perceptual <= 0:
             return None
-        from texvocab.metrics import LPIPS, lpips_available
-
         if not lpips_available():
             log.warning("perceptual loss off: LPIPS-VGG weights are not in the torch cache")
             return None
@@ -214,8 +214,6 @@ class Trainer:
         logs = []
         bar = None
         if self.progress:
-            from tqdm import tqdm
-
             bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
         t0 = time.perf_counter()
         budget = None if self.s.max_minutes is None else 60.0 * self.s.max_minutes
