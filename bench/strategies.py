@@ -92,6 +92,7 @@ def report(runs: list[dict], args, root: Path) -> str:
     strategies = list(dict.fromkeys(r["strategy"] for r in runs))
     seeds = list(dict.fromkeys(r["seed"] for r in runs))
     by = {(r["strategy"], r["seed"]): {m: _mean(r["per_image"][m]) for m in METRICS} for r in runs}
+    runs_by = {(r["strategy"], r["seed"]): r for r in runs}
     n_img = len(runs[0]["per_image"]["psnr_bbox"])
     lines = [f"# Vocabulary strategies on novel poses: {args.iterations} steps each, seeds "
              f"{', '.join(map(str, seeds))}", "",
@@ -123,6 +124,15 @@ def report(runs: list[dict], args, root: Path) -> str:
             per_seed = ", ".join(f"{by[('part', k)]['psnr_bbox'] - by[(other, k)]['psnr_bbox']:+.2f}"
                                  for k in pairs)
             lines.append(f"| {other} | " + " | ".join(cells) + f" | {per_seed} |")
+        lines += ["", "Per image (all seeds pooled): mean PSNR difference part - other ± its "
+                  "standard error over the seed x image pairs, and the share of pairs where "
+                  "part is better.", "", "| part - | d PSNR (dB) | part better |", "|---|---|---|"]
+        for other in (s for s in strategies if s != "part"):
+            d = np.concatenate([np.subtract(runs_by[("part", k)]["per_image"]["psnr_bbox"],
+                                            runs_by[(other, k)]["per_image"]["psnr_bbox"])
+                                for k in seeds if ("part", k) in runs_by and (other, k) in runs_by])
+            lines.append(f"| {other} | {d.mean():+.3f} ± {d.std(ddof=1) / np.sqrt(len(d)):.3f} "
+                         f"(n = {len(d)}) | {(d > 0).mean():.0%} |")
     return "\n".join(lines) + "\n"
 
 
@@ -158,8 +168,17 @@ def main(argv=None) -> int:
                     help="render preset for evaluation (render knobs only)")
     ap.add_argument("--out", default="out/bench/strategies")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite strategies.md from OUT/strategies.json (no training)")
     args = ap.parse_args(argv)
     args.per_set = args.per_set or None
+    if args.report_only:
+        out = Path(args.out)
+        runs = json.loads((out / "strategies.json").read_text())
+        md = report(runs, args, Path(args.capture or out / f"capture_{args.motion}"))
+        atomic_write_bytes(out / "strategies.md", lambda t: Path(t).write_text(md))
+        print(md)
+        return 0
 
     out = Path(args.out)
     root = Path(args.capture) if args.capture else make_capture(out, args.motion)
