@@ -16,7 +16,6 @@ from texvocab.pipeline import (
     Settings,
     VocabTexture,
     Vocabulary,
-    checkpoint_capture_path,
     load_avatar,
     load_body,
     load_textures,
@@ -62,13 +61,12 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
 
 
 def _checkpoint_data(path: Path, smpl: str | None) -> ViewerData:
-    cap_path = checkpoint_capture_path(path)
-    avatar = load_avatar(path, open_capture(cap_path, body=load_body(smpl)))
+    avatar = load_avatar(path, smpl=smpl)
     model = avatar.model
     textures = model.pose_feature.textures.permute(0, 2, 3, 1).numpy()
     return ViewerData(avatar.capture.body, model.pose_feature.vocab, textures, model,
                       avatar.capture, avatar.settings,
-                      f"checkpoint {path} (step {avatar.step}, capture {cap_path})")
+                      f"checkpoint {path} (step {avatar.step}, capture {avatar.capture.root})")
 
 
 def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:

@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from texvocab.metrics import metrics_in_bbox
-    from texvocab.pipeline import checkpoint_capture_path, load_avatar, march_settings, open_capture
+    from texvocab.pipeline import load_avatar, march_settings
     from texvocab.pipeline.evaluate import build_sets
     from texvocab.pipeline.settings import render_overrides
 
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
           + " | zeroed - trained | fixed - trained |")
     print("|---" * (5 + len(VARIANTS)) + "|")
     for ckpt in args.checkpoints:
-        av = load_avatar(ckpt, open_capture(checkpoint_capture_path(ckpt)), progress=False)
+        av = load_avatar(ckpt, progress=False)
         settings = render_overrides(av.settings, args.preset, [])
         march = march_settings(settings)
         items = build_sets(av.capture, settings, args.per_set, generated=())[args.set]

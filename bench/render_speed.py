@@ -72,10 +72,10 @@ def load(args):
     from texvocab.pipeline.train import build_model, load_textures
 
     if args.checkpoint:
-        from texvocab.pipeline import checkpoint_capture_path, load_avatar
+        from texvocab.pipeline import load_avatar
 
-        root = args.capture or checkpoint_capture_path(args.checkpoint)
-        av = load_avatar(args.checkpoint, open_capture(root), progress=False)
+        cap = open_capture(args.capture) if args.capture else None
+        av = load_avatar(args.checkpoint, cap, progress=False)
         return av.model, av.settings, av.capture, f"checkpoint {args.checkpoint}"
     root = Path(args.capture) if args.capture else small_capture(Path(tempfile.mkdtemp()))
     cap = open_capture(root)

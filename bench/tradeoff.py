@@ -199,7 +199,7 @@ def data_growth(capture, model) -> list[str]:
 
 def load_or_train(args):
     from texvocab.capture import open as open_capture
-    from texvocab.pipeline import checkpoint_capture_path, load_avatar
+    from texvocab.pipeline import load_avatar
 
     ckpt = Path(args.checkpoint) if args.checkpoint else Path("out/demo/avatar/checkpoint.pt")
     if not ckpt.is_file():
@@ -207,7 +207,7 @@ def load_or_train(args):
 
         root, _ = demo_capture("out/demo")
         ckpt, _ = demo_avatar("out/demo", root, args.train_minutes)
-    av = load_avatar(ckpt, open_capture(args.capture or checkpoint_capture_path(ckpt)))
+    av = load_avatar(ckpt, open_capture(args.capture) if args.capture else None)
     return ckpt, av.capture, av.model, av.settings, av.checkpoint
 
 

@@ -24,10 +24,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from texvocab.body.limits import clamp_pose
 from texvocab.body.parts import BODY_PARTS, JOINT_NAMES
 from texvocab.body.poses import J
+from texvocab.geometry.rotations import rotvec_to_quat
 
 PartMotion = Callable[[np.ndarray, float], np.ndarray]  # (u (n,), amplitude) -> (n, 24, 3) degrees
 _LEFT_TO_RIGHT = [(i, JOINT_NAMES.index(n.replace("left_", "right_")))
@@ -232,10 +234,7 @@ def compositional_motion(seed: int = 0) -> tuple[np.ndarray, np.ndarray, int]:
 # -- the paper's quaternion distance (Sec. 3.3, Eq. 4) -------------------------------------------
 def pose_quaternions(poses: np.ndarray) -> np.ndarray:
     """Axis-angle (..., 3) radians -> unit quaternions (..., 4) as (w, x, y, z)."""
-    p = np.asarray(poses, dtype=np.float64)
-    angle = np.linalg.norm(p, axis=-1, keepdims=True)
-    axis = p / np.where(angle > 1e-12, angle, 1.0)
-    return np.concatenate([np.cos(angle / 2), np.sin(angle / 2) * axis], axis=-1)
+    return rotvec_to_quat(torch.as_tensor(np.asarray(poses, dtype=np.float64))).numpy()
 
 
 def pairwise_part_distance(poses_a: np.ndarray, poses_b: np.ndarray, joints) -> np.ndarray:

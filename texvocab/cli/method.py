@@ -65,10 +65,8 @@ def cmd_prepare(args: argparse.Namespace) -> int:
     cap = _open(args)
     if cap.num_train == 0:
         raise TexvocabError(f"{args.capture}: no training frames (--train-frames)")
-    run = Settings(texture_size=args.texture_size)
-    if args.eval_views is not None:
-        run = Settings(texture_size=args.texture_size, eval_views=tuple(args.eval_views))
-    settings = texmap_settings(cap, run)
+    views = {} if args.eval_views is None else {"eval_views": tuple(args.eval_views)}
+    settings = texmap_settings(cap, Settings(texture_size=args.texture_size, **views))
     t0 = time.perf_counter()
     paths = prepare_texture_maps(cap, settings)
     print(f"{len(paths)} texture maps ({settings.size}² texels, views "

@@ -44,7 +44,6 @@ _API: dict[str, tuple[str, str]] = {
     "load_textures": ("texvocab.pipeline.train", "load_textures"),
     "Avatar": ("texvocab.pipeline.avatar", "Avatar"),
     "load_avatar": ("texvocab.pipeline.avatar", "load_avatar"),
-    "checkpoint_capture_path": ("texvocab.pipeline.avatar", "checkpoint_capture_path"),
     # files
     "save_png": ("texvocab.io.images", "save_png"),
     "to_uint8": ("texvocab.io.images", "to_uint8"),

@@ -12,6 +12,8 @@ import copy
 from dataclasses import dataclass
 from pathlib import Path
 
+from texvocab.body import load_body
+from texvocab.capture import open as open_capture
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint
 from texvocab.method.field import AvatarField
@@ -35,9 +37,8 @@ class Avatar:
         return int(self.checkpoint["step"])
 
 
-def checkpoint_capture_path(checkpoint: str | Path) -> Path:
-    """The capture folder a checkpoint was trained on; TexvocabError when it is gone."""
-    ck = load_checkpoint(checkpoint)
+def _capture_path(ck: dict, checkpoint: str | Path) -> Path:
+    """The capture folder checkpoint dict ``ck`` was trained on; TexvocabError when gone."""
     cap_path = Path(str(ck.get("capture", "")))
     if not str(ck.get("capture", "")) or not cap_path.is_dir():
         raise TexvocabError(f"{checkpoint}: its capture folder {str(cap_path)!r} is missing; "
@@ -45,9 +46,14 @@ def checkpoint_capture_path(checkpoint: str | Path) -> Path:
     return cap_path
 
 
-def load_avatar(checkpoint: str | Path, capture, progress: bool = True) -> Avatar:
-    """Rebuild the avatar of ``checkpoint`` on ``capture`` (the one it was trained on)."""
+def load_avatar(checkpoint: str | Path, capture=None, smpl: str | None = None,
+                progress: bool = True) -> Avatar:
+    """Rebuild the avatar of ``checkpoint`` on ``capture`` (the one it was trained on);
+    None opens the capture folder the checkpoint records, posed by ``smpl`` (None: the
+    default body). The checkpoint file is read once."""
     ck = load_checkpoint(checkpoint)
+    if capture is None:
+        capture = open_capture(_capture_path(ck, checkpoint), body=load_body(smpl))
     settings = Settings.from_dict(ck["settings"])
     capture = copy.copy(capture)
     capture.num_train = int(ck.get("num_train", capture.num_train))
