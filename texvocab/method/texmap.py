@@ -10,6 +10,11 @@ colour when the rasteriser says that pixel sees this very surface point (depth w
 ``depth_tol``) and the pixel is foreground. This is Eq. 2's pixel↔surface pairing with
 bilinear resampling, and leaves no holes when the texture is finer than the image.
 
+Eq. 2 averages the views that see a texel with equal weight (``view_weighting="mean"``).
+A view seeing the surface at a grazing angle samples it blurred and stretched;
+``"cosine"`` weights each view by the cosine between the surface normal and the ray to
+the camera instead, so head-on views dominate.
+
 Uncovered texels (no view saw them) keep coverage 0; their colour is copied from the
 nearest covered texel so the CNN sees no artificial black seams. Both the colour and the
 coverage are stored, so later stages can weight or mask by coverage.
@@ -30,6 +35,8 @@ from texvocab.geometry.raster import rasterize_mesh
 from texvocab.geometry.uv import texel_map
 from texvocab.io.images import atomic_write_bytes
 
+VIEW_WEIGHTINGS = ("mean", "cosine")
+
 
 @dataclass
 class TexmapSettings:
@@ -37,12 +44,14 @@ class TexmapSettings:
     training views: held-out views never enter a texture map; None: every view, for
     tests and tools only); ``min_cos``: skip views seeing a texel at a more grazing angle
     than this (cosine between surface normal and view ray); ``depth_tol``: metres a texel
-    may lie behind the rasterised surface and still count as visible."""
+    may lie behind the rasterised surface and still count as visible; ``view_weighting``:
+    ``mean`` (Eq. 2) or ``cosine`` (module docstring)."""
 
     size: int = 256
     views: tuple[int, ...] | None = None
     min_cos: float = 0.15
     depth_tol: float = 0.01
+    view_weighting: str = "mean"
 
 
 def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -72,6 +81,7 @@ def build_texture_map(capture, frame: int, settings: TexmapSettings | None = Non
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     acc = np.zeros((len(points), 3))
     count = np.zeros(len(points))
+    wsum = np.zeros(len(points))
     views = views if views is not None else settings_views(s, capture)
     for v in views:
         cam = capture.cameras[v]
@@ -92,9 +102,11 @@ def build_texture_map(capture, frame: int, settings: TexmapSettings | None = Non
         # pixel centres; clamp there so bilinear sampling never blends in the zero outside
         x = np.clip(pix[ok, 0], 0, cam.width - 1)
         y = np.clip(pix[ok, 1], 0, cam.height - 1)
-        acc[ok] += sample_image(capture.image(v, frame), x, y)
+        weight = cos[ok] if s.view_weighting == "cosine" else np.ones(int(ok.sum()))
+        acc[ok] += weight[:, None] * sample_image(capture.image(v, frame), x, y)
+        wsum[ok] += weight
         count[ok] += 1
-    color = acc / np.maximum(count, 1)[:, None]
+    color = acc / np.where(wsum > 0, wsum, 1.0)[:, None]
     if (count > 0).any():
         # unseen texels take the nearest seen texel's colour (in UV space)
         seen = np.zeros((s.size, s.size), bool)
@@ -118,7 +130,9 @@ def cache_dir(capture, settings: TexmapSettings) -> Path:
     from before held-out views were excluded, or another train/eval split) are never
     reused."""
     views = "-".join(str(v) for v in settings_views(settings, capture))
-    return Path(capture.root) / "texvocab_cache" / f"texmaps_{settings.size}_views_{views}"
+    weighting = "" if settings.view_weighting == "mean" else f"_{settings.view_weighting}"
+    return (Path(capture.root) / "texvocab_cache"
+            / f"texmaps_{settings.size}_views_{views}{weighting}")
 
 
 def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:

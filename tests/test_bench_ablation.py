@@ -1,0 +1,45 @@
+"""bench/ablation.py: run names shared across groups, per-variant means over seeds and
+paired differences against the reference from the same seeds and images."""
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _load():
+    spec = importlib.util.spec_from_file_location("bench_ablation", ROOT / "bench" / "ablation.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _result(run, seed, psnr, sps=1.0):
+    return {"run": run, "seed": seed, "steps": 7, "seconds_per_step": sps, "kid": 0.01,
+            "per_image": {"psnr_bbox": psnr, "ssim_bbox": [0.5] * len(psnr),
+                          "lpips": [None] * len(psnr)}}
+
+
+def test_identical_settings_share_one_run_across_groups():
+    bench = _load()
+    base = ["encoder=pyramid", "perceptual=off"]
+    assert bench.run_name(base, []) == bench.run_name(base, ["encoder=pyramid"])
+    assert bench.run_name(base, ["encoder=small"]) == "encoder=small,perceptual=off"
+    refs = {next(iter(v.values())) == [] for v in bench.GROUPS.values()}
+    assert refs == {True}  # every group's reference is the base itself
+
+
+def test_report_pairs_seeds_and_images():
+    bench = _load()
+    runs = {"ref": "a", "other": "b"}
+    psnr = {("a", 0): [30.0, 31.0], ("b", 0): [29.0, 29.5],
+            ("a", 1): [28.0, 28.0], ("b", 1): [28.5, 28.5]}
+    results = {k: _result(k[0], k[1], v) for k, v in psnr.items()}
+    md = "\n".join(bench.group_report("g", runs, results))
+    assert "| ref | 29.2500 (2.5000) |" in md  # seed means 30.5 and 28.0
+    # paired per seed other - ref: -1.25 (seed 0), +0.5 (seed 1); mean -0.375, straddles 0
+    assert "| other | -0.3750 [-1.2500, +0.5000]" in md
+    d = np.array([-1.0, -1.5, 0.5, 0.5])
+    assert f"{d.mean():+.3f} ± {d.std(ddof=1) / 2:.3f} (n = 4) | 50% |" in md
+    assert "7 steps per run, seeds 0, 1; 2 novel-pose images" in md
