@@ -53,7 +53,9 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
     cap = open_capture(path, body=load_body(smpl))
     if cap.num_train < 1:
         raise TexvocabError(f"{path}: the capture has no training frames to build a vocabulary")
-    s = Settings()
+    # the viewer of a bare capture holds out the default evaluation views it has (a
+    # capture with fewer views simply has fewer held out); training refuses instead
+    s = Settings(eval_views=tuple(v for v in Settings().eval_views if v < cap.num_views))
     vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k, s.weighting,
                              s.min_key_distance)
     textures = load_textures(cap, s, progress=True).permute(0, 2, 3, 1).numpy()

@@ -28,7 +28,7 @@ def tiny_checkpoint(tmp_path_factory):
     return tiny_run(tmp_path_factory.mktemp("viewer"), ([("walk", 4), ("arm_raise", 4)], 5), 6, 4,
                     dict(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4), texture_size=64,
                     num_keys=3, k=2, rays_per_batch=128, coarse_samples=8, fine_samples=4,
-                    checkpoint_every=10)
+                    checkpoint_every=10, eval_views=(1,))
 
 
 def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float = 150):

@@ -13,6 +13,9 @@ from texvocab.body.lbs import lbs
 from texvocab.body.parts import JOINT_NAMES
 from texvocab.errors import AssetError, PoseError
 
+POSE_ANGLE_LIMIT = 4 * np.pi  # rad per joint: axis-angle beyond two full turns is refused
+TRANS_LIMIT = 1e4  # metres: a root translation beyond this is not a person in a capture
+
 
 @dataclass
 class BodyOutput:
@@ -114,11 +117,17 @@ class BodyModel:
             b, j = (int(i) for i in bad.nonzero()[0])
             raise PoseError(f"pose[{b}, {j}] ({JOINT_NAMES[j]}) is not finite: "
                             f"{pose[b, j].tolist()}")
+        bad = pose.norm(dim=-1) > POSE_ANGLE_LIMIT
+        if bad.any():
+            b, j = (int(i) for i in bad.nonzero()[0])
+            raise PoseError(f"pose[{b}, {j}] ({JOINT_NAMES[j]}) turns {float(pose[b, j].norm()):.3g} "
+                            f"rad; expected axis-angle of at most 4π (two full turns)")
         if trans is not None:
             if tuple(trans.shape) != (pose.shape[0], 3):
                 raise PoseError(f"trans has shape {tuple(trans.shape)}, expected ({pose.shape[0]}, 3)")
-            if not torch.isfinite(trans).all():
-                raise PoseError(f"trans is not finite: {trans.tolist()}")
+            if not torch.isfinite(trans).all() or trans.abs().max() > TRANS_LIMIT:
+                raise PoseError(f"trans is not finite or beyond {TRANS_LIMIT:g} m: "
+                                f"max |trans| = {float(trans.abs().max()):.3g}")
 
     def shaped(self, betas: torch.Tensor | None, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Rest vertices (B, V, 3) and joints (B, J, 3) for shape coefficients (B, S)."""

@@ -2,12 +2,11 @@
 writers, and synthetic captures with ground truth at any pose."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from texvocab.body import load_body
 from texvocab.capture.camera import Camera
-from texvocab.capture.capture import SYNTH_META, Capture
+from texvocab.capture.capture import SYNTH_META, Capture, read_synth_meta
 from texvocab.capture.thuman import is_thuman, read_thuman
 from texvocab.capture.zju import is_zju, read_zju
 from texvocab.errors import AssetError
@@ -37,8 +36,12 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
     """
     root = Path(path)
     layout = detect_layout(root)
-    if num_train is None and (root / SYNTH_META).is_file():  # the generator's split
-        num_train = json.loads((root / SYNTH_META).read_text()).get("num_train")
+    meta = read_synth_meta(root)
+    if num_train is None and meta is not None:  # the generator's split
+        num_train = meta.get("num_train")
+        if num_train is not None and (type(num_train) is not int or num_train < 0):
+            raise AssetError(f"{root / SYNTH_META}: num_train={num_train!r}; expected an "
+                             "integer >= 0")
     body = body if body is not None else load_body(None)
     reader = read_zju if layout == "zju" else read_thuman
     return reader(root, body, num_train)

@@ -125,5 +125,20 @@ class Capture:
     @property
     def synthetic(self) -> dict | None:
         """The generator settings when this capture was made by ``texvocab synth``."""
-        path = self.root / SYNTH_META
-        return json.loads(path.read_text()) if path.is_file() else None
+        return read_synth_meta(self.root)
+
+
+def read_synth_meta(root: Path) -> dict | None:
+    """``texvocab_synth.json`` of a capture (None when absent); AssetError when it is not
+    a JSON object."""
+    path = Path(root) / SYNTH_META
+    if not path.is_file():
+        return None
+    try:
+        meta = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise AssetError(f"{path}: not valid JSON ({e.msg if hasattr(e, 'msg') else e}); it "
+                         "should hold the generator's settings") from None
+    if not isinstance(meta, dict):
+        raise AssetError(f"{path}: expected a JSON object of generator settings")
+    return meta

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from texvocab.body.model import POSE_ANGLE_LIMIT, TRANS_LIMIT
 from texvocab.body.parts import JOINT_NAMES
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META
@@ -176,6 +177,10 @@ def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train:
     body.check_pose(torch.as_tensor(poses), torch.as_tensor(trans))
     if out.exists() and not overwrite:
         raise AssetError(f"{out} already exists (pass --overwrite to replace it)")
+    if out.exists() and not (out.is_dir() and ((out / SYNTH_META).is_file()
+                                               or not any(out.iterdir()))):
+        raise AssetError(f"{out}: --overwrite replaces only a capture texvocab synthesised (it "
+                         f"holds {SYNTH_META}); this is not one, so nothing was changed")
     cameras = cameras or default_cameras(settings)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
@@ -230,6 +235,11 @@ def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     data = read_npz(path, "pose file (an .npz with 'poses' (T, 24, 3))")
     if "poses" not in data:
         raise AssetError(f"{path}: missing key 'poses' (T, 24, 3) axis-angle")
+    for key in ("poses", "trans"):
+        if key in data and not (np.issubdtype(data[key].dtype, np.number)
+                                and not np.issubdtype(data[key].dtype, np.complexfloating)):
+            raise AssetError(f"{path}: '{key}' holds {data[key].dtype} values; expected real "
+                             "numbers (axis-angle radians / metres)")
     poses = data["poses"].astype(np.float32)
     if poses.ndim == 2 and poses.shape[1] == 72:
         poses = poses.reshape(-1, 24, 3)
@@ -245,4 +255,12 @@ def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) is not finite")
     if not np.isfinite(trans).all():
         raise AssetError(f"{path}: 'trans' is not finite")
+    angle = np.linalg.norm(poses, axis=-1)
+    if (angle > POSE_ANGLE_LIMIT).any():
+        t, j = (int(i) for i in np.argwhere(angle > POSE_ANGLE_LIMIT)[0])
+        raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) turns "
+                         f"{angle[t, j]:.3g} rad; expected axis-angle of at most 4π")
+    if (np.abs(trans) > TRANS_LIMIT).any():
+        raise AssetError(f"{path}: 'trans' reaches {np.abs(trans).max():.3g} m; expected at "
+                         f"most {TRANS_LIMIT:g} m")
     return poses, trans

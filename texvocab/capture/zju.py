@@ -45,15 +45,31 @@ def _cameras(annots: dict, path: Path, num_views: int, size: tuple[int, int]) ->
     cams = annots.get("cams")
     if not isinstance(cams, dict) or not all(k in cams for k in ("K", "R", "T")):
         raise AssetError(f"{path}: 'cams' must hold K, R, T (and D) lists")
+    for k in ("K", "R", "T", "D"):
+        if k in cams and not isinstance(cams[k], list | tuple | np.ndarray):
+            raise AssetError(f"{path}: cams['{k}'] holds {type(cams[k]).__name__}; expected a "
+                             "list with one entry per view")
     counts = {k: len(cams[k]) for k in ("K", "R", "T", "D") if k in cams}
     if len(set(counts.values())) != 1 or num_views != counts["K"]:
         raise AssetError(f"{path}: camera count mismatch: cams has {counts} entries but each "
                          f"frame lists {num_views} images")
     out = []
     for v in range(num_views):
-        dist = np.asarray(cams["D"][v]).reshape(-1) if "D" in cams else np.zeros(5)
-        cam = Camera(cams["K"][v], cams["R"][v], np.asarray(cams["T"][v]).reshape(3) / 1000.0,
-                     size[0], size[1], dist, name=f"view{v}")
+        arrays = {}
+        for key, shape in (("K", (3, 3)), ("R", (3, 3)), ("T", (3,)), ("D", None)):
+            if key not in cams:
+                continue
+            try:
+                a = np.asarray(cams[key][v], dtype=np.float64)
+            except (TypeError, ValueError):
+                raise AssetError(f"{path}: cams['{key}'][{v}] is not numeric") from None
+            if shape is not None and a.size != int(np.prod(shape)):
+                raise AssetError(f"{path}: cams['{key}'][{v}] has shape {a.shape}; expected "
+                                 f"{shape}{' (or (3, 1))' if key == 'T' else ''}")
+            arrays[key] = a.reshape(shape) if shape is not None else a.reshape(-1)
+        dist = arrays.get("D", np.zeros(5))
+        cam = Camera(arrays["K"], arrays["R"], arrays["T"] / 1000.0, size[0], size[1], dist,
+                     name=f"view{v}")
         out.append(cam.validate(str(path)))
     return out
 
@@ -64,7 +80,13 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
     annots = read_npy_object(annots_path)
     if not isinstance(annots, dict) or "ims" not in annots:
         raise AssetError(f"{annots_path}: expected a dict with 'cams' and 'ims'")
-    ims = [entry["ims"] for entry in annots["ims"]]
+    rows = annots["ims"]
+    if not isinstance(rows, list | tuple) or not all(
+            isinstance(e, dict) and isinstance(e.get("ims"), list | tuple)
+            and all(isinstance(p, str) for p in e["ims"]) for e in rows):
+        raise AssetError(f"{annots_path}: 'ims' must be a list of {{'ims': [image paths]}} per "
+                         f"frame, got {type(rows).__name__}")
+    ims = [entry["ims"] for entry in rows]
     if not ims:
         raise AssetError(f"{annots_path}: 'ims' lists no frames")
     num_views = len(ims[0])

@@ -56,6 +56,12 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from texvocab.capture.motion import default_motion
     from texvocab.capture.synth import SynthSettings, load_pose_file, settings_of, synthesize
 
+    for name in ("frames", "ring_views", "size", "texture_size"):
+        value = getattr(args, name, None)
+        if value is not None and value < 1:
+            raise TexvocabError(f"--{name.replace('_', '-')} {value}: expected at least 1")
+    if args.raised_views < 0 or (args.train_frames is not None and args.train_frames < 0):
+        raise TexvocabError("--raised-views and --train-frames must not be negative")
     body = load_body(args.smpl)
     cameras = None
     if args.like:
@@ -74,7 +80,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
         poses, trans, num_train = compositional_motion(args.seed)
     else:
         poses, trans, num_train = default_motion(args.seed)
-    if args.frames:
+    if len(poses) == 0:
+        raise TexvocabError(f"--poses {args.poses}: holds 0 frames; expected at least 1")
+    if args.frames is not None:
         poses, trans = poses[: args.frames], trans[: args.frames]
     if args.train_frames is not None:
         num_train = args.train_frames
@@ -108,7 +116,11 @@ def cmd_sheet(args: argparse.Namespace) -> int:
 
     cap = open_capture(args.capture)
     if args.frames:
-        frames = [int(f) for f in args.frames.split(",")]
+        try:
+            frames = [int(f) for f in args.frames.split(",")]
+        except ValueError:
+            raise TexvocabError(f"--frames {args.frames}: expected frame numbers separated by "
+                                "commas, e.g. 0,10,20") from None
     else:
         frames = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
     bad = [f for f in frames if not 0 <= f < cap.num_frames]

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from texvocab.errors import TexvocabError
+from texvocab.pipeline.run_folder import check_run_folder
 
 
 def add_method_parsers(sub, add_smpl) -> None:
@@ -78,6 +79,13 @@ def cmd_prepare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _index(text: str, what: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise TexvocabError(f"{what}: {text!r} is not a frame number") from None
+
+
 def parse_pose(spec: str, capture) -> np.ndarray:
     """A (24, 3) pose from a preset name, 'frame:N' or 'FILE.npz[:N]'."""
     # late: torch (module docstring)
@@ -87,7 +95,7 @@ def parse_pose(spec: str, capture) -> np.ndarray:
     if spec in PRESETS:
         return preset(spec)[0]
     if spec.startswith("frame:"):
-        n = int(spec.split(":", 1)[1])
+        n = _index(spec.split(":", 1)[1], f"--pose {spec}")
         if not 0 <= n < capture.num_frames:
             raise TexvocabError(f"--pose {spec}: the capture has frames 0..{capture.num_frames - 1}")
         return capture.poses[n]
@@ -95,7 +103,7 @@ def parse_pose(spec: str, capture) -> np.ndarray:
         else (spec, "", "")
     if Path(path).suffix == ".npz":
         poses, _ = load_pose_file(path)
-        n = int(idx or 0)
+        n = _index(idx or "0", f"--pose {spec}")
         if not 0 <= n < len(poses):
             raise TexvocabError(f"--pose {spec}: {path} has {len(poses)} poses")
         return poses[n]
@@ -106,6 +114,10 @@ def parse_pose(spec: str, capture) -> np.ndarray:
 def cmd_vocab(args: argparse.Namespace) -> int:
     from texvocab.method.vocab import Vocabulary  # late: torch (module docstring)
 
+    for name, value, low in (("--keys", args.keys, 1), ("-k", args.k, 1),
+                             ("--min-distance", args.min_distance, 0)):
+        if not value >= low:
+            raise TexvocabError(f"{name} {value}: expected at least {low}")
     cap = _open(args)
     if cap.num_train == 0:
         raise TexvocabError(f"{args.capture}: no training frames to build a vocabulary from")
@@ -125,7 +137,10 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("capture", help="capture folder")
     p.add_argument("--out", required=True, help="run folder (checkpoint, logs)")
     p.add_argument("--iterations", type=int, default=None, help="steps (default: settings)")
-    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from OUT/checkpoint.pt (--iterations N extends it)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the run in OUT (refused without it when OUT holds a checkpoint)")
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
                    help="speed/accuracy preset (bench/tradeoff.py); --set applies after it")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -161,11 +176,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     from texvocab.pipeline.train import Trainer
 
     pre = preset_overrides(args.preset) if args.preset else []
-    settings = Settings().with_overrides(pre + args.overrides)
-    if args.iterations is not None:
-        settings.iterations = args.iterations
+    steps = [] if args.iterations is None else [f"iterations={args.iterations}"]
+    settings = Settings().with_overrides(pre + args.overrides + steps)
+    out = Path(args.out)
+    check_run_folder(out, args.resume, args.overwrite)
     cap = _open(args)
-    trainer = Trainer(cap, settings, args.out)
+    trainer = Trainer(cap, settings, out)
     if args.resume and trainer.resume():
         print(f"resumed at step {trainer.step} from {trainer.checkpoint_path}")
     logs = trainer.run()

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from texvocab.body.parts import body_parts
+from texvocab.body.parts import STRATEGIES, body_parts
 from texvocab.geometry.rotations import rotvec_to_quat
 
 
@@ -208,6 +208,28 @@ class Vocabulary:
                 "part_joints": [list(j) for j in self.part_joints],
                 "key_quats": list(self.key_quats), "key_frames": list(self.key_frames),
                 "k": self.k, "weighting": self.weighting}
+
+    def check(self, num_frames: int) -> None:
+        """ValueError unless the parts, keys and key frames are consistent: every part's
+        keys are (M_p, J_p, 4) finite quaternions pointing to frames in [0, num_frames)."""
+        if self.strategy not in STRATEGIES or self.weighting not in WEIGHTINGS or self.k < 1:
+            raise ValueError(f"strategy {self.strategy!r}, weighting {self.weighting!r}, "
+                             f"k {self.k!r}")
+        if not len(self.part_names) == len(self.part_joints) == len(self.key_quats) == len(
+                self.key_frames):
+            raise ValueError("parts, joints, keys and key frames differ in number")
+        for name, joints, q, f in zip(self.part_names, self.part_joints, self.key_quats,
+                                      self.key_frames, strict=True):
+            if not all(0 <= j < 24 for j in joints):
+                raise ValueError(f"part {name}: joints {joints} outside 0..23")
+            if not (isinstance(q, torch.Tensor) and isinstance(f, torch.Tensor)):
+                raise ValueError(f"part {name}: keys are not tensors")
+            if q.ndim != 3 or q.shape[1:] != (len(joints), 4) or len(f) != len(q) or not len(q):
+                raise ValueError(f"part {name}: keys {tuple(q.shape)} and frames "
+                                 f"{tuple(f.shape)} for {len(joints)} joints")
+            if not torch.isfinite(q).all() or f.min() < 0 or f.max() >= num_frames:
+                raise ValueError(f"part {name}: non-finite keys or frames outside 0.."
+                                 f"{num_frames - 1}")
 
     @classmethod
     def from_dict(cls, d: dict) -> Vocabulary:

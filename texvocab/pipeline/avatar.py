@@ -38,12 +38,20 @@ class Avatar:
 
 
 def _capture_path(ck: dict, checkpoint: str | Path) -> Path:
-    """The capture folder checkpoint dict ``ck`` was trained on; TexvocabError when gone."""
-    cap_path = Path(str(ck.get("capture", "")))
-    if not str(ck.get("capture", "")) or not cap_path.is_dir():
-        raise TexvocabError(f"{checkpoint}: its capture folder {str(cap_path)!r} is missing; "
-                            "the avatar needs the capture it was trained on")
-    return cap_path
+    """The capture folder checkpoint dict ``ck`` was trained on; TexvocabError when gone.
+    Checkpoints store it absolute; an older relative one is tried from the working folder,
+    then from each folder above the checkpoint (where training ran)."""
+    recorded = ck.get("capture", "")
+    if not isinstance(recorded, str) or not recorded:
+        raise TexvocabError(f"{checkpoint}: records no capture folder; pass the capture folder")
+    cap_path = Path(recorded)
+    candidates = [cap_path] if cap_path.is_absolute() else (
+        [cap_path] + [p / cap_path for p in Path(checkpoint).resolve().parents])
+    for c in candidates:
+        if c.is_dir():
+            return c
+    raise TexvocabError(f"{checkpoint}: its capture folder {recorded!r} is missing; the avatar "
+                        "needs the capture it was trained on (pass its folder)")
 
 
 def load_avatar(checkpoint: str | Path, capture=None, smpl: str | None = None,
@@ -54,12 +62,34 @@ def load_avatar(checkpoint: str | Path, capture=None, smpl: str | None = None,
     ck = load_checkpoint(checkpoint)
     if capture is None:
         capture = open_capture(_capture_path(ck, checkpoint), body=load_body(smpl))
-    settings = Settings.from_dict(ck["settings"])
+    try:
+        settings = Settings.from_dict(ck["settings"])
+    except TexvocabError as e:
+        raise TexvocabError(f"{checkpoint}: {e}") from None
     capture = copy.copy(capture)
-    capture.num_train = int(ck.get("num_train", capture.num_train))
+    num_train = ck.get("num_train", capture.num_train)
+    if type(num_train) is not int or not 1 <= num_train <= capture.num_frames:
+        raise TexvocabError(f"{checkpoint}: num_train={num_train!r}; expected 1..{capture.num_frames} "
+                            f"(the frames of {capture.root})")
+    capture.num_train = num_train
+    try:
+        vocab = Vocabulary.from_dict(ck["vocab"])
+        vocab.check(capture.num_train)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as e:
+        raise TexvocabError(f"{checkpoint}: its vocabulary is not readable ({type(e).__name__}: "
+                            f"{str(e).splitlines()[0] if str(e) else ''})") from None
     textures = load_textures(capture, settings, progress)
-    model = build_model(capture, settings, textures, Vocabulary.from_dict(ck["vocab"]))
-    missing, unexpected = model.load_state_dict(ck["model"], strict=False)
+    model = build_model(capture, settings, textures, vocab)
+    if not isinstance(ck["model"], dict):
+        raise TexvocabError(f"{checkpoint}: 'model' holds {type(ck['model']).__name__}, expected "
+                            "the weights (a state dict)")
+    try:
+        missing, unexpected = model.load_state_dict(ck["model"], strict=False)
+    except RuntimeError as e:
+        first = next((ln.strip() for ln in str(e).splitlines() if "size mismatch" in ln),
+                     str(e).splitlines()[0])
+        raise TexvocabError(f"{checkpoint}: weights do not fit the model its settings "
+                            f"describe ({first})") from None
     if unexpected or [k for k in missing if not k.startswith("pose_feature.textures")]:
         raise TexvocabError(f"{checkpoint}: weights do not fit this model (missing "
                             f"{missing[:3]}, unexpected {unexpected[:3]})")

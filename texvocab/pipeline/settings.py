@@ -4,6 +4,7 @@ onto it and checkpoints store it as a plain dict.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields
 
 from texvocab.body.parts import STRATEGIES
@@ -61,6 +62,8 @@ class Settings:
 
     def __post_init__(self) -> None:
         """Refuse values the method cannot run with, naming the setting and the range."""
+        self._check_types()
+        f = self.field
         checks = [
             ("texture_size", self.texture_size >= 8, ">= 8"),
             ("num_keys", self.num_keys >= 1, ">= 1"),
@@ -79,7 +82,26 @@ class Settings:
             ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),
             ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
             ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
-            ("iterations", self.iterations >= 0, ">= 0"),
+            ("k", self.k <= self.num_keys, f"<= num_keys ({self.num_keys}): K of the M keys"),
+            ("iterations", self.iterations >= 1, ">= 1"),
+            ("checkpoint_every", self.checkpoint_every >= 1, ">= 1"),
+            ("max_minutes", self.max_minutes is None or self.max_minutes > 0, "> 0 or none"),
+            ("lr", 0 < self.lr <= 1, "in (0, 1]"),
+            ("lambda_color", self.lambda_color >= 0, ">= 0"),
+            ("lambda_mask", self.lambda_mask >= 0, ">= 0"),
+            ("lambda_eikonal", self.lambda_eikonal >= 0, ">= 0"),
+            ("eval_views", len(set(self.eval_views)) == len(self.eval_views)
+             and all(v >= 0 for v in self.eval_views), "distinct view indices >= 0"),
+            ("train_views", self.train_views is None or (
+                len(self.train_views) > 0 and not set(self.train_views) & set(self.eval_views)
+                and all(v >= 0 for v in self.train_views)),
+             "view indices >= 0 not among eval_views (held-out views never train)"),
+            ("field.pos_freqs", 0 <= f.pos_freqs <= 16, "in 0..16"),
+            ("field.dir_freqs", 0 <= f.dir_freqs <= 16, "in 0..16"),
+            ("field.feature_proj", 1 <= f.feature_proj, ">= 1"),
+            ("field.hidden", 1 <= f.hidden, ">= 1"),
+            ("field.sdf_layers", 1 <= f.sdf_layers, ">= 1"),
+            ("field.color_layers", 0 <= f.color_layers, ">= 0"),
             ("rays_per_batch", self.rays_per_batch >= 1, ">= 1"),
             ("fg_fraction", 0 <= self.fg_fraction <= 1, "in [0, 1]"),
             # float32 VolSDF density and its gradients break down for beta below ~1e-17
@@ -93,6 +115,35 @@ class Settings:
                     self, name)
                 raise TexvocabError(f"setting {name}={value!r}: expected {expected}")
 
+    def _check_types(self) -> None:
+        """Every setting has its default's type (ints stay ints, floats are finite
+        numbers, tuples of view indices are ints); raises naming the first that is not."""
+        if not isinstance(self.field, FieldSettings):
+            raise TexvocabError(f"setting field={self.field!r}: expected a group of field "
+                                "settings (field.hidden=..., field.pos_freqs=...)")
+        for group, prefix in ((self, ""), (self.field, "field.")):
+            for f in fields(group):
+                if f.name == "field":
+                    continue
+                value, default = getattr(group, f.name), f.default
+                if f.name in ("train_views", "eval_views"):
+                    ok = value is None if f.name == "train_views" and value is None else (
+                        isinstance(value, tuple) and all(type(v) is int for v in value))
+                    what = "a list of view indices"
+                elif f.name in ("max_minutes", "shell_width"):
+                    ok = value is None or _finite(value)
+                    what = "a finite number or none"
+                elif isinstance(default, bool):
+                    ok, what = isinstance(value, bool), "true or false"
+                elif isinstance(default, int):
+                    ok, what = type(value) is int, "an integer"
+                elif isinstance(default, float):
+                    ok, what = _finite(value), "a finite number"
+                else:
+                    ok, what = isinstance(value, str), "a name"
+                if not ok:
+                    raise TexvocabError(f"setting {prefix}{f.name}={value!r}: expected {what}")
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["train_views"] = None if self.train_views is None else list(self.train_views)
@@ -101,10 +152,22 @@ class Settings:
 
     @classmethod
     def from_dict(cls, d: dict) -> Settings:
+        """Settings from a plain dict (a checkpoint's or ``--set``'s); TexvocabError naming
+        the first setting that is unknown or of the wrong kind."""
+        if not isinstance(d, dict):
+            raise TexvocabError(f"settings: expected a mapping of setting names to values, "
+                                f"got {type(d).__name__}")
         d = dict(d)
-        d["field"] = FieldSettings(**d.get("field", {}))
+        group = d.get("field", {})
+        if not isinstance(group, dict):
+            raise TexvocabError(f"setting field={group!r}: expected a group of field settings "
+                                "(field.hidden=..., field.pos_freqs=...)")
+        unknown = set(group) - {f.name for f in fields(FieldSettings)}
+        if unknown:
+            raise TexvocabError(f"unknown settings {sorted('field.' + k for k in unknown)}")
+        d["field"] = FieldSettings(**group)
         for key in ("train_views", "eval_views"):
-            if d.get(key) is not None:
+            if isinstance(d.get(key), list | tuple):
                 d[key] = tuple(d[key])
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
@@ -129,6 +192,10 @@ class Settings:
                 raise TexvocabError(f"--set {item!r}: unknown setting {key!r}")
             target[name] = _parse(raw, target[name], key)
         return Settings.from_dict(d)
+
+
+def _finite(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _parse(raw: str, current, key: str):

@@ -34,20 +34,30 @@ from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_tex
 from texvocab.method.vocab import Vocabulary
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
+from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.render import ShellGeometry, render_rays
 
 log = logging.getLogger("texvocab")
+SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --resume
 
 
 def train_views(capture, s: Settings) -> list[int]:
+    """The views a run trains on: ``train_views``, or every view not held out. The held-out
+    ``eval_views`` must exist in the capture (the defaults need views 1 and 5)."""
+    last = capture.num_views - 1
+    bad_eval = [v for v in s.eval_views if v > last]
+    if bad_eval:
+        raise TexvocabError(f"setting eval_views={list(s.eval_views)}: {capture.root} has views "
+                            f"0..{last}; choose held-out views that exist (--set eval_views=...)")
     if s.train_views is not None:
         views = list(s.train_views)
     else:
         views = [v for v in range(capture.num_views) if v not in s.eval_views]
-    bad = [v for v in views if not 0 <= v < capture.num_views]
+    bad = [v for v in views if not 0 <= v <= last]
     if bad or not views:
-        raise TexvocabError(f"train views {views}: the capture has views 0..{capture.num_views - 1}")
+        raise TexvocabError(f"setting train_views={views}: {capture.root} has views 0..{last} "
+                            f"and eval_views {list(s.eval_views)} are held out")
     return views
 
 
@@ -107,6 +117,12 @@ class Trainer:
         self.capture, self.s, self.out = capture, settings, Path(out_dir)
         if capture.num_train < 1:
             raise TexvocabError(f"{capture.root}: no training frames")
+        if settings.num_keys > capture.num_train:
+            raise TexvocabError(f"setting num_keys={settings.num_keys}: {capture.root} has only "
+                                f"{capture.num_train} training frames to take keys from "
+                                f"(--set num_keys={capture.num_train} or fewer)")
+        if Path(out_dir).exists() and not Path(out_dir).is_dir():
+            raise TexvocabError(f"--out {out_dir}: is a file; expected a run folder")
         self.views = train_views(capture, settings)
         self.textures = load_textures(capture, settings, progress)
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
@@ -230,6 +246,12 @@ class Trainer:
         terms["loss"] = (s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"]
                          + s.lambda_eikonal * terms["eikonal"]
                          + s.lambda_perceptual * terms["perceptual"])
+        for name in ("loss", "color", "mask", "eikonal", "perceptual"):
+            if not torch.isfinite(terms[name]):
+                ck = (f"the last checkpoint {self.checkpoint_path} is intact"
+                      if self.checkpoint_path.is_file() else "no checkpoint was written")
+                raise TexvocabError(f"training stopped at step {self.step + 1}: the {name} "
+                                    f"term is {float(terms[name])}; {ck}")
         terms["field_evals"] = out.field_evals
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             self._detach_features = fd
@@ -252,7 +274,8 @@ class Trainer:
                 "beta": float(self.model.beta.detach()), "evals": terms["field_evals"]}
 
     def state(self) -> dict:
-        return {"step": self.step, "settings": self.s.to_dict(), "capture": str(self.capture.root),
+        return {"step": self.step, "settings": self.s.to_dict(),
+                "capture": str(Path(self.capture.root).resolve()),
                 "num_train": self.capture.num_train, "model": self.model.state_dict(),
                 "optimizer": self.optim.state_dict(),
                 "vocab": self.model.pose_feature.vocab.to_dict(),
@@ -266,9 +289,17 @@ class Trainer:
         if not self.checkpoint_path.is_file():
             return False
         ck = load_checkpoint(self.checkpoint_path)
-        if Settings.from_dict(ck["settings"]) != self.s:
-            raise TexvocabError(f"{self.checkpoint_path}: written with other settings; resume "
-                                "with the same ones or choose another --out")
+        theirs, ours = Settings.from_dict(ck["settings"]).to_dict(), self.s.to_dict()
+        differ = [k for k in ours if k not in SCHEDULE and theirs.get(k) != ours[k]]
+        if differ:
+            k = differ[0]
+            raise TexvocabError(f"{self.checkpoint_path}: written with {k}={theirs.get(k)!r}, "
+                                f"this run asks for {k}={ours[k]!r}; resume with the same "
+                                "settings or choose another --out")
+        if int(ck["step"]) > self.s.iterations:
+            raise TexvocabError(f"{self.checkpoint_path}: already at step {ck['step']}, past "
+                                f"iterations={self.s.iterations}; pass --iterations N > "
+                                f"{ck['step']} to extend it")
         self.model.load_state_dict(ck["model"])
         self.optim.load_state_dict(ck["optimizer"])
         self.gen.set_state(ck["rng"]["torch"])
@@ -276,7 +307,12 @@ class Trainer:
         return True
 
     def run(self, until: int | None = None) -> list[dict]:
-        """Train to ``settings.iterations`` (or ``until``); returns per-step logs."""
+        """Train to ``settings.iterations`` (or ``until``) holding the run folder's lock
+        (:class:`~texvocab.pipeline.run_folder.RunLock`); returns per-step logs."""
+        with RunLock(self.out):
+            return self._run(until)
+
+    def _run(self, until: int | None) -> list[dict]:
         end = self.s.iterations if until is None else until
         logs = []
         bar = None
