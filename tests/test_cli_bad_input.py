@@ -66,6 +66,29 @@ def _annots(key, value):
     return change
 
 
+def _resize_one_image(root):
+    from PIL import Image
+
+    path = open_capture(root).image_paths[1][2]
+    with Image.open(path) as im:
+        im.resize((48, 48)).save(path)
+
+
+def _empty_one_mask(root):
+    from PIL import Image
+
+    path = open_capture(root).mask_paths[1][2]
+    with Image.open(path) as im:
+        Image.new(im.mode, im.size).save(path)
+
+
+def _huge_pose(root):
+    path = Path(root) / "params" / "1.npy"
+    p = np.load(path, allow_pickle=True).item()
+    p["poses"] = np.full_like(np.asarray(p["poses"]), 1e30)
+    np.save(path, p, allow_pickle=True)
+
+
 def _file(world, name, content: bytes):
     path = world / "bad" / name
     path.parent.mkdir(exist_ok=True)
@@ -95,6 +118,18 @@ def _settings_str(ck):
 
 def _frames_out_of_range(ck):
     ck["vocab"]["key_frames"] = [f + 100 for f in ck["vocab"]["key_frames"]]
+
+
+class _Evil:
+    def __reduce__(self):
+        return (os.system, ("touch PWNED",))
+
+
+def _evil_checkpoint(world):
+    path = world / "bad" / "evil.pt"
+    path.parent.mkdir(exist_ok=True)
+    torch.save({"format": "texvocab-checkpoint", "x": _Evil()}, path)
+    return str(path)
 
 
 def _user_folder(world):
@@ -168,7 +203,7 @@ CASES = [
     ("synth-poses-empty", lambda w: ["synth", str(w / "new_cap"), "--poses", _poses_file(
         w, "empty.npz", poses=np.zeros((0, 72)))], "0 frames"),
     ("synth-poses-text-npz", lambda w: ["synth", str(w / "new_cap"), "--poses", _file(
-        w, "text.npz", b"this is text, not numpy")], "text.npz"),
+        w, "text.npz", b"this is text, not numpy")], "text.npz: not an .npz archive"),
     ("synth-poses-wrong-shape", lambda w: ["synth", str(w / "new_cap"), "--poses", _poses_file(
         w, "shape.npz", poses=np.zeros((4, 5)))], "poses"),
     ("synth-poses-huge", lambda w: ["synth", str(w / "new_cap"), "--poses", _poses_file(
@@ -185,6 +220,8 @@ CASES = [
                                            str(w / "cap")], "weights do not fit"),
     ("eval-text-checkpoint", lambda w: ["eval", _file(w, "text.pt", b"hello"), str(w / "cap")],
      "text.pt"),
+    ("eval-malicious-checkpoint", lambda w: ["eval", _evil_checkpoint(w), str(w / "cap")],
+     "refused by the weights-only reader"),
     ("eval-missing-checkpoint", ["eval", "{base}/nope.pt", CAP], "nope.pt"),
     ("eval-missing-capture", ["eval", RUN + "/checkpoint.pt", "{base}/nope_cap"], "nope_cap"),
     ("vocab-k-0", ["vocab", CAP, "--pose", "frame:0", "-k", "0"], "k"),
@@ -205,6 +242,11 @@ CASES = [
         w, "json", lambda r: (r / "texvocab_synth.json").write_text("{broken")), "--pose",
                                      "frame:0"],
      "texvocab_synth.json"),
+    ("train-image-other-size", lambda w: ["train", _capture_copy(w, "resized", _resize_one_image),
+                                          "--out", str(w / "new_run"), "--set", "num_keys=3"],
+     "48x48"),
+    ("capture-pose-1e30", lambda w: ["vocab", _capture_copy(w, "hugepose", _huge_pose), "--pose",
+                                     "frame:0"], "SMPL parameters"),
     ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
     ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
 ]
@@ -226,6 +268,7 @@ def test_bad_input_gives_one_error_line_and_changes_nothing(case, world, capsys)
     assert code == 2, err
     assert len(lines) == 1 and lines[0].startswith("error: "), err
     assert words in lines[0], lines[0]
+    assert "weights_only" not in lines[0]  # never advise loading untrusted pickles
     assert snapshot(world) == before
 
 
@@ -233,12 +276,26 @@ def test_case_table_covers_the_probe():
     assert len(CASES) >= 40 and len({c[0] for c in CASES}) == len(CASES)
 
 
-@pytest.mark.parametrize("name", ["k422", "imsabc", "notdict", "json"])
+@pytest.mark.parametrize("name", ["k422", "imsabc", "notdict", "json", "resized", "emptymask"])
 def test_check_assets_reports_a_bad_capture_as_one_fail_line(name, world, capsys):
     change = {"k422": _annots("K", None), "imsabc": _annots("ims", "abc"),
               "notdict": lambda r: np.save(r / "annots.npy", np.arange(3)),
-              "json": lambda r: (r / "texvocab_synth.json").write_text("{broken")}[name]
+              "json": lambda r: (r / "texvocab_synth.json").write_text("{broken"),
+              "resized": _resize_one_image, "emptymask": _empty_one_mask}[name]
     root = _capture_copy(world, name, change)
     assert main(["check-assets", root]) == 1
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 1 and out[0].startswith("FAIL ") and root in out[0], out
+
+
+def test_check_assets_passes_the_good_capture_and_flags_missing_eval_views(world, tmp_path, capsys):
+    assert main(["check-assets", str(world / "cap")]) == 0
+    assert capsys.readouterr().out.startswith("OK ")
+    poses, trans = make_sequence([("walk", 2)], seed=1)
+    four = synthesize(tmp_path / "four", poses, trans, 2, default_body(),
+                      SynthSettings(ring_views=4, raised_views=0, size=32, texture_size=64),
+                      progress=False)
+    assert main(["check-assets", str(four)]) == 0  # a valid capture; the defaults do not fit
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("note ") and "default eval_views are [1, 5]" in out[0]
+    assert "--set eval_views" in out[0] and out[1].startswith("OK ")

@@ -35,7 +35,9 @@ class FakeCapture:
         t = num_train + num_novel
         self.poses = np.arange(t, dtype=np.float32)[:, None, None] * np.ones((1, 24, 3), np.float32)
         self.trans = np.zeros((t, 3), np.float32)
-        self.cameras = [SimpleNamespace(name=f"view{v}") for v in range(views)]
+        self.cameras = [SimpleNamespace(name=f"view{v}", width=64, height=64)
+                        for v in range(views)]
+        self.num_views, self.root, self.frame_ids = views, "fake", list(range(t))
         self.train_frames, self.novel_frames = range(num_train), range(num_train, t)
         self.synthetic = None
         self.reads = 0
@@ -45,7 +47,9 @@ class FakeCapture:
         return np.full((SIZE, SIZE, 3), (frame + view) / 100, np.float32)
 
     def mask(self, view: int, frame: int) -> np.ndarray:
-        return np.ones((SIZE, SIZE), bool)
+        return np.full((SIZE, SIZE), (frame, view) not in self.empty_masks)
+
+    empty_masks: tuple = ()
 
 
 SETTINGS = SimpleNamespace(eval_views=(1, 5))
@@ -85,6 +89,22 @@ def test_build_sets_per_set_limits_both_sets_and_is_validated():
             build_sets(cap, SETTINGS, per_set=bad)
     no_novel = build_sets(FakeCapture(num_train=9, num_novel=0), SETTINGS)
     assert list(no_novel) == ["training_poses"] and len(no_novel["training_poses"]) == 18
+
+
+def test_build_sets_refuses_missing_or_tiny_views_and_leaves_out_empty_masks(caplog):
+    with pytest.raises(TexvocabError, match=r"eval_views \[1, 5\]: fake has views 0..3"):
+        build_sets(FakeCapture(views=4), SETTINGS)
+    tiny = FakeCapture()
+    tiny.cameras[5].width = 10
+    with pytest.raises(TexvocabError, match="view 5 is 10x"):
+        build_sets(tiny, SETTINGS)
+    cap = FakeCapture(num_train=20, num_novel=7)
+    cap.empty_masks = ((21, 5), (22, 1))
+    with caplog.at_level("WARNING", logger="texvocab"):
+        sets = build_sets(cap, SETTINGS)
+    pairs = frames_views(sets["novel_poses"])
+    assert len(pairs) == 12 and (21, 5) not in pairs and (22, 1) not in pairs
+    assert "2 of 14 images have an empty mask (first: frame 21, view 5)" in caplog.text
 
 
 def test_spread_and_capture_items():

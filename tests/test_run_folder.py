@@ -91,3 +91,62 @@ def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_
     monkeypatch.chdir(elsewhere)
     avatar = load_avatar(project / "runs" / "a" / "checkpoint.pt", progress=False)
     assert avatar.capture.root.resolve() == (project / "cap").resolve()
+
+
+def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):  # noqa: F811
+    from texvocab.pipeline.train import load_textures
+
+    cap = open_capture(capture)
+    s = tiny_settings()
+    before = load_textures(cap, s, progress=False)
+    from texvocab.method.texmap import texture_map_path
+    from texvocab.pipeline.train import texmap_settings
+
+    victim = texture_map_path(cap, 1, texmap_settings(cap, s))
+    victim.write_bytes(b"PK\x03\x04 not really a zip")  # truncated / foreign
+    with caplog.at_level("WARNING", logger="texvocab"):
+        after = load_textures(cap, s, progress=False)
+    assert torch.equal(before, after)
+    assert any("damaged texture-map cache" in r.getMessage() for r in caplog.records)
+
+
+def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, tmp_path):  # noqa: F811
+    """A real SIGKILL (no cleanup runs): the checkpoint stays loadable, the dead writer's
+    lock is taken over, and the resumed run ends where an uninterrupted one does."""
+    import signal
+    import time
+
+    texvocab = os.path.join(os.path.dirname(sys.executable), "texvocab")
+    sets = ["--set", "texture_size=64", "--set", "num_keys=3", "--set", "k=2", "--set",
+            "encoder=small", "--set", "rays_per_batch=128", "--set", "perceptual=off",
+            "--set", "coarse_samples=8", "--set", "fine_samples=4", "--set",
+            "checkpoint_every=1", "--set", "field.hidden=32"]
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+
+    def train(out, *extra, wait=True):
+        cmd = [texvocab, "train", str(capture), "--out", str(out), *sets, *extra]
+        if wait:
+            proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+            assert proc.returncode == 0, proc.stderr
+            return None
+        return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+
+    train(tmp_path / "straight", "--iterations", "8")
+    proc = train(tmp_path / "killed", "--iterations", "400", wait=False)
+    ckpt = tmp_path / "killed" / "checkpoint.pt"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not (ckpt.is_file() and
+                                                load_checkpoint(ckpt)["step"] >= 3):
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert (tmp_path / "killed" / LOCK_NAME).exists()  # SIGKILL left it behind
+    step = load_checkpoint(ckpt)["step"]
+    assert 3 <= step < 8
+    train(tmp_path / "killed", "--resume", "--iterations", "8")
+    a = load_checkpoint(tmp_path / "straight" / "checkpoint.pt")
+    b = load_checkpoint(ckpt)
+    assert b["step"] == 8 and not (tmp_path / "killed" / LOCK_NAME).exists()
+    for key, value in a["model"].items():
+        assert torch.allclose(value, b["model"][key], atol=1e-5), key

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+import torch
+
 from texvocab.body import load_body
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META, Capture, read_synth_meta
 from texvocab.capture.thuman import is_thuman, read_thuman
 from texvocab.capture.zju import is_zju, read_zju
-from texvocab.errors import AssetError
+from texvocab.errors import AssetError, PoseError
 
 
 def detect_layout(path: str | Path) -> str:
@@ -44,7 +47,13 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
                              "integer >= 0")
     body = body if body is not None else load_body(None)
     reader = read_zju if layout == "zju" else read_thuman
-    return reader(root, body, num_train)
+    cap = reader(root, body, num_train)
+    try:  # finite and within the stated bounds (texvocab.body.model), before any work
+        body.check_pose(torch.as_tensor(np.asarray(cap.poses)), torch.as_tensor(
+            np.asarray(cap.trans)))
+    except PoseError as e:
+        raise AssetError(f"{root}: its SMPL parameters: {e}") from None
+    return cap
 
 
 __all__ = ["Camera", "Capture", "detect_layout", "open"]

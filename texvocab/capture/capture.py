@@ -100,12 +100,38 @@ class Capture:
 
     def image(self, view: int, frame: int) -> np.ndarray:
         """(H, W, 3) float32 RGB, undistorted."""
-        return self.cameras[view].undistort_image(read_image(self.image_paths[frame][view]))
+        img = read_image(self.image_paths[frame][view])
+        self._check_size(self.image_paths[frame][view], img.shape, view)
+        return self.cameras[view].undistort_image(img)
 
     def mask(self, view: int, frame: int) -> np.ndarray:
         """(H, W) bool foreground, undistorted."""
         m = read_mask(self.mask_paths[frame][view])
+        self._check_size(self.mask_paths[frame][view], m.shape, view)
         return self.cameras[view].undistort_image(m.astype(np.uint8), nearest=True) > 0
+
+    def _check_size(self, path: Path, shape: tuple, view: int) -> None:
+        cam = self.cameras[view]
+        if tuple(shape[:2]) != (cam.height, cam.width):
+            raise AssetError(f"{path}: image is {shape[1]}x{shape[0]}, but view {view}'s "
+                             f"calibration (and its other images) say {cam.width}x{cam.height}")
+
+    def check_image_sizes(self, frames=None, views=None) -> None:
+        """Read the header of every image and mask of ``frames`` x ``views`` (default
+        all) and raise AssetError naming the first that is unreadable or not its view's
+        size: a cheap check before long work (no pixels are decoded)."""
+        frames = range(self.num_frames) if frames is None else frames
+        views = range(self.num_views) if views is None else views
+        for t in frames:
+            for v in views:
+                for path in (self.image_paths[t][v], self.mask_paths[t][v]):
+                    try:
+                        with Image.open(path) as im:
+                            size = im.size
+                    except (OSError, ValueError) as e:
+                        raise AssetError(f"{path}: not a readable image ({type(e).__name__})") \
+                            from None
+                    self._check_size(path, (size[1], size[0]), v)
 
     def shape(self) -> torch.Tensor | None:
         """(1, S) the subject's shape coefficients as the body takes them (the first

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PIL import Image
+import numpy as np
+import torch
 
 from texvocab.body import smpl_io
 from texvocab.capture import open as open_capture
-from texvocab.errors import AssetError
+from texvocab.errors import AssetError, PoseError
 from texvocab.io.spec import check_arrays, load_spec, name_is_accepted, spec_ref
+from texvocab.pipeline.settings import Settings
 
 
 def check_path(path: str | Path) -> list[str]:
@@ -39,6 +41,30 @@ def check_path(path: str | Path) -> list[str]:
     return lines
 
 
+def _check_content(cap) -> list[str]:
+    """What training and evaluation rely on beyond the files: poses finite and within the
+    stated bounds, every mask non-empty, the default held-out views present."""
+    lines = []
+    try:
+        cap.body.check_pose(torch.as_tensor(np.asarray(cap.poses)),
+                            torch.as_tensor(np.asarray(cap.trans)))
+    except PoseError as exc:
+        lines.append(f"FAIL {cap.root}: {exc}")
+    empty = [(t, v) for t in range(cap.num_frames) for v in range(cap.num_views)
+             if not cap.mask(v, t).any()]
+    if empty:
+        t, v = empty[0]
+        lines.append(f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(empty)} of "
+                     f"{cap.num_frames * cap.num_views} masks are empty); training and "
+                     "evaluation need the person in every view")
+    held_out = [v for v in Settings().eval_views if v >= cap.num_views]
+    if held_out:
+        lines.append(f"note {cap.root}: has views 0..{cap.num_views - 1}, but the default "
+                     f"eval_views are {list(Settings().eval_views)}: train and eval with "
+                     "--set eval_views=... (views that exist)")
+    return lines
+
+
 def check_capture(path: Path) -> list[str]:
     """Open a capture folder and stat every image and mask it lists."""
     try:
@@ -50,12 +76,14 @@ def check_capture(path: Path) -> list[str]:
     lines = [f"FAIL {p}: listed by the capture but missing" for p in missing[:10]]
     if len(missing) > 10:
         lines.append(f"FAIL ... and {len(missing) - 10} more missing files")
-    for v, cam in enumerate(cap.cameras):
-        with Image.open(cap.image_paths[0][v]) as im:
-            if im.size != (cam.width, cam.height):
-                lines.append(f"FAIL {cap.image_paths[0][v]}: image is {im.size[0]}x{im.size[1]}, "
-                             f"calibration says {cam.width}x{cam.height}")
+    if not missing:
+        try:
+            cap.check_image_sizes()
+        except AssetError as exc:
+            lines.append(f"FAIL {exc}")
     if not lines:
+        lines += _check_content(cap)
+    if not [ln for ln in lines if ln.startswith("FAIL")]:
         lines.append(f"OK   {path}: {cap.layout} capture, {cap.num_views} views x "
                      f"{cap.num_frames} frames ({cap.num_train} training)")
     return lines

@@ -13,6 +13,7 @@ import torch
 
 from texvocab.errors import AssetError
 from texvocab.io.images import atomic_write_bytes
+from texvocab.io.weights import load_error_reason
 
 FORMAT = "texvocab-checkpoint"
 VERSION = 1
@@ -33,8 +34,8 @@ def load_checkpoint(path: str | Path) -> dict:
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # unpickling refused / truncated / not a torch file
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise AssetError(f"{path}: not a loadable texvocab checkpoint ({msg})") from None
+        raise AssetError(f"{path}: not a loadable texvocab checkpoint, refused by the "
+                         f"weights-only reader ({load_error_reason(exc)})") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise AssetError(f"{path}: not a texvocab checkpoint (no format tag {FORMAT!r}); see "
                          "assets_spec/checkpoint.md")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import codecs
 import io
 import pickle
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -157,10 +158,15 @@ def read_npz(path: str | Path, what: str = "file") -> dict:
     path = Path(path)
     if not path.is_file():
         raise AssetError(f"{what} not found: {path}")
+    if not zipfile.is_zipfile(path):  # np.load would try to unpickle it
+        raise AssetError(f"{path}: not an .npz archive (a zip of .npy arrays); expected {what}")
     try:
         with np.load(path, allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    except ValueError as exc:
-        raise AssetError(f"{path}: object arrays are refused in .npz files ({exc})") from None
-    except Exception as exc:
-        raise AssetError(f"{path}: not a readable .npz ({exc})") from None
+            data = {k: npz[k] for k in npz.files}
+    except ValueError:
+        raise AssetError(f"{path}: holds object (pickled) arrays, which are refused; expected "
+                         f"{what} with numeric arrays") from None
+    except Exception as exc:  # noqa: BLE001 - any damaged archive is the user's file problem
+        raise AssetError(f"{path}: not a readable .npz ({type(exc).__name__}); expected "
+                         f"{what}") from None
+    return data

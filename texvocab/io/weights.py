@@ -44,7 +44,7 @@ def package_dir(name: str) -> Path | None:
     return Path(next(iter(spec.submodule_search_locations)))
 
 
-def _load_error_reason(e: Exception) -> str:
+def load_error_reason(e: Exception) -> str:
     """The informative line of a ``torch.load`` error (torch wraps it in generic advice,
     including re-running with ``weights_only=False``, which we never suggest)."""
     lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
@@ -69,7 +69,7 @@ def load_state_dict(path: Path, what: str, expected: Mapping[str, torch.Size],
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - any unreadable/unsafe file is an asset problem
         raise AssetError(f"{path}: not loadable as a torch state dict with weights_only=True "
-                         f"({_load_error_reason(e)})") from None
+                         f"({load_error_reason(e)})") from None
     if not isinstance(state, Mapping):
         raise AssetError(f"{path}: expected a {what} state dict, got {type(state).__name__}")
     out = {}

@@ -21,7 +21,9 @@ coverage are stored, so later stages can weight or mask by coverage.
 """
 from __future__ import annotations
 
+import logging
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +36,8 @@ from texvocab.capture.camera import sample_image
 from texvocab.geometry.raster import rasterize_mesh
 from texvocab.geometry.uv import texel_map
 from texvocab.io.images import atomic_write_bytes
+
+log = logging.getLogger("texvocab")
 
 VIEW_WEIGHTINGS = ("mean", "cosine")
 
@@ -139,6 +143,21 @@ def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:
     return cache_dir(capture, settings) / f"frame_{capture.frame_ids[frame]:06d}.npz"
 
 
+def _readable(path: Path, size: int) -> bool:
+    """Whether a cached texture map is there and sound; a damaged one (a truncated or
+    foreign file in texvocab's own cache) is logged and rebuilt, never an error."""
+    if not path.is_file():
+        return False
+    try:
+        texture, coverage = load_texture_map(path)
+        ok = texture.shape == (size, size, 3) and coverage.shape == (size, size)
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        ok = False
+    if not ok:
+        log.warning("%s: damaged texture-map cache file, rebuilding it", path)
+    return ok
+
+
 def load_texture_map(path: Path) -> tuple[np.ndarray, np.ndarray]:
     with np.load(path, allow_pickle=False) as npz:
         return npz["texture"].astype(np.float32) / 255.0, npz["coverage"].astype(np.float32)
@@ -153,7 +172,7 @@ def prepare_texture_maps(capture, settings: TexmapSettings | None = None,
     s = settings or TexmapSettings()
     frames = list(capture.train_frames if frames is None else frames)
     paths = [texture_map_path(capture, t, s) for t in frames]
-    todo = [(t, p) for t, p in zip(frames, paths, strict=True) if not p.is_file()]
+    todo = [(t, p) for t, p in zip(frames, paths, strict=True) if not _readable(p, s.size)]
     it = todo
     if progress and todo:
         it = tqdm(todo, desc=f"texture maps {s.size}²", unit="frame")

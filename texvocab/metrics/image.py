@@ -25,6 +25,7 @@ from texvocab.metrics.perceptual import LPIPS, lpips, lpips_with
 PSNR_MAX_DB = 100.0  # PSNR of identical images (mse 0) and cap for any mse <= 1e-10
 SSIM_SIGMA = 1.5
 SSIM_RADIUS = 5  # int(3.5 * sigma + 0.5): scikit-image's truncate=3.5 -> 11 taps
+SSIM_WINDOW = 2 * SSIM_RADIUS + 1  # the smallest image (and bounding box) SSIM measures
 SSIM_K1, SSIM_K2 = 0.01, 0.03
 
 ArrayLike = np.ndarray | torch.Tensor
@@ -115,10 +116,11 @@ def ssim(pred: ArrayLike, gt: ArrayLike) -> float:
     return float(s.mean(axis=(0, 1)).mean())
 
 
-def mask_bbox(mask: ArrayLike, margin: int = 0) -> tuple[int, int, int, int]:
+def mask_bbox(mask: ArrayLike, margin: int = 0, min_size: int = 0) -> tuple[int, int, int, int]:
     """Bounding box ``(y0, y1, x0, x1)`` (half-open: rows y0..y1-1) of the true pixels of
-    a boolean mask ``(H, W)``, grown by ``margin`` pixels on each side and clipped to the
-    image. Raises ``ValueError`` for an empty mask."""
+    a boolean mask ``(H, W)``, grown by ``margin`` pixels on each side, then widened about
+    its centre to at least ``min_size`` pixels per side (SSIM's 11-pixel window on a thin
+    figure), and clipped to the image. Raises ``ValueError`` for an empty mask."""
     m = mask.detach().cpu().numpy() if isinstance(mask, torch.Tensor) else np.asarray(mask)
     if m.ndim != 2:
         raise ValueError(f"mask must be (H, W), got {m.shape}")
@@ -127,8 +129,14 @@ def mask_bbox(mask: ArrayLike, margin: int = 0) -> tuple[int, int, int, int]:
     if rows.size == 0:
         raise ValueError("mask is empty: it has no bounding box")
     h, w = m.shape
-    return (max(0, int(rows[0]) - margin), min(h, int(rows[-1]) + 1 + margin),
-            max(0, int(cols[0]) - margin), min(w, int(cols[-1]) + 1 + margin))
+    box = []
+    for lo, hi, n in ((int(rows[0]) - margin, int(rows[-1]) + 1 + margin, h),
+                      (int(cols[0]) - margin, int(cols[-1]) + 1 + margin, w)):
+        short = max(0, min(min_size, n) - (hi - lo))
+        lo, hi = lo - short // 2, hi + short - short // 2
+        shift = max(0, -lo) - max(0, hi - n)  # slide back inside the image
+        box += [max(0, lo + shift), min(n, hi + shift)]
+    return box[0], box[1], box[2], box[3]
 
 
 def crop_to_bbox(image: ArrayLike, bbox: tuple[int, int, int, int]) -> ArrayLike:
@@ -142,7 +150,7 @@ def metrics_in_bbox(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike,
     """``{"psnr", "ssim"}`` on the crop of the bounding box of ``mask`` ``(H, W)`` (plus
     ``margin`` pixels), AniNeRF style: every pixel of the rectangle counts, background
     included. Images ``(H, W, 3)`` in [0, 1]; the crop must be at least 11x11 for SSIM."""
-    bbox = mask_bbox(mask, margin)
+    bbox = mask_bbox(mask, margin, SSIM_WINDOW)
     p, g = crop_to_bbox(pred, bbox), crop_to_bbox(gt, bbox)
     return {"psnr": psnr(p, g), "ssim": ssim(p, g)}
 
@@ -168,7 +176,7 @@ def evaluate_pair(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike,
     """
     box = metrics_in_bbox(pred, gt, mask)
     full = metrics_full_frame(pred, gt)
-    bbox = mask_bbox(mask)
+    bbox = mask_bbox(mask, 0, SSIM_WINDOW)
     p, g = crop_to_bbox(pred, bbox), crop_to_bbox(gt, bbox)
     perceptual = lpips(p, g) if lpips_model is None else lpips_with(lpips_model, p, g)
     return {"psnr_bbox": box["psnr"], "ssim_bbox": box["ssim"],

@@ -11,6 +11,7 @@ image count; by default the sets are the whole test split (:func:`build_sets`).
 from __future__ import annotations
 
 import json
+import logging
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,6 +25,7 @@ from texvocab.capture.synth import ground_truth_renderer
 from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 from texvocab.metrics import evaluate_pair, frechet
+from texvocab.metrics.image import SSIM_WINDOW
 from texvocab.render import ShellGeometry, render_image
 
 #: Per-image metrics whose set mean is reported with its standard error.
@@ -32,6 +34,7 @@ SEM_KEYS = ("psnr_bbox", "ssim_bbox", "psnr_full", "ssim_full", "lpips")
 GENERATED_POSES = ("kick", "squat", "arms_up", "a_pose")
 
 # (pose (24, 3), trans (3,), Camera, truth (H, W, 3) float in [0, 1], mask (H, W) bool)
+log = logging.getLogger("texvocab")
 Item = tuple[np.ndarray, np.ndarray, object, np.ndarray, np.ndarray]
 
 
@@ -261,14 +264,31 @@ def build_sets(capture, settings, per_set: int | None = None,
     if per_set is not None and per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {per_set}")
     views = list(settings.eval_views)
+    missing = [v for v in views if v >= capture.num_views]
+    if missing:
+        raise TexvocabError(f"eval_views {views}: {capture.root} has views 0.."
+                            f"{capture.num_views - 1} (the checkpoint holds out views it lacks)")
+    small = [v for v in views if min(capture.cameras[v].width, capture.cameras[v].height)
+             < SSIM_WINDOW]
+    if small:
+        cam = capture.cameras[small[0]]
+        raise TexvocabError(f"{capture.root}: view {small[0]} is {cam.width}x{cam.height} "
+                            f"pixels; SSIM needs at least {SSIM_WINDOW}x{SSIM_WINDOW}")
     novel, train = list(capture.novel_frames), list(capture.train_frames)
     n_novel = len(novel) if per_set is None else min(per_set, len(novel))
     n_train = n_novel if novel else (len(train) if per_set is None else per_set)
     sets: dict[str, Sequence[Item]] = {}
     for name, frames in (("training_poses", spread(train, n_train)),
                          ("novel_poses", spread(novel, n_novel))):
-        if frames:
-            sets[name] = CaptureItems(capture, [(t, v) for t in frames for v in views])
+        pairs = [(t, v) for t in frames for v in views]
+        empty = [(t, v) for t, v in pairs if not capture.mask(v, t).any()]
+        if empty:
+            log.warning("%s: %d of %d images have an empty mask (first: frame %d, view %d) "
+                        "and are left out: their metrics are undefined", name, len(empty),
+                        len(pairs), capture.frame_ids[empty[0][0]], empty[0][1])
+            pairs = [p for p in pairs if p not in empty]
+        if pairs:
+            sets[name] = CaptureItems(capture, pairs)
     if capture.synthetic and generated:
         renderer, cams = ground_truth_renderer(capture)
         items = []

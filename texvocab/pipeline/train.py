@@ -124,6 +124,7 @@ class Trainer:
         if Path(out_dir).exists() and not Path(out_dir).is_dir():
             raise TexvocabError(f"--out {out_dir}: is a file; expected a run folder")
         self.views = train_views(capture, settings)
+        capture.check_image_sizes(capture.train_frames, self.views)
         self.textures = load_textures(capture, settings, progress)
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
             torch.manual_seed(settings.seed)
