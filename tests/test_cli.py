@@ -72,7 +72,9 @@ def test_synth_contact_sheet_and_check_assets(tmp_path):
               "--ring-views", "2", "--raised-views", "1", "--texture-size", "256", check_rc=0)
     assert "3 frames x 3 views (zju layout, 2 training frames)" in out.stdout
     assert "synth cap" in out.stderr  # progress bar
-    assert run("check-assets", str(cap), check_rc=0).stdout.startswith("OK")
+    out = run("check-assets", str(cap), check_rc=0).stdout.splitlines()
+    assert out[0].startswith("note ") and "eval_views" in out[0]  # 3 views: not 1 and 5
+    assert out[1].startswith("OK")
     sheet = tmp_path / "sheet.png"
     run("contact-sheet", str(cap), "--out", str(sheet), check_rc=0)
     from PIL import Image
