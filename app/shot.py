@@ -145,6 +145,8 @@ def write_shot(out: str | Path, shot: Shot) -> list[Path]:
 def cmd_shot(args: argparse.Namespace) -> int:
     if args.neural and args.source is None:
         raise TexvocabError("--neural needs a checkpoint (SOURCE = checkpoint.pt)")
+    if args.size is not None:
+        parse_size(args.size)  # a bad size is refused before the avatar loads
     data = load_viewer_data(args.source, smpl=args.smpl)
     if args.neural and data.model is None:
         raise TexvocabError(f"--neural: {args.source} is a capture, not a checkpoint")

@@ -11,7 +11,8 @@ Groups (each varies one knob from the common base; the first variant is its refe
 small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M). The base is ``--base`` on top of the
-defaults (by default ``encoder=pyramid perceptual=off weighting=paper``), so a variant
+defaults (by default ``encoder=pyramid perceptual=off weighting=paper view_weighting=mean``:
+the project before this ablation chose its defaults), so a variant
 differs from its reference in exactly its own setting; identical settings share one run.
 
 Without CAPTURE a compositional synthetic capture is made under OUT (``texvocab synth
@@ -35,7 +36,7 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
 SET = "novel_poses"
-DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper"]
+DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean"]
 GROUPS: dict[str, dict[str, list[str]]] = {
     "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
                    "none": ["strategy=none"]},

