@@ -168,3 +168,10 @@ def test_adaptive_keys_stop_when_every_pose_is_within_d_min():
     q = rotvec_to_quat(poses[:, [4]])
     assert len(farthest_point_sampling(q, 20, min_distance=0.0)) == 20
     assert "M=" in adaptive.format_query(poses[0])
+
+
+def test_settings_absent_from_an_old_checkpoint_keep_their_old_meaning():
+    old = Settings.from_dict({})  # a checkpoint written before these settings existed
+    assert (old.perceptual, old.view_weighting, old.min_key_distance) == ("off", "mean", 0.0)
+    assert Settings().perceptual == "auto"  # today's default differs
+    assert Settings.from_dict(Settings().to_dict()) == Settings()
