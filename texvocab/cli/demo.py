@@ -3,6 +3,8 @@ poses, rendered offscreen front and side, and the default synthetic capture (vie
 frames contact sheet), written as PNGs."""
 from __future__ import annotations
 
+import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -12,10 +14,13 @@ from texvocab.body.poses import preset
 from texvocab.capture import open as open_capture
 from texvocab.capture.motion import default_motion
 from texvocab.capture.synth import synthesize
+from texvocab.errors import TexvocabError
 from texvocab.io.images import contact_sheet, save_png
 from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.train import Trainer
+
+log = logging.getLogger("texvocab")
 
 DEMO_POSES = ("t_pose", "arms_down", "walk", "squat", "arms_up", "kick")
 
@@ -85,7 +90,12 @@ def demo_avatar(out_dir: str | Path, capture_root: Path, minutes: float = 3.0,
     cap = open_capture(capture_root, body=load_body(smpl))
     settings = Settings(iterations=100000, max_minutes=minutes, checkpoint_every=100)
     trainer = Trainer(cap, settings, run)
-    trainer.resume()
+    try:
+        trainer.resume()
+    except TexvocabError as e:  # the demo's own run, from other settings (an older texvocab)
+        kept = run / f"checkpoint-before-{time.strftime('%Y%m%d-%H%M%S')}.pt"
+        trainer.checkpoint_path.rename(kept)
+        log.warning("%s; kept it as %s and training the demo avatar afresh", e, kept)
     trainer.run()
     trainer.model.eval()
     sets = build_sets(cap, settings)  # the full test split: every novel frame x eval view
