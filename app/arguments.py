@@ -42,6 +42,9 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--smpl", metavar="PATH", default=None,
                    help="your SMPL model file or folder (see assets_spec/README.md); "
                         "default: the embedded default body")
+    p.add_argument("--capture", metavar="FOLDER", default=None,
+                   help="the capture folder a checkpoint was trained on, when it is not where the "
+                        "checkpoint records it (moved, or another machine)")
     p.add_argument("--script", default=None, help=argparse.SUPPRESS)
     p.add_argument("--report", default=None, help=argparse.SUPPRESS)
     p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)

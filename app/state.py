@@ -63,8 +63,10 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
                       f"capture {path} ({cap.num_train} training frames)")
 
 
-def _checkpoint_data(path: Path, smpl: str | None) -> ViewerData:
-    avatar = load_avatar(path, smpl=smpl)
+def _checkpoint_data(path: Path, smpl: str | None, capture: str | None = None) -> ViewerData:
+    cap = None if capture is None else open_capture(Path(capture).expanduser(),
+                                                    body=load_body(smpl))
+    avatar = load_avatar(path, cap, smpl=smpl)
     model = avatar.model
     textures = model.pose_feature.textures.permute(0, 2, 3, 1).numpy()
     return ViewerData(avatar.capture.body, model.pose_feature.vocab, textures, model,
@@ -72,7 +74,8 @@ def _checkpoint_data(path: Path, smpl: str | None) -> ViewerData:
                       f"checkpoint {path} (step {avatar.step}, capture {avatar.capture.root})")
 
 
-def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
+def load_viewer_data(source: str | None, smpl: str | None = None,
+                     capture: str | None = None) -> ViewerData:
     """Load what ``texvocab view [SOURCE]`` shows.
 
     Args:
@@ -81,7 +84,10 @@ def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
             checkpoint file written by ``texvocab train`` (its model, vocabulary and
             capture).
         smpl: the user's SMPL model file/folder; default the embedded default body.
+        capture: for a checkpoint, its capture folder when not where it records it.
     """
+    if capture is not None and (source is None or Path(source).expanduser().is_dir()):
+        raise TexvocabError("--capture applies to a checkpoint SOURCE only")
     if source is None:
         body = load_body(smpl)
         return ViewerData(body, settings=Settings(), source=body.name)
@@ -89,7 +95,7 @@ def load_viewer_data(source: str | None, smpl: str | None = None) -> ViewerData:
     if path.is_dir():
         return _capture_data(path, smpl)
     if path.is_file():
-        return _checkpoint_data(path, smpl)
+        return _checkpoint_data(path, smpl, capture)
     raise TexvocabError(f"{source}: no such file or folder; expected a checkpoint .pt written "
                         "by 'texvocab train' or a capture folder")
 

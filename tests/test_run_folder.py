@@ -150,3 +150,25 @@ def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, t
     assert b["step"] == 8 and not (tmp_path / "killed" / LOCK_NAME).exists()
     for key, value in a["model"].items():
         assert torch.allclose(value, b["model"][key], atol=1e-5), key
+
+
+def test_a_moved_capture_is_named_and_capture_points_to_it(capture, tmp_path, capsys):  # noqa: F811
+    import shutil
+
+    from app.state import load_viewer_data
+
+    moved = tmp_path / "moved_cap"
+    shutil.copytree(capture, moved)
+    trainer = Trainer(open_capture(moved), tiny_settings(iterations=1, perceptual="off"),
+                      tmp_path / "run", progress=False)
+    trainer.run()
+    shutil.move(moved, tmp_path / "elsewhere_cap")  # the recorded (absolute) path is gone
+    ckpt = str(trainer.checkpoint_path)
+    assert main(["shot", ckpt, "--out", str(tmp_path / "shot")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "moved_cap" in err and "missing" in err
+    assert not (tmp_path / "shot").exists()
+    data = load_viewer_data(ckpt, capture=str(tmp_path / "elsewhere_cap"))
+    assert data.model is not None and data.capture.root == tmp_path / "elsewhere_cap"
+    with pytest.raises(TexvocabError, match="--capture applies to a checkpoint"):
+        load_viewer_data(str(tmp_path / "elsewhere_cap"), capture=str(capture))

@@ -109,6 +109,9 @@ def add_viewer_parsers(sub) -> None:
                    help="any of: " + ", ".join(SHOT_OVERLAYS) + " (over the blended texture)")
     p.add_argument("--neural", action=argparse.BooleanOptionalAction, default=None,
                    help="also render the trained avatar (default: when SOURCE is a checkpoint)")
+    p.add_argument("--capture", metavar="FOLDER", default=None,
+                   help="the capture folder a checkpoint was trained on, when it is not where the "
+                        "checkpoint records it (moved, or another machine)")
     _add_smpl(p)
     p.set_defaults(func=cmd_shot)
 

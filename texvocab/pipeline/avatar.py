@@ -51,7 +51,8 @@ def _capture_path(ck: dict, checkpoint: str | Path) -> Path:
         if c.is_dir():
             return c
     raise TexvocabError(f"{checkpoint}: its capture folder {recorded!r} is missing; the avatar "
-                        "needs the capture it was trained on (pass its folder)")
+                        "needs the capture it was trained on (eval: its CAPTURE argument; "
+                        "shot and view: --capture FOLDER)")
 
 
 def load_avatar(checkpoint: str | Path, capture=None, smpl: str | None = None,
