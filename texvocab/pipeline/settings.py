@@ -131,7 +131,7 @@ class Settings:
                     continue
                 value, default = getattr(group, f.name), f.default
                 if f.name in ("train_views", "eval_views"):
-                    ok = value is None if f.name == "train_views" and value is None else (
+                    ok = (value is None and f.name == "train_views") or (
                         isinstance(value, tuple) and all(type(v) is int for v in value))
                     what = "a list of view indices"
                 elif f.name in ("max_minutes", "shell_width"):

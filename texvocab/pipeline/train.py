@@ -137,7 +137,6 @@ class Trainer:
         self.frames: dict[int, FrameData] = {}
         self.progress = progress
         self.perceptual = perceptual_term(settings)
-        self._detach_features: FrameData | None = None
 
     @property
     def checkpoint_path(self) -> Path:
@@ -221,7 +220,7 @@ class Trainer:
         """Draw one step's batch (frame, two training views, rays, the perceptual patch)
         from the run's random stream and return its loss terms as tensors (unweighted:
         ``color``, ``mask``, ``eikonal``, ``perceptual``), their weighted sum ``loss`` and
-        ``field_evals``."""
+        ``field_evals`` and the step's ``frame`` (its :class:`FrameData`)."""
         s = self.s
         t = int(torch.randint(self.capture.num_train, (1,), generator=self.gen))
         fd = self._frame(t)
@@ -254,18 +253,16 @@ class Trainer:
                 raise TexvocabError(f"training stopped at step {self.step + 1}: the {name} "
                                     f"term is {float(terms[name].detach())}; {ck}")
         terms["field_evals"] = out.field_evals
-        if getattr(self.model.pose_feature.encoder, "trainable", False):
-            self._detach_features = fd
+        terms["frame"] = fd
         return terms
 
     def train_step(self) -> dict:
-        self._detach_features = None
         terms = self.loss_terms()
         self.optim.zero_grad(set_to_none=True)
         terms["loss"].backward()
         self.optim.step()
-        if self._detach_features is not None:  # a trainable encoder's graph ends here
-            fd = self._detach_features
+        if getattr(self.model.pose_feature.encoder, "trainable", False):
+            fd = terms["frame"]  # a trainable encoder's graph ends here
             fd.ctx.features = tuple(f.detach() for f in fd.ctx.features)
         self.step += 1
         psnr = float(-10 * torch.log10(terms["color"].detach().clamp(min=1e-10)))
