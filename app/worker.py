@@ -56,21 +56,6 @@ class RenderFrame:
     elapsed: float
 
 
-def pad_single_point_calls(field):
-    """The field with calls of exactly one point evaluated as two (the point twice).
-
-    texvocab.method.feature.PoseFeature.forward indexes numpy arrays with a torch bool mask; a
-    one-element mask is read as the integer index 1 there (IndexError). The marcher
-    makes such calls when a ray chunk leaves a single sample to evaluate (small images).
-    """
-    def call(points, dirs):
-        if points.shape[0] != 1:
-            return field(points, dirs)
-        sigma, rgb = field(points.expand(2, -1), dirs.expand(2, -1))
-        return sigma[:1], rgb[:1]
-    return call
-
-
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
     once, then the levels (as :func:`texvocab.pipeline.evaluate.render_view` does for one)."""
@@ -82,7 +67,7 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
                 return
             shell = ShellGeometry.build(ctx.vertices, model.body.faces, m.shell_width,
                                         m.shell_voxel, m.shell_exact, index=ctx.index)
-            field = pad_single_point_calls(model.for_pose(ctx))
+            field = model.for_pose(ctx)
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
                                       levels=levels, cancelled=cancelled, shell=shell)
     return render

@@ -30,7 +30,7 @@ def render(model, item, march, variant: str, fixed) -> np.ndarray:
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
         if variant == "feature zeroed":
-            ctx.features = tuple(torch.zeros_like(f) for f in ctx.features)
+            ctx.features = ctx.features.zeros_like()
         elif variant == "keys of a fixed pose":
             ctx.frames, ctx.part_coef, ctx.features = fixed.frames, fixed.part_coef, fixed.features
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,

@@ -14,6 +14,16 @@ on the first frames in the same run, on the same field, for the ratio.
 
     .venv/bin/python bench/render_speed.py [CKPT] [--capture DIR] [--frames 3]
         [--variant "12+4:coarse_samples=12,fine_samples=4"] [--reference 1]
+    .venv/bin/python bench/render_speed.py CKPT --compare [--frames 3]
+
+``--compare`` renders the same frames four ways in one run — ``new``: the surface-guided
+marcher (guide=raster) at the ``fast`` preset's knobs; ``previous``: the shell marcher
+(guide=shell) at the ``fast`` preset; ``quality``: the shell marcher at the ``quality``
+preset; ``reference``: the uniform 64+32 marcher in the body's box — and prints per path
+seconds, field evaluations, PSNR against the truth and against the reference, and as its
+last line ``summary: new_s=… previous_s=… reference_s=… new_evals=… reference_evals=…
+psnr_delta_vs_quality_db=…`` (per-frame means; the new path's PSNR against the truth
+minus the quality preset's).
 
 CKPT's capture is the one recorded in the checkpoint unless --capture is given. Without
 CKPT and --capture a small synthetic capture (6 frames, 4 views, 256²) is made in a
@@ -109,6 +119,28 @@ def items_of(cap, settings, frames: int):
     return items[:max(frames, 1)]
 
 
+class Timed:
+    """A pose field whose calls (density or SDF) add their time and point count to
+    ``spent``; ``beta`` passes through (the surface-guided marcher reads it)."""
+
+    def __init__(self, field, spent: dict):
+        self.field, self.spent = field, spent
+        self.beta = field.beta
+
+    def _timed(self, fn, points, dirs):
+        start = time.perf_counter()
+        out = fn(points, dirs)
+        self.spent["field"] += time.perf_counter() - start
+        self.spent["evals"] += len(points)
+        return out
+
+    def __call__(self, points, dirs):
+        return self._timed(self.field, points, dirs)
+
+    def sdf_rgb(self, points, dirs):
+        return self._timed(self.field.sdf_rgb, points, dirs)
+
+
 def timed_render(model, item, march):
     """Render one item with the time split; returns (image (H, W, 3) numpy, row dict)."""
     from texvocab.render import ShellGeometry, render_image
@@ -122,16 +154,8 @@ def timed_render(model, item, march):
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
                                     march.shell_voxel, march.shell_exact, index=ctx.index)
         t2 = time.perf_counter()
-        field = model.for_pose(ctx)
-
-        def counted(points, dirs):
-            start = time.perf_counter()
-            out = field(points, dirs)
-            spent["field"] += time.perf_counter() - start
-            spent["evals"] += len(points)
-            return out
-
-        out = render_image(counted, cam, ctx.vertices, model.body.faces, march, shell=shell)
+        out = render_image(Timed(model.for_pose(ctx), spent), cam, ctx.vertices,
+                           model.body.faces, march, shell=shell)
     t3 = time.perf_counter()
     row = {"context": t1 - wall0, "shell": t2 - t1, "field": spent["field"],
            "evals": spent["evals"], "march": t3 - t2 - spent["field"], "total": t3 - wall0,
@@ -154,6 +178,56 @@ def reference_render(model, item, coarse: int, fine: int):
         "context": float("nan"), "shell": 0.0, "field": float("nan"),
         "evals": out.stats.field_evals, "march": float("nan"), "total": total,
         "cpu": time.process_time() - cpu0}
+
+
+def compare(model, settings, items, what: str, repeats: int = 1) -> int:
+    """The four-way comparison of ``--compare``; prints a table and the summary line."""
+    from texvocab.metrics import evaluate_pair, psnr
+    from texvocab.metrics.image import crop_to_bbox, mask_bbox
+    from texvocab.pipeline.settings import PRESETS, march_settings
+
+    base = march_settings(settings)
+    fast = {k: v for k, v in PRESETS["fast"].items() if k != "image_scale"}
+    quality = {k: v for k, v in PRESETS["quality"].items() if k != "image_scale"}
+    paths = {"new": dataclasses.replace(base, **fast, guide="raster"),
+             "previous": dataclasses.replace(base, **fast, guide="shell"),
+             "quality": dataclasses.replace(base, **quality, guide="shell")}
+    print(f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
+          f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
+          f"{max(repeats, 1)} per frame, incl. pose context and shell; PSNR in the mask's "
+          "bounding box.\n")
+    print("| path | frame | seconds | field evals | PSNR vs truth | PSNR vs reference |")
+    print("|---|---|---|---|---|---|")
+    rows = {name: [] for name in (*paths, "reference")}
+    for item in items:
+        box = mask_bbox(item[5])
+        ref_img, ref_row = reference_render(model, item, 64, 32)
+        results = {"reference": (ref_img, ref_row)}
+        for name, march in paths.items():
+            best = None
+            for _ in range(max(repeats, 1)):
+                img, row = timed_render(model, item, march)
+                if best is None or row["total"] < best[1]["total"]:
+                    best = (img, row)
+            results[name] = best
+        for name, (img, row) in results.items():
+            p_gt = evaluate_pair(img, item[4], item[5])["psnr_bbox"]
+            p_ref = psnr(crop_to_bbox(img, box), crop_to_bbox(ref_img, box))
+            rows[name].append((row["total"], row["evals"], p_gt, p_ref))
+            print(f"| {name} | {item[0]} | {row['total']:.3f} | {int(row['evals']):,} | "
+                  f"{p_gt:.3f} | {min(p_ref, 99.0):.2f} |", flush=True)
+    mean = {n: np.mean(np.array(r, dtype=np.float64), 0) for n, r in rows.items()}
+    print()
+    for n, (sec, ev, p_gt, p_ref) in mean.items():
+        print(f"- {n}: {sec:.3f} s/frame, {ev:,.0f} field evaluations, PSNR {p_gt:.3f} dB vs "
+              f"truth, {min(p_ref, 99.0):.2f} dB vs reference")
+    print(f"- previous / new: {mean['previous'][0] / mean['new'][0]:.2f}x time; reference / "
+          f"new: {mean['reference'][1] / mean['new'][1]:.1f}x field evaluations")
+    print(f"summary: new_s={mean['new'][0]:.3f} previous_s={mean['previous'][0]:.3f} "
+          f"reference_s={mean['reference'][0]:.3f} new_evals={mean['new'][1]:.0f} "
+          f"reference_evals={mean['reference'][1]:.0f} "
+          f"psnr_delta_vs_quality_db={mean['new'][2] - mean['quality'][2]:+.3f}")
+    return 0
 
 
 COLS = ("context", "shell", "field", "evals", "march", "total", "cpu", "psnr_bbox", "psnr_full")
@@ -186,8 +260,15 @@ def main(argv=None) -> int:
                     help="frames also rendered by the uniform 64+64 reference marcher")
     ap.add_argument("--repeats", type=int, default=1, help="renders per frame (best kept)")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--compare", action="store_true",
+                    help="new (guided, fast knobs) vs previous (shell, fast) vs quality vs "
+                    "the uniform 64+32 reference; ends with a summary line")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
+    if args.compare:
+        model, settings, cap, what = load(args)
+        return compare(model, settings, items_of(cap, settings, args.frames), what,
+                       args.repeats)
 
     from texvocab.metrics import evaluate_pair
     from texvocab.pipeline.settings import march_settings

@@ -16,7 +16,7 @@ from texvocab.errors import AssetError, TexvocabError
 from texvocab.geometry.rotations import rotvec_to_quat
 from texvocab.geometry.uv import uv_to_grid
 from texvocab.method.encoder import AUTO_FALLBACK, build_encoder
-from texvocab.method.feature import channels_last_maps, sample_maps
+from texvocab.method.feature import FeatureMaps, sample_maps
 from texvocab.method.texmap import TexmapSettings, build_texture_map, cache_dir
 from texvocab.method.vocab import Vocabulary, farthest_point_sampling, part_distance
 from texvocab.metrics import perceptual as lpips_module
@@ -127,7 +127,7 @@ def test_sample_maps_equals_grid_sample_for_channels_last_and_plain_maps():
     uv = torch.rand(300, 2, generator=g, dtype=torch.float64) * 1.4 - 0.2  # incl. outside
     ref = F.grid_sample(maps[:1], uv_to_grid(uv).view(1, 1, -1, 2), mode="bilinear",
                         padding_mode="border", align_corners=False)[0, :, 0].T
-    for m in (maps[0], channels_last_maps(maps)[0]):
+    for m in (maps[0], FeatureMaps.from_stack(maps).map(0)):
         got = sample_maps(m, uv)
         assert torch.allclose(got, ref, atol=1e-12)
         (ga,) = torch.autograd.grad(got.square().sum(), maps)

@@ -104,7 +104,7 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
     differentiable render for one pose."""
     ctx = field.pose_feature.context(pose)
     assert_finite(vertices=ctx.vertices, transforms=ctx.transforms, part_coef=ctx.part_coef,
-                  features=torch.stack(ctx.features))
+                  features=ctx.features.table)
     pts = shell_points(ctx, 300).requires_grad_(True)
     feat = field.pose_feature(ctx, pts)
     assert_finite(feature=feat.features, uv=feat.uv, distance=feat.distance)
@@ -469,7 +469,7 @@ def test_all_zero_textures(body, vocab, encoder):
     pose = uniform_pose(0.3)
     ctx = field.pose_feature.context(pose)
     out = field.pose_feature(ctx, shell_points(ctx, 200))
-    assert_finite(features=torch.stack(ctx.features), feature=out.features)
+    assert_finite(features=ctx.features.table, feature=out.features)
     valid = out.features[out.valid]
     if encoder == "pass_through":
         assert torch.equal(out.features, torch.zeros_like(out.features))
@@ -562,7 +562,7 @@ def test_float32_and_float64_agree_at_extreme_poses(body, vocab, case):
     field64 = copy.deepcopy(field32).double()
     ctx32 = field32.pose_feature.context(pose)
     ctx64 = field64.pose_feature.context(pose)
-    assert ctx64.features[0].dtype == torch.float64
+    assert ctx64.features.table.dtype == torch.float64
     pts = shell_points(ctx32, 300, seed=4)
     f32 = field32.pose_feature(ctx32, pts).features
     f64 = field64.pose_feature(ctx64, pts.double()).features

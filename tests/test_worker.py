@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from app.worker import ProgressiveWorker, RenderJob, model_renderer, pad_single_point_calls
+from app.worker import ProgressiveWorker, RenderJob, model_renderer
 from texvocab.capture.camera import Camera
 from texvocab.render import MarchSettings, progressive_render
 from texvocab.render.analytic import SphereField
@@ -246,20 +246,6 @@ def test_model_renderer_uses_the_models_pose_context(levels):
     assert [lv for lv, _, _ in out] == list(levels)
     assert tuple(out[-1][1].shape) == (32, 32, 3)
     assert calls == {"context": 1, "for_pose": 1}
-
-
-def test_single_point_field_calls_are_padded():
-    seen = []
-
-    def field(points, dirs):
-        seen.append(points.shape[0])
-        return points[:, 0] * 2, points.repeat(1, 1)
-
-    padded = pad_single_point_calls(field)
-    sigma, rgb = padded(torch.tensor([[0.5, 1.0, 2.0]]), torch.tensor([[0.0, 0.0, 1.0]]))
-    assert seen == [2] and sigma.tolist() == [1.0] and rgb.tolist() == [[0.5, 1.0, 2.0]]
-    sigma, _ = padded(torch.ones(3, 3), torch.ones(3, 3))
-    assert seen == [2, 3] and sigma.shape == (3,)
 
 
 def test_worker_thread_runs_at_the_requested_niceness():

@@ -156,6 +156,27 @@ class AvatarField(nn.Module):
         density = laplace_density(sdf, self.beta) * valid
         return density, rgb
 
-    def for_pose(self, ctx: PoseContext):
-        """A ``field(points, dirs) -> (density, rgb)`` closure for the marcher."""
-        return lambda points, dirs: self.forward(ctx, points, dirs)
+    def for_pose(self, ctx: PoseContext) -> PoseField:
+        """The field at one pose, as the marchers call it."""
+        return PoseField(self, ctx)
+
+
+class PoseField:
+    """The avatar field at one pose: ``field(points, dirs) -> (density, rgb)`` for the
+    shell marcher, ``field.sdf_rgb(points, dirs) -> (sdf, rgb)`` and ``field.beta`` for the
+    surface-guided one (points more than the shell width from the body read SDF =
+    shell width: no density)."""
+
+    def __init__(self, model: AvatarField, ctx: PoseContext):
+        self.model, self.ctx = model, ctx
+
+    def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
+        return self.model(self.ctx, points, dirs)
+
+    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
+        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs)
+        return torch.where(valid, sdf, self.model.settings.shell_width), rgb
+
+    @property
+    def beta(self) -> float:
+        return float(self.model.beta.detach())

@@ -14,7 +14,7 @@ from texvocab.method.field import FieldSettings
 from texvocab.method.texmap import VIEW_WEIGHTINGS
 from texvocab.method.vocab import WEIGHTINGS
 from texvocab.metrics.inception_perceptual import MIN_PATCH
-from texvocab.render import MarchSettings
+from texvocab.render import GUIDES, MarchSettings
 
 PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
 # What a setting absent from a stored settings dict (a checkpoint written before the
@@ -48,6 +48,8 @@ class Settings:
     early_stop_eps: float = 1e-3
     image_scale: float = 1.0  # render at this fraction of the capture's resolution
     shell_width: float | None = None  # marcher δ (m); None: the field's shell_width
+    guide: str = "raster"  # raster: surface-guided marcher (mesh raster + SDF band, README
+    # "Rendering") | shell: every ray marched front to back through the shell
     # training
     iterations: int = 2000
     rays_per_batch: int = 1024
@@ -86,6 +88,7 @@ class Settings:
             ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),
             ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
             ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
+            ("guide", self.guide in GUIDES, " or ".join(GUIDES)),
             ("k", self.k <= self.num_keys, f"<= num_keys ({self.num_keys}): K of the M keys"),
             ("iterations", self.iterations >= 1, ">= 1"),
             ("checkpoint_every", self.checkpoint_every >= 1, ">= 1"),
@@ -225,7 +228,8 @@ def _parse(raw: str, current, key: str):
 
 # Render knobs: a preset or ``--set`` may change these on a trained checkpoint (the rest
 # is baked into the weights). See bench/tradeoff.py for what each costs and buys.
-RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps", "shell_width")
+RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps", "shell_width",
+                "guide")
 
 # Chosen from bench/tradeoff.py on the default synthetic capture (README, "Presets").
 PRESETS: dict[str, dict] = {
@@ -260,7 +264,8 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     than the many small ones that early termination favours at render time."""
     width = s.field.shell_width if training or s.shell_width is None else s.shell_width
     m = MarchSettings(shell_width=width, coarse_samples=s.coarse_samples,
-                      fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps)
+                      fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps,
+                      guide=s.guide)
     if training:
-        m.segment, m.scout_threshold = m.max_coarse, None
+        m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
     return m

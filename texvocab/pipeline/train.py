@@ -263,7 +263,7 @@ class Trainer:
         self.optim.step()
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             fd = terms["frame"]  # a trainable encoder's graph ends here
-            fd.ctx.features = tuple(f.detach() for f in fd.ctx.features)
+            fd.ctx.features = fd.ctx.features.detach()
         self.step += 1
         psnr = float(-10 * torch.log10(terms["color"].detach().clamp(min=1e-10)))
         return {"loss": float(terms["loss"].detach()), "psnr": psnr,

@@ -2,6 +2,7 @@
 early termination, progressive levels, and a uniform reference marcher."""
 from texvocab.render.coarse import Field, Marched, coarse_pass, evaluate_field, march_until_opaque
 from texvocab.render.marcher import (
+    GUIDES,
     MarchSettings,
     RayResult,
     RenderCancelled,
@@ -15,7 +16,7 @@ from texvocab.render.reference import composite_reference, mesh_bbox, ray_box, r
 from texvocab.render.samples import RaySamples, composite, sample_pdf
 from texvocab.render.shell import ShellBounds, ShellGeometry, ShellPath, shell_bounds, trace_path
 
-__all__ = ["Field", "MarchSettings", "Marched", "RayResult", "RaySamples", "RenderCancelled",
+__all__ = ["GUIDES", "Field", "MarchSettings", "Marched", "RayResult", "RaySamples", "RenderCancelled",
            "RenderResult", "RenderStats", "ShellBounds", "ShellGeometry", "ShellPath",
            "coarse_pass", "composite", "composite_reference", "evaluate_field",
            "march_until_opaque", "mesh_bbox", "progressive_render", "ray_box", "render_image",

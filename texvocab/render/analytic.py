@@ -51,6 +51,10 @@ class SphereField:
         return volsdf_density(self.sdf(points), self.beta), \
             smooth_colour(points, self.albedo, self.freq)
 
+    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
+        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
+        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)
+
 
 class MeshSDFField:
     """VolSDF density of a closed posed mesh, the body's own shape.
@@ -105,3 +109,7 @@ class MeshSDFField:
     def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
         return volsdf_density(self.sdf(points), self.beta), \
             smooth_colour(points, self.albedo, self.freq)
+
+    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
+        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
+        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)

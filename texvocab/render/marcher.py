@@ -76,6 +76,14 @@ class MarchSettings:
     empty_opacity: rays whose coarse opacity stays below this get no fine samples (they
         graze the shell but not the surface); their colour is off by at most this.
     chunk_rays: rays per batch (memory).  chunk_points: points per field call (memory).
+    guide: "shell" marches every ray through the shell front to back (above); "raster"
+        is the surface-guided marcher (:mod:`texvocab.render.guided`): the mesh's
+        rasterisation and the field's SDF place ``band_samples`` samples ``band_spacing``
+        β / cos apart around each ray's surface, composited in closed form; rays at depth
+        edges, meeting faces at a cosine below ``min_cos``, passing within
+        ``miss_margin`` β of the surface outside the silhouette, or whose samples do not
+        bracket the surface (or leave more than ``band_leftover`` transmittance) are
+        marched uniformly over their stretch of shell (coarse_samples, fine_samples).
     """
 
     shell_width: float = 0.04
@@ -92,6 +100,17 @@ class MarchSettings:
     empty_opacity: float = 1e-3
     chunk_rays: int = 4096
     chunk_points: int = 1 << 18
+    guide: str = "shell"
+    band_samples: int = 4
+    band_spacing: float = 2.0
+    band_leftover: float = 0.1
+    min_cos: float = 0.25
+    miss_margin: float = 8.0
+    fallback_segment: int = 2
+    fallback_scout: float | None = 1e-3
+
+
+GUIDES = ("raster", "shell")
 
 
 class RenderCancelled(Exception):
@@ -234,6 +253,12 @@ def render_image(field: Field, camera, vertices, faces, settings: MarchSettings 
     :class:`RenderCancelled` is raised. Differentiable w.r.t. the field's outputs.
     """
     s = settings or MarchSettings()
+    if s.guide not in GUIDES:
+        raise ValueError(f"MarchSettings.guide={s.guide!r}: expected one of {GUIDES}")
+    if s.guide == "raster":
+        from texvocab.render.guided import render_image_guided  # it builds on this module
+
+        return render_image_guided(field, camera, vertices, faces, s, background, cancelled, shell)
     start = time.perf_counter()
     shell_seconds = 0.0
     if shell is None:
