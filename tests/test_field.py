@@ -68,3 +68,21 @@ def test_laplace_density_is_finite_at_extreme_beta(beta):
 def test_positional_encoding_shape():
     x = torch.rand(5, 3)
     assert positional_encoding(x, 4).shape == (5, 27)
+
+
+def test_pose_field_serves_both_marchers_down_to_one_point(field):
+    """PoseField: density for the shell marcher, SDF for the guided one (the same
+    VolSDF pair), beta as a float; a single point works (the viewer once padded those)."""
+    from texvocab.method.field import laplace_density
+
+    ctx = field.pose_feature.context(*preset("walk"))
+    pf = field.for_pose(ctx)
+    with torch.no_grad():
+        for n in (1, 7):
+            pts = ctx.vertices[:n].detach() + 0.003
+            dirs = torch.nn.functional.normalize(pts, dim=-1)
+            sigma, rgb = pf(pts, dirs)
+            sdf, rgb2 = pf.sdf_rgb(pts, dirs)
+            assert sigma.shape == (n,) and sdf.shape == (n,) and torch.equal(rgb, rgb2)
+            assert torch.allclose(sigma, laplace_density(sdf, field.beta), rtol=1e-5)
+    assert isinstance(pf.beta, float) and pf.beta == pytest.approx(float(field.beta))

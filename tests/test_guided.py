@@ -99,3 +99,25 @@ def test_unknown_guide_is_refused(body):  # noqa: F811
     with pytest.raises(ValueError, match="guide"):
         render_image(body["field"], body["camera"], body["v"], body["f"],
                      dataclasses.replace(SHELL, guide="mesh"))
+
+
+def test_guide_is_a_render_knob_that_training_never_uses():
+    from texvocab.errors import TexvocabError
+    from texvocab.pipeline.settings import Settings, march_settings, render_overrides
+
+    s = Settings()
+    assert march_settings(s).guide == "raster" and march_settings(s, training=True).guide == "shell"
+    assert march_settings(render_overrides(s, None, ["guide=shell"])).guide == "shell"
+    assert march_settings(render_overrides(s, "fast", [])).guide == "raster"
+    with pytest.raises(TexvocabError, match="guide"):
+        Settings(guide="mesh")
+
+
+def test_a_one_point_field_call_works(body):  # noqa: F811
+    """The guided marcher and the viewer's smallest levels call the field with single
+    points (the viewer used to pad such calls)."""
+    field = body["field"]
+    sigma, rgb = field(body["v"][:1], torch.tensor([[0.0, 0.0, 1.0]]))
+    sdf, rgb2 = field.sdf_rgb(body["v"][:1], torch.tensor([[0.0, 0.0, 1.0]]))
+    assert sigma.shape == (1,) and rgb.shape == (1, 3) and sdf.shape == (1,)
+    assert torch.equal(rgb, rgb2)

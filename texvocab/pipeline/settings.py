@@ -268,4 +268,8 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
                       guide=s.guide)
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
+    elif m.guide == "raster":
+        # the shell serves only the guided marcher's fallback rays: a coarser, inexact
+        # grid builds 3-4x faster (0.15 -> 0.04 s) for slightly longer in-shell paths
+        m.shell_voxel, m.shell_exact = 0.015, False
     return m

@@ -79,11 +79,12 @@ class MarchSettings:
     guide: "shell" marches every ray through the shell front to back (above); "raster"
         is the surface-guided marcher (:mod:`texvocab.render.guided`): the mesh's
         rasterisation and the field's SDF place ``band_samples`` samples ``band_spacing``
-        β / cos apart around each ray's surface, composited in closed form; rays at depth
-        edges, meeting faces at a cosine below ``min_cos``, passing within
+        β / cos apart around each ray's surface, composited in closed form; rays behind
+        an occlusion edge, meeting faces at a cosine below ``min_cos``, passing within
         ``miss_margin`` β of the surface outside the silhouette, or whose samples do not
-        bracket the surface (or leave more than ``band_leftover`` transmittance) are
-        marched uniformly over their stretch of shell (coarse_samples, fine_samples).
+        bracket the surface (or leave more than ``band_leftover`` transmittance) fall
+        back to this shell marcher with ``fallback_segment`` scouts per step and
+        ``fallback_scout`` as scout threshold (few rays: fewer, larger field calls).
     """
 
     shell_width: float = 0.04
@@ -106,7 +107,7 @@ class MarchSettings:
     band_leftover: float = 0.1
     min_cos: float = 0.25
     miss_margin: float = 8.0
-    fallback_segment: int = 2
+    fallback_segment: int = 8
     fallback_scout: float | None = 1e-3
 
 
