@@ -186,12 +186,12 @@ def compare(model, settings, items, what: str, repeats: int = 1) -> int:
     from texvocab.metrics.image import crop_to_bbox, mask_bbox
     from texvocab.pipeline.settings import PRESETS, march_settings
 
-    base = march_settings(settings)
-    fast = {k: v for k, v in PRESETS["fast"].items() if k != "image_scale"}
-    quality = {k: v for k, v in PRESETS["quality"].items() if k != "image_scale"}
-    paths = {"new": dataclasses.replace(base, **fast, guide="raster"),
-             "previous": dataclasses.replace(base, **fast, guide="shell"),
-             "quality": dataclasses.replace(base, **quality, guide="shell")}
+    def march(preset: str, guide: str):
+        knobs = [f"{k}={v}" for k, v in PRESETS[preset].items() if k != "image_scale"]
+        return march_settings(settings.with_overrides(knobs + [f"guide={guide}"]))
+
+    paths = {"new": march("fast", "raster"), "previous": march("fast", "shell"),
+             "quality": march("quality", "shell")}
     print(f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
           f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
           f"{max(repeats, 1)} per frame, incl. pose context and shell; PSNR in the mask's "
