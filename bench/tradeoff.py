@@ -34,7 +34,7 @@ from texvocab.pipeline.evaluate import render_view
 from texvocab.pipeline.settings import PRESETS, RENDER_KNOBS
 from texvocab.render import MarchSettings
 
-REFERENCE = {"coarse_samples": 64, "fine_samples": 32, "early_stop_eps": 0.0}
+REFERENCE = {"coarse_samples": 64, "fine_samples": 32, "early_stop_eps": 0.0, "guide": "shell"}
 
 # (label, overrides of the render knobs); one knob at a time from the defaults.
 SWEEP: list[tuple[str, dict]] = (
@@ -49,8 +49,12 @@ SWEEP: list[tuple[str, dict]] = (
 
 
 def march_of(knobs: dict, base: MarchSettings) -> MarchSettings:
-    keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width"}
-    return replace(base, **{k: v for k, v in knobs.items() if k in keys})
+    keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width", "guide"}
+    m = replace(base, **{k: v for k, v in knobs.items() if k in keys})
+    if m.guide == "shell" and base.guide != "shell":  # the shell marcher's own shell grid
+        m = replace(m, shell_voxel=MarchSettings.shell_voxel,
+                    shell_exact=MarchSettings.shell_exact)
+    return m
 
 
 def measure(model, items, knobs: dict, base: MarchSettings, references=None) -> dict:
@@ -90,7 +94,7 @@ def pareto(rows: list[dict]) -> set[str]:
 def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
     """Two panels over seconds per frame: PSNR against the ground truth (what a user sees;
     the model's error dominates) and against the 64+32 reference render (the renderer's
-    own error). Presets are stars; the Pareto front (vs truth) is dashed; the dotted line
+    own error). Presets are stars (orange: with the shell marcher); the Pareto front (vs truth) is dashed; the dotted line
     is the 1 s frame budget. Only the presets, the default, the reference, the image-scale
     points (and on the right the coarse-sample sweep) are labelled, to keep it readable."""
     import matplotlib
@@ -107,8 +111,8 @@ def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
             preset = r["label"].startswith("preset ")
             ax.scatter(r["seconds"], r[key], s=110 if preset else 28,
                        marker="*" if preset else "o", zorder=3 if preset else 2,
-                       color="crimson" if preset else
-                       ("tab:blue" if r["label"] in front else "grey"))
+                       color=("darkorange" if "guide=shell" in r["label"] else "crimson")
+                       if preset else ("tab:blue" if r["label"] in front else "grey"))
             label = r["label"]
             if preset or "scale" in label or label.startswith(("reference", "default")) or (
                     key == "psnr_ref" and label.startswith("coarse")):
@@ -242,9 +246,10 @@ def main(argv=None) -> int:
     ref = measure(model, items, REFERENCE, base)
     rows = [{"label": "reference 64+32 ε=0", **ref}]
     print(f"  reference: {ref['seconds']:.2f} s/frame", flush=True)
-    configs = [("default", {})] + SWEEP + [(f"preset {n}", {k: v for k, v in p.items()
-                                                           if k in RENDER_KNOBS})
-                                         for n, p in PRESETS.items()]
+    presets = [(n, {k: v for k, v in p.items() if k in RENDER_KNOBS}) for n, p in PRESETS.items()]
+    configs = ([("default", {})] + SWEEP + [(f"preset {n}", p) for n, p in presets]
+               + [("default, guide=shell", {"guide": "shell"})]
+               + [(f"preset {n}, guide=shell", {**p, "guide": "shell"}) for n, p in presets])
     for label, knobs in configs:
         r = measure(model, items, knobs, base, references=ref["images"])
         rows.append({"label": label, "knobs": knobs, **r})
