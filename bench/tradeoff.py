@@ -94,9 +94,10 @@ def pareto(rows: list[dict]) -> set[str]:
 def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
     """Two panels over seconds per frame: PSNR against the ground truth (what a user sees;
     the model's error dominates) and against the 64+32 reference render (the renderer's
-    own error). Presets are stars (orange: with the shell marcher); the Pareto front (vs truth) is dashed; the dotted line
-    is the 1 s frame budget. Only the presets, the default, the reference, the image-scale
-    points (and on the right the coarse-sample sweep) are labelled, to keep it readable."""
+    own error). Presets are stars (orange: with the shell marcher); the Pareto front (vs
+    truth) is dashed; the dotted line is the 1 s frame budget. Only the presets, the
+    default, the reference, the image-scale points (and on the right the coarse-sample
+    sweep) are labelled, to keep it readable."""
     import matplotlib
 
     matplotlib.use("Agg")
