@@ -37,8 +37,8 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", default="1280x800", metavar="WxH",
                    help="window size (default 1280x800, at least 320x240)")
     p.add_argument("--poses", default=None, metavar="FILE.npz",
-                   help="a pose sequence .npz ('poses' (T, 24, 3) or (T, 72), optional "
-                        "'trans') for the Pose panel's timeline")
+                   help="a pose sequence .npz for the Pose panel's timeline: SMPL (T, 24, 3) "
+                        "or (T, 72) [+ trans], AMASS SMPL-H (T, 156) or SMPL-X (T, 165)")
     p.add_argument("--smpl", metavar="PATH", default=None,
                    help="your SMPL model file or folder (see assets_spec/README.md); "
                         "default: the embedded default body")

@@ -16,8 +16,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from texvocab.body.model import POSE_ANGLE_LIMIT, TRANS_LIMIT
-from texvocab.body.parts import JOINT_NAMES
+from texvocab.body.pose_files import read_pose_sequence
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META
 from texvocab.capture.garment import Garment
@@ -25,7 +24,6 @@ from texvocab.capture.thuman import ThumanWriter
 from texvocab.capture.zju import ZjuWriter
 from texvocab.errors import AssetError
 from texvocab.io.gl_platform import ensure_offscreen
-from texvocab.io.safe_pickle import read_npz
 
 LAYOUTS = ("zju", "thuman")
 
@@ -228,39 +226,9 @@ def ground_truth_renderer(capture) -> tuple[SynthRenderer, list[Camera]]:
     return SynthRenderer(capture.body, settings), cams
 
 
-def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Poses (T, 24, 3) and trans (T, 3) from an .npz with ``poses`` ((T, 24, 3) or
-    (T, 72)) and optional ``trans`` (T, 3)."""
-    path = Path(path)
-    data = read_npz(path, "pose file (an .npz with 'poses' (T, 24, 3))")
-    if "poses" not in data:
-        raise AssetError(f"{path}: missing key 'poses' (T, 24, 3) axis-angle")
-    for key in ("poses", "trans"):
-        if key in data and not (np.issubdtype(data[key].dtype, np.number)
-                                and not np.issubdtype(data[key].dtype, np.complexfloating)):
-            raise AssetError(f"{path}: '{key}' holds {data[key].dtype} values; expected real "
-                             "numbers (axis-angle radians / metres)")
-    poses = data["poses"].astype(np.float32)
-    if poses.ndim == 2 and poses.shape[1] == 72:
-        poses = poses.reshape(-1, 24, 3)
-    if poses.ndim != 3 or poses.shape[1:] != (24, 3):
-        raise AssetError(f"{path}: 'poses' has shape {data['poses'].shape}, expected (T, 24, 3) "
-                         "or (T, 72)")
-    trans = data.get("trans", np.zeros((len(poses), 3))).astype(np.float32)
-    if trans.shape != (len(poses), 3):
-        raise AssetError(f"{path}: 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
-    bad = ~np.isfinite(poses).all(-1)
-    if bad.any():
-        t, j = (int(i) for i in np.argwhere(bad)[0])
-        raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) is not finite")
-    if not np.isfinite(trans).all():
-        raise AssetError(f"{path}: 'trans' is not finite")
-    angle = np.linalg.norm(poses, axis=-1)
-    if (angle > POSE_ANGLE_LIMIT).any():
-        t, j = (int(i) for i in np.argwhere(angle > POSE_ANGLE_LIMIT)[0])
-        raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) turns "
-                         f"{angle[t, j]:.3g} rad; expected axis-angle of at most 4π")
-    if (np.abs(trans) > TRANS_LIMIT).any():
-        raise AssetError(f"{path}: 'trans' reaches {np.abs(trans).max():.3g} m; expected at "
-                         f"most {TRANS_LIMIT:g} m")
-    return poses, trans
+def load_pose_file(path: str | Path, fps: float | None = 30.0) -> tuple[np.ndarray, np.ndarray]:
+    """Poses (T, 24, 3) and trans (T, 3), +Y up, of any pose file
+    :func:`texvocab.body.pose_files.read_pose_sequence` reads (SMPL, AMASS SMPL-H,
+    SMPL-X), resampled to ``fps`` when the file states its frame rate."""
+    seq = read_pose_sequence(path, fps=fps)
+    return seq.poses, seq.trans

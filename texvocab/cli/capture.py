@@ -30,8 +30,9 @@ def add_synth_parser(sub, add_smpl) -> None:
                         "frames recombine those part poses in ways never seen together "
                         "(the body-part vocabulary's case; README, 'Captures')")
     p.add_argument("--poses", metavar="FILE.npz", default=None,
-                   help="poses (T, 24, 3) or (T, 72) [+ trans (T, 3)] instead of the default "
-                        "procedural motion")
+                   help="poses instead of the default procedural motion: SMPL (T, 24, 3) or "
+                        "(T, 72) [+ trans (T, 3)], AMASS SMPL-H (T, 156) or SMPL-X (T, 165) "
+                        "(resampled to 30 fps, turned Z-up -> +Y up)")
     p.add_argument("--like", metavar="CAPTURE", default=None,
                    help="copy cameras and settings from this synthetic capture")
     p.add_argument("--frames", type=int, default=None,

@@ -11,6 +11,7 @@ from pathlib import Path
 from app.arguments import add_view_arguments
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
 from texvocab.cli.method import add_method_parsers, add_train_parsers
+from texvocab.cli.render import add_render_parser
 from texvocab.errors import TexvocabError
 
 
@@ -153,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_sheet_parser(sub)
 
     add_method_parsers(sub, _add_smpl)
+    add_render_parser(sub, _add_smpl)
     add_train_parsers(sub, _add_smpl)
     add_viewer_parsers(sub)
     return parser

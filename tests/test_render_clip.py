@@ -1,0 +1,94 @@
+"""``texvocab render``: a raw AMASS-layout file (written here) drives a trained avatar to
+an MP4 whose frame count, size and rate are read back from the file; an interrupted
+render resumes from its cached frames; bad input changes nothing."""
+import os
+
+import numpy as np
+import pytest
+from test_pose_files import amass_file
+from tiny_runs import tiny_run
+
+from texvocab.cli.main import main
+from texvocab.pipeline.clip import frame_cameras, read_video_info
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    return tiny_run(tmp_path_factory.mktemp("clip"), ([("walk", 2)], 2), 1, 3,
+                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
+                    num_keys=1, k=1, rays_per_batch=64, coarse_samples=8, fine_samples=4,
+                    checkpoint_every=2, eval_views=(1,))
+
+
+def test_amass_file_renders_to_an_mp4_read_back(checkpoint, tmp_path, capsys):
+    amass_file(tmp_path / "walk.npz", frames=49, rate=120.0)  # 0.4 s -> 13 frames at 30 fps
+    out = tmp_path / "clip.mp4"
+    assert main(["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"),
+                 "--out", str(out), "--preset", "fast"]) == 0
+    frames, size, fps = read_video_info(out)
+    assert (frames, size, fps) == (13, (64, 64), 30.0)
+    pngs = sorted((tmp_path / "clip.frames").glob("frame_*.png"))
+    assert len(pngs) == 13
+    from PIL import Image
+
+    first = np.asarray(Image.open(pngs[0]))
+    assert first.shape == (64, 64, 3) and first.max() > 30  # the body is in view
+    # interrupted: two frames lost; the same command (with --overwrite for the finished
+    # video) renders only those two and keeps the others byte for byte
+    kept = pngs[0].read_bytes(), os.stat(pngs[0]).st_mtime_ns
+    pngs[5].unlink()
+    pngs[9].unlink()
+    capsys.readouterr()
+    assert main(["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"),
+                 "--out", str(out), "--preset", "fast", "--overwrite"]) == 0
+    assert "rendered 2 frames (11 cached)" in capsys.readouterr().out
+    assert (pngs[0].read_bytes(), os.stat(pngs[0]).st_mtime_ns) == kept
+    assert read_video_info(out)[0] == 13
+
+
+def test_other_settings_never_reuse_or_destroy_cached_frames(checkpoint, tmp_path, capsys):
+    amass_file(tmp_path / "walk.npz", frames=9, rate=120.0)
+    folder = tmp_path / "seq"
+    args = ["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--out",
+            str(folder), "--preset", "fast"]
+    assert main(args) == 0
+    before = {p.name: p.read_bytes() for p in folder.glob("frame_*.png")}
+    assert len(before) == 3
+    capsys.readouterr()
+    assert main(args + ["--camera", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "view" in err[0]
+    assert {p.name: p.read_bytes() for p in folder.glob("frame_*.png")} == before
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    assert main(args[:5] + [str(tmp_path / "mine")]) == 2
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+@pytest.mark.parametrize("extra,needle", [(["--camera", "7"], "--camera 7"),
+                                          (["--frames", "5:2"], "--frames"),
+                                          (["--fps", "0"], "--fps")])
+def test_bad_render_arguments_give_one_error_line(checkpoint, tmp_path, capsys, extra, needle):
+    amass_file(tmp_path / "walk.npz", frames=9, rate=120.0)
+    code = main(["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--out",
+                 str(tmp_path / "c.mp4")] + extra)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("error:") and needle in err[0]
+    assert not (tmp_path / "c.mp4").exists() and not (tmp_path / "c.frames").exists()
+
+
+def test_follow_camera_keeps_the_root_where_the_capture_had_it():
+    from texvocab.capture.camera import Camera
+
+    K = np.array([[100.0, 0, 32], [0, 100.0, 32], [0, 0, 1]])
+    cam = Camera(K, np.eye(3), np.array([0.0, 0.0, 3.0]), 64, 64)
+    roots = np.array([[0.0, 0, 0], [1.0, 0.2, -0.5]])
+    for c, r in zip(frame_cameras(cam, roots, np.zeros(3), True, 0.0), roots, strict=True):
+        px, _ = c.project(r[None])
+        assert np.allclose(px[0], [32, 32])
+    # one turn over 2 frames: frame 1 looks at the root from the other side
+    turned = frame_cameras(cam, roots, np.zeros(3), True, 1.0)[1]
+    px, z = turned.project(roots[1:])
+    assert np.allclose(px[0], [32, 32]) and z[0] == pytest.approx(3.0)
+    assert np.allclose(cam.center, [0, 0, -3.0]) and np.allclose(turned.center - roots[1],
+                                                                 [0, 0, 3.0], atol=1e-9)

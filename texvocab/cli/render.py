@@ -1,0 +1,130 @@
+"""``texvocab render CKPT --poses FILE --out clip.mp4``: a pose sequence (SMPL, AMASS
+SMPL-H or SMPL-X) driving a trained avatar, as an MP4 or a PNG sequence."""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from texvocab.errors import TexvocabError
+
+
+def add_render_parser(sub, add_smpl) -> None:
+    p = sub.add_parser("render", help="render a pose sequence with a trained avatar to a video",
+                       description="Drive a trained avatar with a pose file (SMPL (T, 24, 3) / "
+                                   "(T, 72), AMASS SMPL-H (T, 156), SMPL-X (T, 165)) and write "
+                                   "an MP4 (--out clip.mp4) or a PNG sequence (--out FOLDER). "
+                                   "Frames are cached beside the video (clip.frames/): run the "
+                                   "same command again to resume an interrupted render.")
+    p.add_argument("checkpoint", help="trained checkpoint (checkpoint.pt)")
+    p.add_argument("--poses", required=True, metavar="FILE.npz", help="pose sequence")
+    p.add_argument("--out", required=True, help="clip.mp4, or a folder for PNG frames")
+    p.add_argument("--camera", type=int, default=0, metavar="N",
+                   help="capture camera to render from (default 0)")
+    p.add_argument("--no-follow", dest="follow", action="store_false",
+                   help="keep the camera where the capture had it (default: it moves with the "
+                        "body's root, as a follow camera)")
+    p.add_argument("--orbit", type=float, default=0.0, metavar="TURNS",
+                   help="turn the camera about the body this many times over the clip")
+    p.add_argument("--fps", type=float, default=30.0,
+                   help="frame rate: files that state theirs (AMASS) are resampled to it")
+    p.add_argument("--root", choices=("keep", "zero"), default="keep",
+                   help="zero: drop the root orientation and translation")
+    p.add_argument("--up", choices=("auto", "y", "z"), default="auto",
+                   help="the file's up axis (auto: Z for AMASS SMPL-H/SMPL-X, else Y)")
+    p.add_argument("--frames", default=None, metavar="A:B",
+                   help="only frames A..B-1 of the (resampled) sequence")
+    p.add_argument("--capture", metavar="FOLDER", default=None,
+                   help="the capture the checkpoint was trained on (default: the one it records)")
+    p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
+                   help="render preset (render knobs only; the rest is in the checkpoint)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a render knob, e.g. --set image_scale=0.5")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace frames cached by a render with other settings")
+    add_smpl(p)
+    p.set_defaults(func=cmd_render)
+
+
+def _frame_range(spec: str | None, n: int) -> range:
+    if spec is None:
+        return range(n)
+    a, sep, b = spec.partition(":")
+    try:
+        lo, hi = int(a or 0), int(b) if b else n
+    except ValueError:
+        raise TexvocabError(f"--frames {spec!r}: expected A:B (frame numbers)") from None
+    if not sep or not 0 <= lo < hi <= n:
+        raise TexvocabError(f"--frames {spec!r}: expected A:B with 0 <= A < B <= {n}")
+    return range(lo, hi)
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    # late: torch (module docstring of texvocab.cli.main)
+    import numpy as np
+
+    from texvocab.body.pose_files import read_pose_sequence
+    from texvocab.pipeline.avatar import load_avatar
+    from texvocab.pipeline.clip import (
+        ClipSpec,
+        frame_cameras,
+        frames_dir,
+        prepare_frames_dir,
+        render_frames,
+        write_mp4,
+    )
+    from texvocab.pipeline.evaluate import render_view
+    from texvocab.pipeline.settings import march_settings, render_overrides
+
+    out = Path(args.out)
+    if not args.fps > 0:
+        raise TexvocabError(f"--fps {args.fps}: expected a frame rate > 0")
+    if not Path(args.poses).is_file():
+        raise TexvocabError(f"--poses {args.poses}: no such file")
+    if out.suffix.lower() not in ("", ".mp4"):
+        raise TexvocabError(f"--out {out}: expected a .mp4 file or a folder for PNG frames")
+    if out.suffix.lower() == ".mp4" and out.exists() and not args.overwrite:
+        raise TexvocabError(f"--out {out}: exists; pass --overwrite to replace it")
+    cap = None
+    if args.capture:
+        from texvocab.body import load_body
+        from texvocab.capture import open as open_capture
+
+        cap = open_capture(args.capture, body=load_body(args.smpl))
+    avatar = load_avatar(args.checkpoint, cap, smpl=args.smpl)
+    cap, model = avatar.capture, avatar.model
+    if not 0 <= args.camera < cap.num_views:
+        raise TexvocabError(f"--camera {args.camera}: the capture has views 0..{cap.num_views - 1}")
+    settings = render_overrides(avatar.settings, args.preset, args.overrides)
+    pelvis = model.body.rest_joints[0].double().numpy()
+    seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=args.root,
+                             pelvis=pelvis)
+    keep = _frame_range(args.frames, len(seq))
+    poses, trans = seq.poses[keep.start:keep.stop], seq.trans[keep.start:keep.stop]
+    fps = seq.fps or args.fps
+    knobs = {k: getattr(settings, k) for k in ("coarse_samples", "fine_samples",
+                                               "early_stop_eps", "shell_width", "guide")}
+    spec = ClipSpec.make(args.checkpoint, args.poses, args.camera, args.orbit, args.follow,
+                         fps, settings.image_scale,
+                         {**knobs, "frames": [keep.start, keep.stop], "up": args.up,
+                          "root": args.root})
+    folder = frames_dir(out)
+    cached = prepare_frames_dir(folder, spec, args.overwrite)
+    reference = np.asarray(cap.trans[:cap.num_train], dtype=np.float64).mean(0)
+    cams = frame_cameras(cap.cameras[args.camera], trans.astype(np.float64) + pelvis,
+                         reference + pelvis, args.follow, args.orbit)
+    march = march_settings(settings)
+    t0 = time.perf_counter()
+    paths = render_frames(lambda p, t, c: render_view(model, p, t, c, march,
+                                                      settings.image_scale)[0],
+                          poses, trans, cams, folder)
+    seconds = time.perf_counter() - t0
+    done = len(paths) - cached
+    print(f"rendered {done} frames ({cached} cached) in {seconds:.1f} s"
+          + (f", {seconds / done:.2f} s per frame" if done else "")
+          + f"; {seq.layout} poses at {fps:g} fps")
+    if out.suffix.lower() == ".mp4":
+        write_mp4(paths, out, fps)
+        print(f"  video:  {out.resolve()} ({len(paths)} frames, {len(paths) / fps:.1f} s)")
+    print(f"  frames: {folder.resolve()}/")
+    return 0
