@@ -131,3 +131,17 @@ def test_image_scale_renders_smaller_and_shows_it_at_full_size(capture):
     mask = cap.mask(1, t)
     assert metrics_in_bbox(half, full, mask)["psnr"] > 20
     assert metrics_in_bbox(np.zeros_like(full), full, mask)["psnr"] < 15
+
+
+def test_time_budget_progress_bar_counts_the_budget(capture, tmp_path, capsys):
+    """With max_minutes the bar counts seconds of the budget, not steps of a nominal
+    iteration count (it used to show '0/100000 steps, 33:56:08 left')."""
+    cap = open_capture(capture)
+    s = tiny_settings(iterations=100_000, max_minutes=0.04, checkpoint_every=1000)
+    trainer = Trainer(cap, s, tmp_path / "run", progress=True)
+    logs = trainer.run()
+    err = capsys.readouterr().err
+    assert 0 < len(logs) < 100_000
+    assert "s of the time budget" in err and "/2 s of" in err
+    assert "100000" not in err
+    assert (tmp_path / "run" / "checkpoint.pt").is_file()

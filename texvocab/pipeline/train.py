@@ -314,10 +314,14 @@ class Trainer:
         end = self.s.iterations if until is None else until
         logs = []
         bar = None
-        if self.progress:
-            bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
-        t0 = time.perf_counter()
         budget = None if self.s.max_minutes is None else 60.0 * self.s.max_minutes
+        if self.progress and budget is None:
+            bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
+        elif self.progress:  # a time budget: the bar counts its seconds down, not steps
+            bar = tqdm(total=round(budget), desc="train", unit="s",
+                       bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s of "
+                                  "the time budget [{elapsed}<{remaining}{postfix}]")
+        t0 = time.perf_counter()
         while self.step < end:
             if budget is not None and time.perf_counter() - t0 > budget:
                 log.info("time budget of %.1f min reached at step %d", self.s.max_minutes,
@@ -326,9 +330,12 @@ class Trainer:
             rec = self.train_step()
             logs.append(rec)
             if bar is not None:
-                bar.update(1)
-                bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
-                                beta=f"{rec['beta']:.4f}")
+                if budget is None:
+                    bar.update(1)
+                else:
+                    bar.update(min(time.perf_counter() - t0, bar.total) - bar.n)
+                bar.set_postfix(step=self.step, loss=f"{rec['loss']:.4f}",
+                                psnr=f"{rec['psnr']:.2f}", beta=f"{rec['beta']:.4f}")
             if self.step % self.s.checkpoint_every == 0 or self.step == end:
                 self.save()
         if bar is not None:
