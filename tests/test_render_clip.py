@@ -92,3 +92,21 @@ def test_follow_camera_keeps_the_root_where_the_capture_had_it():
     assert np.allclose(px[0], [32, 32]) and z[0] == pytest.approx(3.0)
     assert np.allclose(cam.center, [0, 0, -3.0]) and np.allclose(turned.center - roots[1],
                                                                  [0, 0, 3.0], atol=1e-9)
+
+
+def test_ray_frames_equal_the_serial_render(checkpoint, tmp_path):
+    """`--ray` on a local 2-worker Ray: the same frames as the serial render (to one 8-bit
+    level: the workers run 1 torch thread, the serial render the process's)."""
+    from PIL import Image
+
+    amass_file(tmp_path / "walk.npz", frames=17, rate=120.0)  # 5 frames at 30 fps
+    base = ["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--preset",
+            "fast", "--orbit", "0.5"]
+    assert main(base + ["--out", str(tmp_path / "serial")]) == 0
+    assert main(base + ["--out", str(tmp_path / "ray"), "--ray", "--workers", "2"]) == 0
+    names = sorted(p.name for p in (tmp_path / "serial").glob("frame_*.png"))
+    assert len(names) == 5 and names == sorted(p.name for p in (tmp_path / "ray").glob("*.png"))
+    for name in names:
+        a = np.asarray(Image.open(tmp_path / "serial" / name)).astype(int)
+        b = np.asarray(Image.open(tmp_path / "ray" / name)).astype(int)
+        assert np.abs(a - b).max() <= 1 and (a == b).mean() > 0.99

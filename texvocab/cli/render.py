@@ -40,6 +40,10 @@ def add_render_parser(sub, add_smpl) -> None:
                    help="render preset (render knobs only; the rest is in the checkpoint)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a render knob, e.g. --set image_scale=0.5")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="render frames in parallel as Ray tasks: a local Ray with --workers "
+                        "workers, or the cluster at ADDRESS (pip install 'texvocab[scale]')")
+    p.add_argument("--workers", type=int, default=2, help="Ray workers (default 2)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace frames cached by a render with other settings")
     add_smpl(p)
@@ -73,12 +77,18 @@ def cmd_render(args: argparse.Namespace) -> int:
         render_frames,
         write_mp4,
     )
-    from texvocab.pipeline.evaluate import render_view
+    from texvocab.pipeline.clip_worker import FrameWorker
     from texvocab.pipeline.settings import march_settings, render_overrides
 
     out = Path(args.out)
     if not args.fps > 0:
         raise TexvocabError(f"--fps {args.fps}: expected a frame rate > 0")
+    if args.workers < 1:
+        raise TexvocabError(f"--workers {args.workers}: expected at least 1")
+    if args.ray is not None:
+        from texvocab.pipeline.clip_ray import _ray
+
+        _ray()  # refuse before any work when Ray is missing
     if not Path(args.poses).is_file():
         raise TexvocabError(f"--poses {args.poses}: no such file")
     if out.suffix.lower() not in ("", ".mp4"):
@@ -115,9 +125,18 @@ def cmd_render(args: argparse.Namespace) -> int:
                          reference + pelvis, args.follow, args.orbit)
     march = march_settings(settings)
     t0 = time.perf_counter()
-    paths = render_frames(lambda p, t, c: render_view(model, p, t, c, march,
-                                                      settings.image_scale)[0],
-                          poses, trans, cams, folder)
+    if args.ray is None:
+        import torch
+
+        worker = FrameWorker(model, march, settings.image_scale, torch.get_num_threads())
+        paths = render_frames(lambda p, t, c: worker.render(0, p, t, c)[1], poses, trans, cams,
+                              folder)
+    else:
+        from texvocab.pipeline.clip_ray import render_frames_ray
+
+        paths = render_frames_ray(model, march, settings.image_scale, poses, trans, cams,
+                                  folder, None if args.ray == "local" else args.ray,
+                                  args.workers)
     seconds = time.perf_counter() - t0
     done = len(paths) - cached
     print(f"rendered {done} frames ({cached} cached) in {seconds:.1f} s"

@@ -17,7 +17,7 @@ from tqdm import tqdm
 
 from texvocab.capture.camera import Camera
 from texvocab.errors import TexvocabError
-from texvocab.io.images import atomic_write_bytes, save_png, to_uint8
+from texvocab.io.images import atomic_write_bytes, save_png
 
 KEY_FILE = "clip.json"
 
@@ -118,14 +118,14 @@ def frame_cameras(camera: Camera, roots: np.ndarray, reference: np.ndarray, foll
 
 def render_frames(render, poses: np.ndarray, trans: np.ndarray, cameras: list[Camera],
                   folder: Path, progress: bool = True) -> list[Path]:
-    """``render(pose, trans, camera) -> (H, W, 3) float`` for every frame not yet in
+    """``render(pose, trans, camera) -> (H, W, 3) uint8`` for every frame not yet in
     ``folder``; frames written atomically as frame_00000.png, ..."""
     paths = [folder / f"frame_{i:05d}.png" for i in range(len(poses))]
     todo = [i for i, p in enumerate(paths) if not p.is_file()]
     bar = tqdm(total=len(paths), initial=len(paths) - len(todo), unit="frame",
                desc="render", disable=not progress)
     for i in todo:
-        save_png(paths[i], to_uint8(render(poses[i], trans[i], cameras[i])))
+        save_png(paths[i], render(poses[i], trans[i], cameras[i]))
         bar.update(1)
     bar.close()
     return paths
