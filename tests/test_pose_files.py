@@ -69,12 +69,16 @@ def test_root_zero_and_no_rate_keep_every_frame(tmp_path):
     np.savez(tmp_path / "smpl.npz", poses=np.zeros((5, 72)))
     plain = read_pose_sequence(tmp_path / "smpl.npz")
     assert plain.layout == "smpl" and len(plain) == 5 and plain.fps is None
+    np.savez(tmp_path / "empty.npz", poses=np.zeros((0, 24, 3)))
+    assert len(read_pose_sequence(tmp_path / "empty.npz")) == 0  # callers say "0 frames"
 
 
 @pytest.mark.parametrize("poses,extra,match", [
     (np.zeros((4, 100)), {}, r"'poses' has shape \(4, 100\); expected .*156.*165"),
     (np.zeros((4, 156)), {"mocap_framerate": -1.0}, "'mocap_framerate' is"),
     (np.zeros((4, 156)), {"trans": np.zeros((3, 3))}, "'trans' has shape"),
+    (np.zeros(()), {}, r"'poses' has shape \(\)"),
+    (np.zeros((0, 5, 3)), {}, r"'poses' has shape \(0, 5, 3\)"),
 ])
 def test_bad_pose_files_name_the_array(tmp_path, poses, extra, match):
     np.savez(tmp_path / "bad.npz", poses=poses, **extra)

@@ -75,7 +75,8 @@ def read_pose_sequence(path: str | Path, fps: float | None = 30.0, up: str = "au
             raise AssetError(f"{path}: '{key}' holds {data[key].dtype} values; expected real "
                              "numbers (axis-angle radians / metres)")
     raw = np.asarray(data["poses"])
-    flat = raw.reshape(len(raw), -1) if raw.ndim == 3 and raw.shape[2] == 3 else raw
+    flat = raw.reshape(raw.shape[0], raw.shape[1] * 3) if raw.ndim == 3 and raw.shape[2] == 3 \
+        else raw
     if flat.ndim != 2 or flat.shape[1] not in LAYOUTS:
         raise AssetError(f"{path}: 'poses' has shape {raw.shape}; expected {ACCEPTED}")
     layout = LAYOUTS[flat.shape[1]]

@@ -139,6 +139,9 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("--iterations", type=int, default=None, help="steps (default: settings)")
     p.add_argument("--resume", action="store_true",
                    help="continue from OUT/checkpoint.pt (--iterations N extends it)")
+    p.add_argument("--ddp", type=int, default=None, metavar="N",
+                   help="data-parallel training on N local processes (gloo on CPU); under "
+                        "torchrun the group comes from torchrun instead (README, 'Training')")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the run in OUT (refused without it when OUT holds a checkpoint)")
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
@@ -175,12 +178,16 @@ def cmd_train(args: argparse.Namespace) -> int:
     from texvocab.pipeline.settings import Settings, preset_overrides
     from texvocab.pipeline.train import Trainer
 
+    if args.ddp is not None and args.ddp < 1:
+        raise TexvocabError(f"--ddp {args.ddp}: expected a number of processes >= 1")
     pre = preset_overrides(args.preset) if args.preset else []
     steps = [] if args.iterations is None else [f"iterations={args.iterations}"]
     settings = Settings().with_overrides(pre + args.overrides + steps)
     out = Path(args.out)
     check_run_folder(out, args.resume, args.overwrite)
     cap = _open(args)
+    if args.ddp is not None or _under_torchrun():
+        return _train_parallel(args, settings, out)
     trainer = Trainer(cap, settings, out)
     if args.resume and trainer.resume():
         print(f"resumed at step {trainer.step} from {trainer.checkpoint_path}")
@@ -188,6 +195,40 @@ def cmd_train(args: argparse.Namespace) -> int:
     last = logs[-1] if logs else {}
     print(f"step {trainer.step}: loss {last.get('loss', float('nan')):.4f}, batch PSNR "
           f"{last.get('psnr', float('nan')):.2f} dB; checkpoint {trainer.checkpoint_path}")
+    return 0
+
+
+def _under_torchrun() -> bool:
+    from texvocab.pipeline.ddp import under_torchrun  # late: torch
+
+    return under_torchrun()
+
+
+def _train_parallel(args: argparse.Namespace, settings, out: Path) -> int:
+    """--ddp N (local processes) or a torchrun process: texvocab.pipeline.ddp."""
+    import torch.distributed as dist
+
+    from texvocab.io.checkpoint import load_checkpoint
+    from texvocab.pipeline import ddp
+
+    job = {"capture": args.capture, "settings": settings, "out": str(out),
+           "resume": args.resume, "smpl": args.smpl, "train_frames": args.train_frames}
+    if ddp.under_torchrun():
+        dist.init_process_group(ddp.backend(), init_method="env://")
+        try:
+            world = dist.get_world_size()
+            ddp.run_process(job)
+            dist.barrier()  # leave together: rank 0 may still be writing the checkpoint
+            lead = dist.get_rank() == 0
+        finally:
+            dist.destroy_process_group()
+        if not lead:
+            return 0
+    else:
+        world = args.ddp
+        ddp.spawn(world, job)
+    ck = load_checkpoint(out / "checkpoint.pt")
+    print(f"step {ck['step']} on {world} processes; checkpoint {out / 'checkpoint.pt'}")
     return 0
 
 

@@ -137,6 +137,10 @@ class Trainer:
         self.frames: dict[int, FrameData] = {}
         self.progress = progress
         self.perceptual = perceptual_term(settings)
+        # data-parallel training (texvocab.pipeline.ddp): this process computes shard
+        # `rank` of `world` of every step's batch; `sync` all-reduces the gradients and
+        # `agree(flag)` is True on every process when it is on any (a time budget's stop)
+        self.rank, self.world, self.sync, self.agree = 0, 1, None, None
 
     @property
     def checkpoint_path(self) -> Path:
@@ -206,10 +210,12 @@ class Trainer:
         o, d = cam.pixel_rays(torch.stack([pix % w, pix // w], 1).numpy())
         return o, d, near[pix], far[pix], img[pix], mask[pix].float()
 
-    def _eikonal(self, fd: FrameData, n: int) -> torch.Tensor:
+    def _eikonal(self, fd: FrameData, n: int, evaluate: bool = True) -> torch.Tensor:
         verts = fd.ctx.vertices.detach()
         idx = torch.randint(len(verts), (n,), generator=self.gen)
         noise = torch.randn(n, 3, generator=self.gen) * (self.s.field.shell_width / 2)
+        if not evaluate:  # the points are drawn (the stream stays shared), not used
+            return torch.zeros(())
         pts = (verts[idx] + noise).requires_grad_(True)
         sdf, _, valid = self.model.sdf_and_color(fd.ctx, pts, torch.nn.functional.normalize(
             noise, dim=-1))
@@ -235,17 +241,28 @@ class Trainer:
         batch.append(self._rays(fd, t, vs[0], max(1, half - p * p)))
         batch.append(self._rays(fd, t, vs[1], s.rays_per_batch - half))
         o, d, near, far, gt, m = (torch.cat(x) for x in zip(*batch, strict=True))
-        out = render_rays(self.model.for_pose(fd.ctx), o, d, near, far, self.march, self.gen,
+        # every process draws the whole batch from the shared stream and renders its shard:
+        # the patch and the eikonal term on rank 0, the other rays dealt round; each term is
+        # scaled so the mean over processes of the shards' gradients is the whole batch's
+        total, gen, lead = len(o), self.gen, self.rank == 0
+        if self.world > 1:
+            rest = torch.arange(p * p, total)[self.rank::self.world]
+            mine = torch.cat([torch.arange(p * p), rest]) if lead else rest
+            o, d, near, far, gt, m = (x[mine] for x in (o, d, near, far, gt, m))
+            gen = torch.Generator().manual_seed(s.seed * 1_000_003 + self.step * 64 + self.rank)
+        share = self.world * len(o) / total
+        out = render_rays(self.model.for_pose(fd.ctx), o, d, near, far, self.march, gen,
                           fd.shell)
+        eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
-                 "eikonal": self._eikonal(fd, 512) if s.lambda_eikonal > 0 else torch.zeros(()),
+                 "eikonal": torch.zeros(()) if eikonal is None else eikonal,
                  "perceptual": torch.zeros(())}
-        if self.perceptual is not None:
+        if self.perceptual is not None and lead:
             patch, truth = (x[:p * p].T.reshape(1, 3, p, p) for x in (out.rgb, gt))
             terms["perceptual"] = self.perceptual(patch, truth).mean()
-        terms["loss"] = (s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"]
-                         + s.lambda_eikonal * terms["eikonal"]
-                         + s.lambda_perceptual * terms["perceptual"])
+        terms["loss"] = (share * (s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"])
+                         + self.world * (s.lambda_eikonal * terms["eikonal"]
+                                         + s.lambda_perceptual * terms["perceptual"]))
         for name in ("loss", "color", "mask", "eikonal", "perceptual"):
             if not torch.isfinite(terms[name]):
                 ck = (f"the last checkpoint {self.checkpoint_path} is intact"
@@ -260,6 +277,8 @@ class Trainer:
         terms = self.loss_terms()
         self.optim.zero_grad(set_to_none=True)
         terms["loss"].backward()
+        if self.sync is not None:
+            self.sync()
         self.optim.step()
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             fd = terms["frame"]  # a trainable encoder's graph ends here
@@ -280,6 +299,8 @@ class Trainer:
                 "rng": {"torch": self.gen.get_state()}}
 
     def save(self) -> Path:
+        if self.rank != 0:
+            return self.checkpoint_path
         return save_checkpoint(self.checkpoint_path, self.state())
 
     def resume(self) -> bool:
@@ -307,6 +328,8 @@ class Trainer:
     def run(self, until: int | None = None) -> list[dict]:
         """Train to ``settings.iterations`` (or ``until``) holding the run folder's lock
         (:class:`~texvocab.pipeline.run_folder.RunLock`); returns per-step logs."""
+        if self.rank != 0:  # data-parallel: rank 0 holds the lock and writes checkpoints
+            return self._run(until)
         with RunLock(self.out):
             return self._run(until)
 
@@ -323,7 +346,10 @@ class Trainer:
                                   "the time budget [{elapsed}<{remaining}{postfix}]")
         t0 = time.perf_counter()
         while self.step < end:
-            if budget is not None and time.perf_counter() - t0 > budget:
+            over = budget is not None and time.perf_counter() - t0 > budget
+            if self.agree is not None and budget is not None:
+                over = self.agree(over)
+            if over:
                 log.info("time budget of %.1f min reached at step %d", self.s.max_minutes,
                          self.step)
                 break
