@@ -12,7 +12,6 @@ from texvocab.capture.motion import make_sequence
 from texvocab.capture.synth import SynthSettings, synthesize
 from texvocab.cli.main import main
 from texvocab.io.checkpoint import load_checkpoint
-from texvocab.method.field import FieldSettings
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.train import Trainer
 
