@@ -110,3 +110,33 @@ def test_ray_frames_equal_the_serial_render(checkpoint, tmp_path):
         a = np.asarray(Image.open(tmp_path / "serial" / name)).astype(int)
         b = np.asarray(Image.open(tmp_path / "ray" / name)).astype(int)
         assert np.abs(a - b).max() <= 1 and (a == b).mean() > 0.99
+
+
+def test_side_by_side_panels_show_the_same_body(checkpoint, tmp_path):
+    """--panels neural,vocab,novelty: three 64² panels per frame, the GL views (OSMesa)
+    drawn from the same camera as the neural render: their silhouettes coincide."""
+    from PIL import Image
+
+    amass_file(tmp_path / "walk.npz", frames=9, rate=120.0)
+    out = tmp_path / "p.mp4"
+    assert main(["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--out",
+                 str(out), "--preset", "fast", "--panels", "neural,vocab,novelty"]) == 0
+    assert read_video_info(out)[:2] == (3, (192, 64))
+    frame = np.asarray(Image.open(tmp_path / "p.frames" / "frame_00000.png")).astype(int)
+    masks = [frame[:, 64 * i:64 * (i + 1)].sum(-1) > 30 for i in range(3)]
+    for m in masks[1:]:
+        iou = (m & masks[0]).sum() / (m | masks[0]).sum()
+        assert iou > 0.6, iou
+    novelty = frame[:, 128:][masks[2]]
+    assert novelty[:, 2].mean() > 60 or novelty[:, 0].mean() > 60  # heat colours, not grey
+
+
+@pytest.mark.parametrize("extra,needle", [(["--panels", "neural,depth"], "--panels"),
+                                          (["--panels", "vocab", "--ray"], "--ray")])
+def test_bad_panels_give_one_error_line(checkpoint, tmp_path, capsys, extra, needle):
+    amass_file(tmp_path / "walk.npz", frames=9, rate=120.0)
+    code = main(["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--out",
+                 str(tmp_path / "c.mp4")] + extra)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and needle in err[0]
+    assert not (tmp_path / "c.frames").exists()

@@ -26,6 +26,10 @@ def add_render_parser(sub, add_smpl) -> None:
                         "body's root, as a follow camera)")
     p.add_argument("--orbit", type=float, default=0.0, metavar="TURNS",
                    help="turn the camera about the body this many times over the clip")
+    p.add_argument("--panels", default="neural", metavar="LIST",
+                   help="comma-separated panels side by side: neural (the avatar), vocab (the "
+                        "body with the pose's blended vocabulary texture), novelty (each "
+                        "part's distance to its nearest key); default: neural")
     p.add_argument("--fps", type=float, default=30.0,
                    help="frame rate: files that state theirs (AMASS) are resampled to it")
     p.add_argument("--root", choices=("keep", "zero"), default="keep",
@@ -85,6 +89,15 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--fps {args.fps}: expected a frame rate > 0")
     if args.workers < 1:
         raise TexvocabError(f"--workers {args.workers}: expected at least 1")
+    panels = [p.strip() for p in args.panels.split(",") if p.strip()]
+    known = ("neural", "vocab", "novelty")
+    if not panels or any(p not in known for p in panels) or len(set(panels)) < len(panels):
+        raise TexvocabError(f"--panels {args.panels!r}: expected a comma-separated list of "
+                            f"distinct {', '.join(known)}")
+    gl = [p for p in panels if p != "neural"]
+    if gl and args.ray is not None:
+        raise TexvocabError(f"--panels {args.panels}: the {', '.join(gl)} panels are drawn by "
+                            "this process's GL; use --ray with --panels neural")
     if args.ray is not None:
         from texvocab.pipeline.clip_ray import _ray
 
@@ -95,17 +108,24 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--out {out}: expected a .mp4 file or a folder for PNG frames")
     if out.suffix.lower() == ".mp4" and out.exists() and not args.overwrite:
         raise TexvocabError(f"--out {out}: exists; pass --overwrite to replace it")
-    cap = None
-    if args.capture:
-        from texvocab.body import load_body
-        from texvocab.capture import open as open_capture
+    data = None
+    if gl:  # the viewer's data: the avatar plus what its 3D view draws
+        from app.state import load_viewer_data
 
-        cap = open_capture(args.capture, body=load_body(args.smpl))
-    avatar = load_avatar(args.checkpoint, cap, smpl=args.smpl)
-    cap, model = avatar.capture, avatar.model
+        data = load_viewer_data(args.checkpoint, args.smpl, args.capture)
+        cap, model, trained = data.capture, data.model, data.settings
+    else:
+        cap = None
+        if args.capture:
+            from texvocab.body import load_body
+            from texvocab.capture import open as open_capture
+
+            cap = open_capture(args.capture, body=load_body(args.smpl))
+        avatar = load_avatar(args.checkpoint, cap, smpl=args.smpl)
+        cap, model, trained = avatar.capture, avatar.model, avatar.settings
     if not 0 <= args.camera < cap.num_views:
         raise TexvocabError(f"--camera {args.camera}: the capture has views 0..{cap.num_views - 1}")
-    settings = render_overrides(avatar.settings, args.preset, args.overrides)
+    settings = render_overrides(trained, args.preset, args.overrides)
     pelvis = model.body.rest_joints[0].double().numpy()
     seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=args.root,
                              pelvis=pelvis)
@@ -117,7 +137,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     spec = ClipSpec.make(args.checkpoint, args.poses, args.camera, args.orbit, args.follow,
                          fps, settings.image_scale,
                          {**knobs, "frames": [keep.start, keep.stop], "up": args.up,
-                          "root": args.root})
+                          "root": args.root, "panels": panels})
     folder = frames_dir(out)
     cached = prepare_frames_dir(folder, spec, args.overwrite)
     reference = np.asarray(cap.trans[:cap.num_train], dtype=np.float64).mean(0)
@@ -129,8 +149,23 @@ def cmd_render(args: argparse.Namespace) -> int:
         import torch
 
         worker = FrameWorker(model, march, settings.image_scale, torch.get_num_threads())
-        paths = render_frames(lambda p, t, c: worker.render(0, p, t, c)[1], poses, trans, cams,
-                              folder)
+        extra = None
+        if gl:
+            from app.clip_panels import GLPanels, side_by_side
+
+            extra = GLPanels(data, panels)
+
+        def frame(p, t, c):
+            images = {"neural": worker.render(0, p, t, c)[1]} if "neural" in panels else {}
+            if extra is not None:
+                images.update(zip(extra.panels, extra.render(p, t, c), strict=True))
+            return images["neural"] if not gl else side_by_side([images[n] for n in panels])
+
+        try:
+            paths = render_frames(frame, poses, trans, cams, folder)
+        finally:
+            if extra is not None:
+                extra.close()
     else:
         from texvocab.pipeline.clip_ray import render_frames_ray
 
