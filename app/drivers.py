@@ -160,7 +160,35 @@ def script_shot_novelty(ctx, viewer, report: dict) -> None:
     wait_neural(ctx, viewer, report)
 
 
-ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
+def _wait_export(ctx, viewer, timeout: float = 120.0) -> dict:
+    t0 = time.perf_counter()
+    ctx.yield_(2)
+    while viewer.export is not None and viewer.export.running and \
+            time.perf_counter() - t0 < timeout:
+        ctx.yield_()
+    ctx.yield_(2)
+    job = viewer.export
+    return {"path": None if job is None or job.path is None else str(job.path.resolve()),
+            "error": None if job is None else job.error,
+            "frames": None if job is None else job.done}
+
+
+def script_export(ctx, viewer, report: dict) -> None:
+    """Load the --poses sequence, click "Export video", then "Screenshot"; wait for each."""
+    ctx.yield_(4)
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_click("**/Sequence/Load")
+    ctx.yield_(2)
+    report["sequence_frames"] = None if viewer.sequence is None else len(viewer.sequence.poses)
+    report["fps"] = None if viewer.sequence is None else viewer.sequence.fps
+    ctx.item_click("**/Sequence/Export video")
+    report["video"] = _wait_export(ctx, viewer)
+    ctx.item_click("**/Sequence/Screenshot")
+    report["screenshot"] = _wait_export(ctx, viewer)
+
+
+ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default, "export": script_export,
                   "shot-left-arm": script_shot_left_arm, "shot-novelty": script_shot_novelty}
 
 

@@ -41,9 +41,13 @@ class NeuralView:
     def busy(self) -> bool:
         return self.worker.busy
 
+    def size_for(self, aspect: float) -> tuple[int, int]:
+        """(w, h) of the full-resolution level for a view of ``aspect``."""
+        return _fit(max(8, round(self.resolution * self.image_scale)), aspect)
+
     def update(self, state, camera, aspect: float, force: bool = False) -> None:
         """Submit a job when the pose, camera or size changed; upload a new level."""
-        w, h = _fit(max(8, round(self.resolution * self.image_scale)), aspect)
+        w, h = self.size_for(aspect)
         key = (state.version, camera_key(camera), w, h, self.preset)
         if (self.live and key != self._key) or force:
             self._key = key

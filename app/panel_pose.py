@@ -136,7 +136,33 @@ def _sequence(viewer) -> None:
         _, seq.fps = imgui.slider_float("fps", seq.fps, 1.0, 60.0, "%.0f fps")
         imgui.same_line()
         imgui.text_disabled(Path(seq.path).name)
+    _export_buttons(viewer)
     imgui.pop_id()
+
+
+def _export_buttons(viewer) -> None:
+    """"Export video" (the loaded sequence) and "Screenshot" (the current pose: 3D view
+    and neural render), rendered in the background from the 3D view's camera at the
+    neural panel's resolution (app.export); the result's path or error underneath."""
+    if viewer.neural is None:
+        return
+    job = viewer.export
+    if job is not None and job.running:
+        imgui.text(f"exporting {job.done}/{job.total} ...")
+        return
+    seq = viewer.sequence
+    if seq is not None and imgui.button("Export video"):
+        viewer.start_export(seq.poses, seq.trans, Path(seq.path).stem, seq.fps)
+    if seq is not None:
+        imgui.same_line()
+    if imgui.button("Screenshot"):
+        viewer.start_export(viewer.state.pose[None], viewer.state.trans[None], "shot", 1.0,
+                            view3d=True)
+    if job is not None:
+        if job.error:
+            imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), job.error)
+        elif job.path is not None:
+            imgui.text_disabled(f"wrote {job.path}")
 
 
 def _show_frame(viewer) -> None:

@@ -67,6 +67,7 @@ class Viewer:
         self.preset = ""
         self.sequence = None
         self.sequence_path, self.sequence_error = "", ""
+        self.export = None  # the last app.export.Export job
         self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
         self.frame_ms: deque[float] = deque(maxlen=600)  # wall time between frames
         self.frame_cpu_ms: deque[float] = deque(maxlen=600)  # of it, this thread's CPU time
@@ -134,6 +135,22 @@ class Viewer:
             self.ctx.screen.use()
             self._scene_key = key
         return self._scene_tex
+
+    def start_export(self, poses, trans, stem: str, fps: float, view3d: bool = False) -> None:
+        """Render ``poses`` (T, 24, 3) from the 3D view's camera at the neural panel's
+        resolution in the background (app.export): an MP4, or for one pose neural.png
+        (+ view3d.png, the 3D view at the same size, when ``view3d``)."""
+        from app.export import Export
+
+        w, h = self.neural.size_for(self.view_aspect())
+        camera = self.camera.to_texvocab_camera(w, h)
+        image = None
+        if view3d:
+            self.scene.render(self.state, self.camera, (w, h), self.options)
+            image = self.scene.read((w, h))
+        march = self.neural.march or march_settings(self.data.settings)
+        self.export = Export(self.data.model, march, camera, np.asarray(poses),
+                             np.asarray(trans), stem, fps, image)
 
     def view_aspect(self) -> float:
         w, h = self.view_size

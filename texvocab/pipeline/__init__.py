@@ -44,6 +44,9 @@ _API: dict[str, tuple[str, str]] = {
     "load_textures": ("texvocab.pipeline.train", "load_textures"),
     "Avatar": ("texvocab.pipeline.avatar", "Avatar"),
     "load_avatar": ("texvocab.pipeline.avatar", "load_avatar"),
+    # clips (texvocab render, the viewer's export)
+    "FrameWorker": ("texvocab.pipeline.clip_worker", "FrameWorker"),
+    "write_mp4": ("texvocab.pipeline.clip", "write_mp4"),
     # files
     "save_png": ("texvocab.io.images", "save_png"),
     "to_uint8": ("texvocab.io.images", "to_uint8"),

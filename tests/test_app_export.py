@@ -1,0 +1,52 @@
+"""The timeline's "Export video" and "Screenshot" buttons, clicked in the real window
+(GLFW under Xvfb, ImGui Test Engine): an MP4 of the loaded AMASS-layout sequence whose
+frame count is read back, and a screenshot folder with the neural render and the 3D
+view; both under exports/ of the working folder, never replacing a file."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+from test_pose_files import amass_file
+from tiny_runs import tiny_run
+
+from texvocab.pipeline.clip import read_video_info
+
+XVFB = shutil.which("xvfb-run")
+
+
+def test_export_video_and_screenshot_buttons(tmp_path):
+    ckpt = tiny_run(tmp_path / "run", ([("walk", 2)], 2), 1, 3,
+                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
+                    num_keys=1, k=1, rays_per_batch=64, coarse_samples=8, fine_samples=4,
+                    checkpoint_every=2, eval_views=(1,))
+    amass_file(tmp_path / "walk.npz", frames=17, rate=120.0)  # 5 frames at 30 fps
+    work = tmp_path / "work"
+    (work / "exports").mkdir(parents=True)
+    (work / "exports" / "walk.mp4").write_bytes(b"mine")  # must survive the export
+    report = tmp_path / "export.json"
+    assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
+    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", sys.executable, "-m", "app.window",
+           str(ckpt), "--size", "1280x800", "--script", "export", "--report", str(report),
+           "--neural-resolution", "48", "--poses", str(tmp_path / "walk.npz")]
+    proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=300)
+    assert report.is_file(), f"rc {proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
+    rep = json.loads(report.read_text())
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
+    assert rep["sequence_frames"] == 5 and rep["fps"] == 30
+    video = rep["video"]
+    assert not video["error"] and video["frames"] == 5
+    assert video["path"].endswith("exports/walk_2.mp4")  # walk.mp4 was taken
+    assert (work / "exports" / "walk.mp4").read_bytes() == b"mine"
+    frames, size, fps = read_video_info(work / "exports" / "walk_2.mp4")
+    assert frames == 5 and fps == 30 and max(size) in (48, 48 + 1)
+    shot = rep["screenshot"]
+    assert not shot["error"] and shot["path"].endswith("exports/shot")
+    neural = np.asarray(Image.open(work / "exports" / "shot" / "neural.png"))
+    view = np.asarray(Image.open(work / "exports" / "shot" / "view3d.png"))
+    assert neural.shape == view.shape and max(neural.shape[:2]) == 48
+    assert neural.max() > 30 and view.std() > 5  # something drawn in both
