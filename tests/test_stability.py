@@ -45,7 +45,7 @@ from texvocab.method.feature import PoseFeature, sample_maps
 from texvocab.method.field import laplace_density
 from texvocab.method.texmap import TexmapSettings, build_texture_map
 from texvocab.method.vocab import Vocabulary
-from texvocab.render import ShellGeometry, render_image
+from texvocab.render import MarchSettings, ShellGeometry, render_image
 
 PI = math.pi
 AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
@@ -128,6 +128,13 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
     assert out.rays > 0 and float(out.opacity.max()) > 0
     assert (out.opacity >= 0).all() and (out.opacity <= 1 + 1e-6).all()
     assert_param_grads(field)
+    # the surface-guided marcher (render time) on the same pose: finite and in range
+    with torch.no_grad():
+        guided = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces,
+                              MarchSettings(guide="raster"))
+    assert_finite(guided_rgb=guided.rgb, guided_alpha=guided.alpha, guided_depth=guided.depth)
+    assert (guided.alpha >= 0).all() and (guided.alpha <= 1 + 1e-6).all()
+    assert (guided.rgb >= 0).all() and (guided.rgb <= 1 + 1e-6).all()
 
 
 # --- rotations through the whole path -------------------------------------------------
