@@ -1,7 +1,7 @@
 """Data-parallel training (texvocab train --ddp 2): two local CPU processes (gloo) give
 the weights of one process that accumulates the same two shards of every step's batch,
-and a time budget stops both at the same step. The slowest test of the suite's training
-group (two processes start torch): about 30 s."""
+and a time budget stops both at the same step. About 10 s each (two processes start
+torch), measured in ./scripts/test."""
 import numpy as np
 import pytest
 import torch
