@@ -98,7 +98,7 @@ def render_neural(data: ViewerData, state: ViewerState, camera, background) -> n
     with torch.no_grad():
         ctx = model.pose_feature.context(state.pose, state.trans)
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    index=ctx.index)
+                                    march.shell_voxel, march.shell_exact, index=ctx.index)
         out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
                            background=tuple(background), shell=shell)
     return to_uint8(out.rgb.numpy())
