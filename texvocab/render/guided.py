@@ -171,20 +171,22 @@ def render_image_guided(field, camera, vertices, faces, settings: MarchSettings 
         slope = radius * t_hit / float(camera.K[0, 0]) * (1 - c * c).sqrt() / c
         own = torch.where(hit & (cos >= s.min_cos), t_hit - slope, t_hit)
         passby = (front < _FAR / 2) & (front < torch.where(hit, own, torch.inf) - delta)
-        # a miss passes the body closest near the nearest hit pixel's surface point; a hit
-        # behind a nearer surface (an occlusion edge) is marched through both
-        # (its silhouette's tangent point lies up to a pixel footprint per pixel of
-        # distance behind that point, where a second probe looks)
+        # A passing ray is probed where it comes closest to the surface it passes: a miss
+        # near the nearest hit pixel's surface point, a hit behind an occlusion edge near
+        # the nearest surface point of its window. The silhouette's tangent point lies up
+        # to a pixel footprint per pixel of distance behind that point, where a second
+        # probe looks. Both probes beyond miss_margin β: the passed surface shows nothing.
         gap, (iy, ix) = ndimage.distance_transform_edt(~hit.view(H, W).numpy(),
                                                        return_indices=True)
-        nearest = torch.from_numpy((iy * W + ix).reshape(-1))
-        p_idx = torch.nonzero(passby & ~hit).squeeze(1)
+        gap = torch.from_numpy(gap).float().view(-1)
+        nearest = torch.where(hit, front_pix, torch.from_numpy((iy * W + ix).reshape(-1)))
+        gap = torch.where(hit, float(radius), gap)
+        p_idx = torch.nonzero(passby).squeeze(1)
         q = nearest[p_idx]
-        t_pass = torch.where(passby, front, torch.inf)
+        t_pass = torch.full((H * W,), torch.inf)
         t_pass[p_idx] = ((t_hit[q, None] * dirs[q]) * dirs[p_idx]).sum(1)
-        behind = t_pass[p_idx] * (1 + torch.from_numpy(gap).float().view(-1)[p_idx]
-                                  / float(camera.K[0, 0]))
-        h_idx = torch.nonzero(hit & ~passby & (cos >= s.min_cos)).squeeze(1)
+        behind = t_pass[p_idx] * (1 + gap[p_idx] / float(camera.K[0, 0]))
+        h_idx = torch.nonzero(hit & (cos >= s.min_cos)).squeeze(1)
         idx = torch.cat([p_idx, p_idx, h_idx])
         t_probe = torch.cat([t_pass[p_idx], behind, t_hit[h_idx]])
         check()
@@ -192,13 +194,14 @@ def render_image_guided(field, camera, vertices, faces, settings: MarchSettings 
                                    s.chunk_points)
         evals += len(idx)
         n_p = len(p_idx)
-        close = passby & hit
+        close = torch.zeros(H * W, dtype=torch.bool)
         close[p_idx] = torch.minimum(sdf0[:n_p], sdf0[n_p:2 * n_p]) <= s.miss_margin * beta
         paths["background"] = int((passby & ~close & ~hit).sum())
         kind[passby & ~close & ~hit] = 1
-        band_idx = h_idx
-        ok = _band(field, s, beta, o, dirs, band_idx, t_hit, cos, sdf0[2 * n_p:],
-                   rgb0[2 * n_p:], rgb_out, alpha_out, depth_out, bg)
+        alone = ~close[h_idx]  # hits whose passed surface (if any) shows nothing
+        band_idx = h_idx[alone]
+        ok = _band(field, s, beta, o, dirs, band_idx, t_hit, cos, sdf0[2 * n_p:][alone],
+                   rgb0[2 * n_p:][alone], rgb_out, alpha_out, depth_out, bg)
         evals += len(band_idx) * s.band_samples
         paths["band"] = int(ok.sum())
         kind[band_idx[ok]] = 2
