@@ -62,6 +62,31 @@ class SurfaceProjection:
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
+# edge topology per face array (the same for every pose of a body): (vertex count, bytes
+# hash) -> (edge index of each face corner's edge, edges, closed)
+_TOPOLOGY: dict[tuple[int, int], tuple[np.ndarray, int, bool]] = {}
+
+
+def _edge_topology(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, int, bool]:
+    """For faces (F, 3): the undirected edge id (F * 3,) of edge k (corner k to k + 1) of
+    each face, the number of edges, and whether the mesh is closed and consistently
+    oriented (every edge on two faces, no directed edge twice). Cached per face array."""
+    key = (num_vertices, hash(faces.tobytes()))
+    if key not in _TOPOLOGY:
+        directed = np.stack([faces, np.roll(faces, -1, axis=1)], -1).reshape(-1, 2)
+        undirected = directed.min(1) * num_vertices + directed.max(1)
+        uniq, inverse, count = np.unique(undirected, return_inverse=True, return_counts=True)
+        directed_key = directed[:, 0] * num_vertices + directed[:, 1]
+        closed = bool((count == 2).all()) and len(np.unique(directed_key)) == len(directed_key)
+        if len(_TOPOLOGY) > 16:
+            _TOPOLOGY.clear()
+        _TOPOLOGY[key] = (inverse.reshape(-1), len(uniq), closed)
+    return _TOPOLOGY[key]
+
+
+def _scatter_add(index: np.ndarray, values: np.ndarray, size: int) -> np.ndarray:
+    """(size, 3) sums of values (N, 3) at index (N,) (np.add.at, by bincount: faster)."""
+    return np.stack([np.bincount(index, values[:, c], minlength=size) for c in range(3)], 1)
 
 
 def _default_workers() -> int:
@@ -216,21 +241,16 @@ class SurfaceIndex:
         cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         norm = np.linalg.norm(cross, axis=1, keepdims=True)
         self._face_normal = np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0)
+        nv = len(self.vertices)
         self._vertex_normal = np.zeros_like(self.vertices)
         for k in range(3):
             e1, e2 = tri[:, (k + 1) % 3] - tri[:, k], tri[:, (k + 2) % 3] - tri[:, k]
             angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), (e1 * e2).sum(1))
-            np.add.at(self._vertex_normal, f[:, k], angle[:, None] * self._face_normal)
+            self._vertex_normal += _scatter_add(f[:, k], angle[:, None] * self._face_normal, nv)
         # edge k of a face joins corners k and k+1; its pseudo-normal sums the faces on it
-        directed = np.stack([f, np.roll(f, -1, axis=1)], -1).reshape(-1, 2)
-        key = directed.min(1) * len(self.vertices) + directed.max(1)
-        uniq, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-        edge_sum = np.zeros((len(uniq), 3))
-        np.add.at(edge_sum, inverse, np.repeat(self._face_normal, 3, axis=0))
+        inverse, edges, self.closed = _edge_topology(f, nv)
+        edge_sum = _scatter_add(inverse, np.repeat(self._face_normal, 3, axis=0), edges)
         self._edge_normal = edge_sum[inverse].reshape(-1, 3, 3)  # (F, 3 edges, 3)
-        directed_key = directed[:, 0] * len(self.vertices) + directed[:, 1]
-        self.closed = bool((count == 2).all()) and \
-            len(np.unique(directed_key)) == len(directed_key)
         corners = tri.reshape(-1, 3)
         t = tri - (corners.min(0) + corners.max(0)) / 2  # centred: a better-rounded volume
         volume = (t[:, 0] * np.cross(t[:, 1], t[:, 2])).sum() / 6.0
