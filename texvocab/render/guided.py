@@ -7,28 +7,31 @@ The avatar's SDF is the posed body's signed distance plus a residual, and its de
 zero beyond the shell (δ from the mesh) — so a ray's first surface lies within δ of the
 mesh's first hit, known for every pixel from one rasterisation. Per pixel:
 
-* **interior** (the ray hits the mesh, no miss or depth jump of δ within the pixels δ
-  projects to, and it meets the face at a cosine >= ``min_cos``): one *probe* evaluation
-  at the mesh hit t_m gives the SDF s_0; the surface is at t* ≈ t_m + s_0 / cos (one
-  Newton step along the ray with the face's cosine); ``band_samples`` samples spaced
-  ``band_spacing`` β / cos around t* are evaluated in one call. Between samples the SDF
-  is taken linear and the VolSDF optical depth of each interval is exact for it
+* **band** (the ray hits the mesh at a cosine >= ``min_cos``, and any nearer surface it
+  passes is more than ``miss_margin`` β away): one *probe* evaluation at the mesh hit
+  t_m gives the SDF s_0; the surface is at t* ≈ t_m + s_0 / cos (one Newton step along
+  the ray with the face's cosine); ``band_samples`` samples spaced ``band_spacing``
+  β / cos around t* are evaluated in one call. Between samples the SDF is taken linear
+  and the VolSDF optical depth of each interval is exact for it
   (:func:`interval_optical_depth`): with β ≈ 2 mm a handful of samples integrate the
   surface's opacity profile that a Riemann sum needs dozens for. The part of the ray in
   front of the first sample is integrated along the same line; the transmittance left
   after the last sample goes to its colour (as early termination does). A ray whose
-  samples do not bracket the surface (first SDF < 0, last > 0) falls back.
-* **fringe** (no mesh hit, but a hit pixel within that radius): a probe at the ray's
-  closest approach to the nearest hit pixel's surface point; if the SDF there is more
-  than ``miss_margin`` β the ray sees the background (density < e^-miss_margin / 2β at
-  the closest point), else it falls back.
-* **fallback** (depth edges, grazing hits, close fringe rays, failed brackets): the
-  uniform coarse-to-fine marcher over the ray's stretch within δ of every surface its
-  neighbourhood shows, coarse samples all in one call (no scouting) — exact up to the
-  sampling, as the shell marcher is.
+  samples do not bracket the surface (first SDF > 0 > last) or leave more than
+  ``band_leftover`` transmittance falls back.
+* **passing rays** (no mesh hit, or a hit behind a surface that is more than δ nearer in
+  the pixels within ``miss_margin`` β): two probes where the ray comes closest to the
+  passed surface (at the nearest surface point, and a pixel footprint per pixel of
+  distance behind it, where a silhouette's tangent point lies). Both beyond
+  ``miss_margin`` β: the passed surface shows nothing (density < e^-miss_margin / 2β),
+  and a miss sees the background. Otherwise the ray falls back.
+* **fallback** (close passing rays, grazing hits, failed bands): the shell marcher
+  (:func:`texvocab.render.marcher.render_rays`) with the same settings over the ray's
+  in-shell path, in larger calls (``fallback_segment``) — exact up to its sampling.
 
-Field calls per frame: probe, band, fallback coarse, fallback fine — four, against tens
-for front-to-back marching, whose small calls pay the field's fixed per-call cost.
+Field calls per frame: one for the probes, one for the bands, and a few for the fallback
+rays, against tens for front-to-back marching of every ray, whose small calls pay the
+field's fixed per-call cost.
 """
 from __future__ import annotations
 
