@@ -12,7 +12,7 @@ import sys
 import numpy as np
 from PIL import Image
 from test_pose_files import amass_file
-from tiny_runs import tiny_run
+from tiny_runs import smallest_run
 
 from texvocab.pipeline.clip import read_video_info
 
@@ -20,10 +20,7 @@ XVFB = shutil.which("xvfb-run")
 
 
 def test_export_video_and_screenshot_buttons(tmp_path):
-    ckpt = tiny_run(tmp_path / "run", ([("walk", 2)], 2), 1, 3,
-                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
-                    num_keys=1, k=1, rays_per_batch=64, coarse_samples=8, fine_samples=4,
-                    checkpoint_every=2, eval_views=(1,))
+    ckpt = smallest_run(tmp_path / "run")
     amass_file(tmp_path / "walk.npz", frames=17, rate=120.0)  # 5 frames at 30 fps
     work = tmp_path / "work"
     (work / "exports").mkdir(parents=True)

@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 from test_pose_files import amass_file
-from tiny_runs import tiny_run
+from tiny_runs import smallest_run
 
 from texvocab.cli.main import main
 from texvocab.pipeline.clip import frame_cameras, read_video_info
@@ -14,10 +14,7 @@ from texvocab.pipeline.clip import frame_cameras, read_video_info
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
-    return tiny_run(tmp_path_factory.mktemp("clip"), ([("walk", 2)], 2), 1, 3,
-                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
-                    num_keys=1, k=1, rays_per_batch=64, coarse_samples=8, fine_samples=4,
-                    checkpoint_every=2, eval_views=(1,))
+    return smallest_run(tmp_path_factory.mktemp("clip"))
 
 
 def test_amass_file_renders_to_an_mp4_read_back(checkpoint, tmp_path, capsys):

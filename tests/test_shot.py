@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 from scipy import ndimage
-from tiny_runs import tiny_run
+from tiny_runs import smallest_run
 
 from texvocab.cli.main import main
 from texvocab.io.images import save_png
@@ -74,10 +74,7 @@ def test_shot_errors_are_one_line(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tmp_path_factory):
     """A capture of 2 frames (1 for training) x 3 views at 64 px, a 2-step run on it."""
-    return tiny_run(tmp_path_factory.mktemp("shot"), ([("walk", 2)], 2), 1, 3,
-                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
-                    num_keys=1, k=1, rays_per_batch=64, coarse_samples=8, fine_samples=4,
-                    checkpoint_every=2, eval_views=(1,))
+    return smallest_run(tmp_path_factory.mktemp("shot"))
 
 
 def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(tiny_checkpoint,

@@ -19,3 +19,12 @@ def tiny_run(root, segments, num_train: int, views: int, field: dict, **settings
     trainer = Trainer(open_capture(cap), s, root / "run", progress=False)
     trainer.run()
     return trainer.checkpoint_path
+
+
+def smallest_run(root):
+    """The smallest real avatar: 2 frames (1 for training) x 3 views at 64 px, a 2-step
+    run of a 16-wide model with one key per part; returns its checkpoint's path."""
+    return tiny_run(root, ([("walk", 2)], 2), 1, 3,
+                    dict(hidden=16, sdf_layers=1, color_layers=1, pos_freqs=2), texture_size=32,
+                    num_keys=1, k=1, rays_per_batch=64, coarse_samples=8, fine_samples=4,
+                    checkpoint_every=2, eval_views=(1,))
