@@ -82,7 +82,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         write_mp4,
     )
     from texvocab.pipeline.clip_worker import FrameWorker
-    from texvocab.pipeline.settings import march_settings, render_overrides
+    from texvocab.pipeline.settings import RENDER_KNOBS, march_settings, render_overrides
 
     out = Path(args.out)
     if not args.fps > 0:
@@ -132,8 +132,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     keep = _frame_range(args.frames, len(seq))
     poses, trans = seq.poses[keep.start:keep.stop], seq.trans[keep.start:keep.stop]
     fps = seq.fps or args.fps
-    knobs = {k: getattr(settings, k) for k in ("coarse_samples", "fine_samples",
-                                               "early_stop_eps", "shell_width", "guide")}
+    knobs = {k: getattr(settings, k) for k in RENDER_KNOBS}
     spec = ClipSpec.make(args.checkpoint, args.poses, args.camera, args.orbit, args.follow,
                          fps, settings.image_scale,
                          {**knobs, "frames": [keep.start, keep.stop], "up": args.up,
