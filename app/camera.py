@@ -127,3 +127,51 @@ class OrbitCamera:
         yaw = float(np.degrees(np.arctan2(offset[0], offset[2])))
         fov = float(np.degrees(2 * np.arctan(0.5 * cam.height / cam.K[1, 1])))
         return cls(target=look, yaw=yaw, pitch=pitch, distance=dist, fov=fov)
+
+
+@dataclass
+class CaptureViewCamera:
+    """One of the capture's own cameras, as a preset of the 3D view: drawn and rendered
+    exactly as ``texvocab shot --camera N`` does (its K, R, t), scaled to the view's
+    size with its aspect ratio kept (the view is letterboxed). ``shift`` (3,) moves it
+    with the body in follow mode. Dragging turns it into the nearest :class:`OrbitCamera`.
+    """
+
+    camera: Camera
+    index: int
+    shift: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def aspect(self) -> float:
+        return self.camera.width / self.camera.height
+
+    def moved(self) -> Camera:
+        """The capture camera moved by ``shift`` (same orientation and intrinsics)."""
+        centre = self.camera.center + self.shift
+        c = self.camera
+        return Camera(c.K, c.R, -c.R @ centre, c.width, c.height, c.dist, c.name)
+
+    def to_texvocab_camera(self, width: int, height: int) -> Camera:
+        """The camera at ``width`` (its height follows from the aspect ratio; ``height``
+        must agree to one pixel)."""
+        cam = self.moved()
+        if width == cam.width:
+            return cam
+        factor = width / cam.width
+        if abs(cam.height * factor - height) > 1.0:
+            raise ValueError(f"capture view {self.index} is {cam.width}x{cam.height}; cannot "
+                             f"draw it at {width}x{height} (different aspect ratio)")
+        return cam.scaled(factor)
+
+    def key(self) -> tuple:
+        return ("view", self.index, *(float(v) for v in self.shift))
+
+    def to_orbit(self, target) -> OrbitCamera:
+        return OrbitCamera.from_capture_camera(self.moved(), target)
+
+
+def fit_aspect(width: int, height: int, aspect: float) -> tuple[int, int]:
+    """The largest (w, h) inside ``width`` × ``height`` with w / h = ``aspect``."""
+    if width / max(height, 1) > aspect:
+        return max(1, round(height * aspect)), max(1, height)
+    return max(1, width), max(1, round(width / aspect))

@@ -39,8 +39,9 @@ def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
             time.perf_counter() - t0 < timeout:
         ctx.yield_()
     ctx.yield_(2)
-    log = list(viewer.idling_log)  # (worker busy, idling enabled) per frame so far
-    report["idling_while_busy"] = sorted({idle for busy, idle in log if busy})
+    log = list(viewer.idling_log)  # (worker busy, playing, idling enabled) per frame so far
+    report["idling_while_busy"] = sorted({idle for busy, play, idle in log if busy and not play})
+    report["idling_while_playing"] = sorted({idle for _, play, idle in log if play})
     report["idling_when_done"] = bool(hello_imgui.get_runner_params().fps_idling.enable_idling)
     f = viewer.neural.frame
     report["neural"] = None if f is None else {
@@ -111,7 +112,7 @@ def _sequence_steps(ctx, viewer, report: dict) -> None:
     if viewer.sequence is None:
         return
     report["sequence_frames"] = len(viewer.sequence.poses)
-    ctx.item_input_value("**/Sequence/frame", 2)
+    ctx.item_input_value("**/Sequence/##frame", 2)
     ctx.yield_(2)
     report["sequence_frame"] = viewer.sequence.frame
     report["pose_at_frame"] = viewer.state.pose.tolist()
@@ -184,7 +185,8 @@ def script_export(ctx, viewer, report: dict) -> None:
     report["fps"] = None if viewer.sequence is None else viewer.sequence.fps
     ctx.item_click("**/Sequence/Export video")
     report["video"] = _wait_export(ctx, viewer)
-    ctx.item_click("**/Sequence/Screenshot")
+    ctx.set_ref("3D view")
+    ctx.item_click("**/Screenshot")
     report["screenshot"] = _wait_export(ctx, viewer)
 
 

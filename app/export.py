@@ -29,8 +29,8 @@ class Export:
     """One background job: ``frames`` (poses (T, 24, 3), trans (T, 3)) rendered with
     ``model`` from ``camera`` (an OpenCV camera) and written as an MP4 at ``fps`` (T > 1)
     or, for one frame, as neural.png beside ``view3d`` (an (H, W, 3) uint8 3D view) in a
-    fresh folder. ``done`` / ``total`` count frames; ``path`` is set when written,
-    ``error`` on failure."""
+    fresh folder (``model`` None: view3d alone). ``done`` / ``total`` count frames;
+    ``path`` is set when written, ``error`` on failure."""
 
     def __init__(self, model, march, camera, poses, trans, stem: str, fps: float = 30.0,
                  view3d: np.ndarray | None = None, folder: Path = EXPORT_DIR):
@@ -51,13 +51,15 @@ class Export:
         from texvocab.pipeline import FrameWorker, write_mp4
 
         try:
-            worker = FrameWorker(self.model, self.march, 1.0, threads=1)
             self.folder.mkdir(parents=True, exist_ok=True)
+            worker = None if self.model is None else FrameWorker(self.model, self.march, 1.0,
+                                                                 threads=1)
             if self.total == 1:
                 out = fresh_path(self.folder, self.stem, "")
                 out.mkdir()
-                save_png(out / "neural.png",
-                         worker.render(0, self.poses[0], self.trans[0], self.camera)[1])
+                if worker is not None:
+                    save_png(out / "neural.png",
+                             worker.render(0, self.poses[0], self.trans[0], self.camera)[1])
                 if self.view3d is not None:
                     save_png(out / "view3d.png", self.view3d)
                 self.done, self.path = 1, out

@@ -16,14 +16,25 @@ from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 from texvocab.pipeline import RENDER_PRESETS as PRESETS
 from texvocab.pipeline import march_settings, render_overrides
 
+#: during playback the render follows the timeline at one level: a finer one when a
+#: frame took under half this many seconds, a coarser one when it took more
+PLAYBACK_SECONDS = 0.5
+STALE_TINT = (0.45, 0.45, 0.45, 1.0)
+
 
 class NeuralView:
     """The neural render's GUI state: the worker, the displayed level's GL texture, and
-    the version counter bumped whenever pose, camera or resolution change."""
+    the version counter bumped whenever pose, camera or resolution change.
 
-    def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0, settings=None):
+    While a sequence plays, renders are not cancelled by each new frame (none would ever
+    finish): the worker renders the newest pose at one level (:attr:`playback_level`),
+    and when it is done the then-newest pose follows."""
+
+    def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0, settings=None,
+                 on_frame=None):
         self.ctx = ctx
-        self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice)
+        self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice,
+                                        on_frame=on_frame)
         self.settings = settings  # the checkpoint's Settings (for the presets)
         self.preset = "checkpoint"  # or a texvocab.pipeline.settings.PRESETS name
         self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
@@ -31,9 +42,11 @@ class NeuralView:
         self.live = True
         self.resolution = 256  # long side of the full-resolution level, pixels
         self.version = 0
+        self.playback_level = 8
         self._key = None
         self.frame: RenderFrame | None = None
         self.texture = None
+        self.labels: dict[int, str] = {}  # version -> what it shows ("frame 12", "edit 40")
         #: (version, level, milliseconds, seconds since the job started, (h, w)) per shown level
         self.history: deque[tuple] = deque(maxlen=200)
 
@@ -41,22 +54,42 @@ class NeuralView:
     def busy(self) -> bool:
         return self.worker.busy
 
+    @property
+    def stale(self) -> bool:
+        """True while the shown image belongs to an older pose, camera or size."""
+        return self.frame is not None and self.frame.version != self.version
+
     def size_for(self, aspect: float) -> tuple[int, int]:
         """(w, h) of the full-resolution level for a view of ``aspect``."""
         return _fit(max(8, round(self.resolution * self.image_scale)), aspect)
 
-    def update(self, state, camera, aspect: float, force: bool = False) -> None:
-        """Submit a job when the pose, camera or size changed; upload a new level."""
+    def update(self, state, camera, aspect: float, force: bool = False, label: str = "",
+               playing: bool = False) -> None:
+        """Submit a job when the pose, camera or size changed (while ``playing``: only
+        once the previous one is done); upload a new level. ``label`` names the pose."""
         w, h = self.size_for(aspect)
-        key = (state.version, camera_key(camera), w, h, self.preset)
-        if (self.live and key != self._key) or force:
+        key = (state.version, camera_key(camera), w, h, self.preset, playing)
+        changed = (self.live and key != self._key) or force
+        if changed and not (playing and self.worker.busy and not force):
             self._key = key
             self.version += 1
+            self.labels[self.version] = label or f"edit {state.version}"
+            for old in [v for v in self.labels if v < self.version - 64]:
+                del self.labels[old]
+            levels = (self.playback_level,) if playing else None
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
-                                         camera.to_texvocab_camera(w, h), self.march))
+                                         camera.to_texvocab_camera(w, h), self.march, levels))
         frame = self.worker.poll()
         if frame is not None:
             self._upload(frame)
+            if playing:
+                self._adapt_playback_level(frame)
+
+    def _adapt_playback_level(self, frame: RenderFrame) -> None:
+        if frame.elapsed < PLAYBACK_SECONDS / 2 and self.playback_level > 1:
+            self.playback_level //= 2
+        elif frame.elapsed > PLAYBACK_SECONDS and self.playback_level < 8:
+            self.playback_level *= 2
 
     def set_preset(self, name: str) -> None:
         """Render with a speed/accuracy preset's render knobs (bench/tradeoff.py), or with
@@ -67,6 +100,13 @@ class NeuralView:
             return
         s = render_overrides(self.settings, name, [])
         self.march, self.image_scale = march_settings(s), s.image_scale
+
+    def stale_line(self) -> str:
+        """"stale: shows frame 12; rendering frame 15" (or "" when the image is current)."""
+        if not self.stale:
+            return ""
+        shown = self.labels.get(self.frame.version, "an older pose")
+        return f"stale: shows {shown}; rendering {self.labels.get(self.version, 'the new pose')}"
 
     def _upload(self, frame: RenderFrame) -> None:
         img = np.ascontiguousarray((np.clip(frame.image, 0, 1) * 255 + 0.5).astype(np.uint8))
@@ -96,21 +136,32 @@ def _fit(long_side: int, aspect: float) -> tuple[int, int]:
 
 
 def camera_key(camera) -> tuple:
+    """What identifies the view of an orbit camera or a capture-camera preset."""
+    if hasattr(camera, "key"):
+        return camera.key()
     return (float(camera.yaw), float(camera.pitch), float(camera.distance), float(camera.fov),
             *(float(v) for v in camera.target))
 
 
-def status_line(frame: RenderFrame | None, busy: bool) -> str:
+
+def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | None = None) -> str:
+    """What the shown image is and how long it took; during playback, the level the render
+    follows the timeline at."""
     if frame is None:
         return "rendering..." if busy else "waiting"
     level = "full resolution" if frame.level == 1 else f"1/{frame.level} resolution"
     h, w = frame.image.shape[:2]
+    if playback_level is not None:
+        nxt = "full" if playback_level == 1 else f"1/{playback_level}"
+        return (f"playback: {level} ({w}x{h}) in {frame.elapsed:.2f} s per frame; following "
+                f"the timeline at {nxt} resolution")
     total = f"{frame.elapsed:.1f} s so far, refining..." if busy else f"{frame.elapsed:.1f} s in all"
     return f"{level} ({w}x{h}): {frame.seconds * 1000:.0f} ms; {total}"
 
 
 def draw_neural_panel(viewer) -> None:
-    """The "Neural render" window's contents."""
+    """The "Neural render" window's contents. A stale image (pose or camera changed since)
+    is dimmed and labelled with the pose it shows until the first new level replaces it."""
     nv = viewer.neural
     if nv is None:
         imgui.push_text_wrap_pos(0.0)
@@ -132,8 +183,13 @@ def draw_neural_panel(viewer) -> None:
         nv.set_preset(names[index])
     if imgui.is_item_hovered():
         imgui.set_tooltip("speed/accuracy preset of the render knobs (bench/tradeoff.py)")
-    nv.update(viewer.state, viewer.camera, viewer.view_aspect(), force)
-    imgui.text(status_line(nv.frame, nv.busy))
+    playing = viewer.sequence is not None and viewer.sequence.playing
+    nv.update(viewer.state, viewer.camera, viewer.neural_aspect(), force, viewer.pose_label(),
+              playing)
+    imgui.text(status_line(nv.frame, nv.busy, nv.playback_level if playing else None))
+    if playing and nv.frame is not None:
+        imgui.text_disabled(f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
+                            f"the timeline is at {viewer.pose_label()}")
     for err in list(nv.worker.errors)[-1:]:
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), err)
     if nv.texture is None:
@@ -141,4 +197,18 @@ def draw_neural_panel(viewer) -> None:
     avail = imgui.get_content_region_avail()
     tw, th = nv.texture.size
     scale = min(avail.x / tw, avail.y / th) if avail.x > 0 and avail.y > 0 else 1.0
-    imgui.image(imgui.ImTextureRef(nv.texture.glo), imgui.ImVec2(tw * scale, th * scale))
+    pos = imgui.get_cursor_screen_pos()
+    size = imgui.ImVec2(tw * scale, th * scale)
+    imgui.dummy(size)
+    draw = imgui.get_window_draw_list()
+    tint = imgui.get_color_u32(imgui.ImVec4(*(STALE_TINT if nv.stale else (1, 1, 1, 1))))
+    draw.add_image(imgui.ImTextureRef(nv.texture.glo), pos,
+                   imgui.ImVec2(pos.x + size.x, pos.y + size.y), imgui.ImVec2(0, 0),
+                   imgui.ImVec2(1, 1), tint)
+    line = nv.stale_line()
+    if line and not playing:
+        draw.add_rect_filled(imgui.ImVec2(pos.x, pos.y), imgui.ImVec2(pos.x + size.x, pos.y + 22),
+                             imgui.get_color_u32(imgui.ImVec4(0.0, 0.0, 0.0, 0.6)))
+        draw.add_text(imgui.ImVec2(pos.x + 6, pos.y + 4),
+                      imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), line)
+    viewer.neural_stale_shown = line

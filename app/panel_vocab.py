@@ -1,6 +1,9 @@
 """Vocabulary panel: per body part, the K keys the current pose selects (key id, source
-frame t, weight bar, thumbnail of the key's texture map U_t) and the part's distance to
-its nearest key; clicking a key moves that part's pose to the key.
+frame t, thumbnail of the key's texture map U_t), each key's distance d to the query
+(Eq. 4), its raw weight (Eq. 6: J_p - d for the paper's weighting, 1/d for inverse) and the
+share of the part's feature its texture contributes after normalisation (the bar), with
+how far that share is from uniform 1/K; and the part's distance to its nearest key.
+Clicking a key moves that part's pose to the key.
 
 Widget IDs: window "Vocabulary", key buttons ``<part>/keys/key<K>`` (K = key id; the
 test engine's "**" wildcard does not reach into the table).
@@ -46,8 +49,25 @@ class ThumbnailCache:
         self._cache.clear()
 
 
-def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float) -> None:
-    """Thumbnail button, key id and source frame beside it, the weight bar below."""
+def raw_weight(weighting: str, num_joints: int, d: float) -> float:
+    """The unnormalised weight of a key at distance ``d`` (Eq. 6, or 1/d for inverse)."""
+    if weighting == "paper":
+        return max(num_joints - d, 0.0)
+    return float("inf") if d <= 0 else 1.0 / d
+
+
+def key_caption(weighting: str, num_joints: int, d: float, share: float, k: int) -> str:
+    """"d 0.0123 · w 2.988 · 33.4% (+0.1)" — distance, raw weight, share and its offset
+    from uniform 1/K in percentage points."""
+    w = raw_weight(weighting, num_joints, d)
+    w_text = "exact" if w == float("inf") else f"{w:.4g}"
+    return f"d {d:.4f}  w {w_text}  {100 * share:.1f}% ({100 * (share - 1 / k):+.1f})"
+
+
+def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float, d: float,
+              num_joints: int) -> None:
+    """Thumbnail button, key id and source frame beside it; d, raw weight and share below,
+    the share as a bar."""
     size = imgui.ImVec2(THUMB_PX, THUMB_PX)
     if viewer.thumbs is not None and viewer.data.textures is not None:
         ref = imgui.ImTextureRef(viewer.thumbs.get(frame).glo)
@@ -64,7 +84,24 @@ def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float) -> None
     imgui.text(f"key {key_id}")
     imgui.text_disabled(f"t = {frame}")
     imgui.end_group()
-    imgui.progress_bar(weight, imgui.ImVec2(-1, 0), f"{weight:.2f}")
+    vocab = viewer.data.vocab
+    imgui.progress_bar(weight, imgui.ImVec2(-1, 0),
+                       f"{100 * weight:.1f}% ({100 * (weight - 1 / vocab.k):+.1f})")
+    caption = key_caption(vocab.weighting, num_joints, d, weight, vocab.k)
+    imgui.text_disabled(caption.rsplit("  ", 1)[0])
+    if imgui.is_item_hovered():
+        imgui.set_tooltip(_weight_tooltip(vocab.weighting, num_joints, caption))
+
+
+def _weight_tooltip(weighting: str, num_joints: int, caption: str) -> str:
+    if weighting == "paper":
+        return (f"{caption}\nd: quaternion distance of the part's pose to this key (Eq. 4).\n"
+                f"w = J_p - d with J_p = {num_joints} joints (Eq. 6), then normalised over the "
+                "K keys.\nWith d much smaller than J_p every key gets about 1/K: the shares "
+                "show how little d moves them.")
+    return (f"{caption}\nd: quaternion distance of the part's pose to this key (Eq. 4).\n"
+            "w = 1/d (inverse weighting), normalised over the K keys: the nearest key "
+            "dominates.")
 
 
 def _part_row(viewer, q) -> None:
@@ -76,10 +113,12 @@ def _part_row(viewer, q) -> None:
     keys = [(int(k), int(f), float(w)) for k, f, w in
             zip(q.key_ids, q.frames, q.weights, strict=True)]
     viewer.drawn_keys[q.part] = keys
+    vocab = viewer.data.vocab
+    num_joints = len(vocab.part_joints[vocab.part_names.index(q.part)])
     if imgui.begin_table("keys", max(len(keys), 1), imgui.TableFlags_.sizing_stretch_same):
-        for key_id, frame, weight in keys:
+        for (key_id, frame, weight), d in zip(keys, q.distances, strict=True):
             imgui.table_next_column()
-            _key_cell(viewer, q.part, key_id, frame, weight)
+            _key_cell(viewer, q.part, key_id, frame, weight, float(d), num_joints)
         imgui.end_table()
     imgui.separator()
     imgui.pop_id()

@@ -13,6 +13,7 @@ from texvocab.errors import TexvocabError
 from texvocab.pipeline import (
     BODY_PARTS,
     JOINT_LIMITS_DEG,
+    JOINT_NAMES,
     Settings,
     VocabTexture,
     Vocabulary,
@@ -110,6 +111,8 @@ class ViewerState:
         pose: (24, 3) float64 axis-angle, radians (SMPL order; joint 0 is the root).
         trans: (3,) float64 root translation, metres.
         version: incremented on every change of pose or trans.
+        change: the last change in words ("left shoulder z -40°", "preset walk"), for
+            labels such as the neural render's stale banner.
     """
 
     def __init__(self, data: ViewerData, pose=None, trans=None):
@@ -120,12 +123,14 @@ class ViewerState:
         self.pose = np.zeros((24, 3)) if pose is None else np.array(pose, np.float64).reshape(24, 3)
         self.trans = self.rest_trans.copy() if trans is None else np.array(trans, np.float64)
         self.version = 0
+        self.change = "rest pose"
         self._cache: dict[str, tuple[int, object]] = {}
         self._vocab_texture = None
         self._poser = None
 
     # -- editing ------------------------------------------------------------------------
-    def _changed(self, pose: np.ndarray, trans: np.ndarray | None = None) -> bool:
+    def _changed(self, pose: np.ndarray, trans: np.ndarray | None = None,
+                 change: str = "pose set") -> bool:
         trans = self.trans if trans is None else np.asarray(trans, np.float64).reshape(3)
         if np.array_equal(pose, self.pose) and np.array_equal(trans, self.trans):
             return False
@@ -133,31 +138,45 @@ class ViewerState:
             raise TexvocabError("pose and translation must be finite")
         self.pose, self.trans = pose, trans.copy()
         self.version += 1
+        self.change = change
         return True
 
-    def set_pose(self, pose, trans=None) -> bool:
+    def set_pose(self, pose, trans=None, change: str = "pose set") -> bool:
         """Replace the whole pose (24, 3) (and trans (3,)); no clamping. True if changed."""
-        return self._changed(np.array(pose, np.float64).reshape(24, 3), trans)
+        return self._changed(np.array(pose, np.float64).reshape(24, 3), trans, change)
 
     def joint_deg(self, j: int) -> np.ndarray:
         """(3,) axis-angle components of joint ``j`` in degrees (the sliders' values)."""
         return np.degrees(self.pose[j])
 
     def set_joint(self, j: int, xyz_deg) -> bool:
-        """Set joint ``j``'s axis-angle components (degrees), clamped to its limits."""
+        """Set joint ``j``'s axis-angle components (degrees). The components that change
+        are clamped to the joint's limits; the others keep their value even when it lies
+        outside them (a pose loaded from a file), so moving one slider never snaps another."""
         lim = JOINT_LIMITS_DEG[j].astype(np.float64)
-        deg = np.clip(np.asarray(xyz_deg, np.float64).reshape(3), lim[:, 0], lim[:, 1])
+        old = np.degrees(self.pose[j])
+        new = np.asarray(xyz_deg, np.float64).reshape(3)
+        moved = ~np.isclose(new, old, rtol=0.0, atol=1e-9)
+        deg = np.where(moved, np.clip(new, lim[:, 0], lim[:, 1]), old)
         pose = self.pose.copy()
-        pose[j] = np.radians(deg)
-        return self._changed(pose)
+        pose[j] = np.where(moved, np.radians(deg), self.pose[j])
+        what = ", ".join(f"{'xyz'[a]} {deg[a]:.0f}°" for a in np.flatnonzero(moved))
+        return self._changed(pose, change=f"{JOINT_NAMES[j].replace('_', ' ')} {what}")
+
+    def out_of_limits(self, j: int) -> np.ndarray:
+        """(3,) bool: which of joint ``j``'s components lie outside its limits (by more than
+        a hundredth of a degree)."""
+        lim = JOINT_LIMITS_DEG[j].astype(np.float64)
+        deg = self.joint_deg(j)
+        return (deg < lim[:, 0] - 1e-2) | (deg > lim[:, 1] + 1e-2)
 
     def set_trans(self, xyz) -> bool:
-        return self._changed(self.pose.copy(), np.asarray(xyz, np.float64))
+        return self._changed(self.pose.copy(), np.asarray(xyz, np.float64), "root moved")
 
     def reset_joint(self, j: int) -> bool:
         pose = self.pose.copy()
         pose[j] = 0.0
-        return self._changed(pose)
+        return self._changed(pose, change=f"{JOINT_NAMES[j].replace('_', ' ')} reset")
 
     def reset_part(self, name: str) -> bool:
         """Rest pose for the joints of one of the five body parts (``BODY_PARTS``)."""
@@ -165,11 +184,11 @@ class ViewerState:
             raise TexvocabError(f"unknown body part {name!r}; expected one of {PART_NAMES}")
         pose = self.pose.copy()
         pose[list(BODY_PARTS[name])] = 0.0
-        return self._changed(pose)
+        return self._changed(pose, change=f"{name.replace('_', ' ')} reset")
 
     def reset_all(self) -> bool:
         """Rest pose (T-pose, zero root orientation) at the rest translation."""
-        return self._changed(np.zeros((24, 3)), self.rest_trans)
+        return self._changed(np.zeros((24, 3)), self.rest_trans, "rest pose")
 
     def apply_preset(self, name: str) -> bool:
         """A named preset (texvocab.body.poses): joints 1..23 from the preset, the root
@@ -179,7 +198,7 @@ class ViewerState:
         p, t = preset(name)
         pose = np.asarray(p, np.float64).copy()
         pose[0] = self.pose[0]
-        return self._changed(pose, self.rest_trans + np.asarray(t, np.float64))
+        return self._changed(pose, self.rest_trans + np.asarray(t, np.float64), f"preset {name}")
 
     def key_pose(self, part: str | int, key_index: int) -> tuple[tuple[int, ...], np.ndarray]:
         """(joints of the vocabulary part, their (J_p, 3) axis-angle in key ``key_index``)."""
@@ -199,7 +218,8 @@ class ViewerState:
         joints, rotvecs = self.key_pose(part, key_index)
         pose = self.pose.copy()
         pose[list(joints)] = rotvecs
-        return self._changed(pose)
+        name = self.data.vocab.part_names[part] if isinstance(part, int) else part
+        return self._changed(pose, change=f"{name.replace('_', ' ')} to key {key_index}")
 
     # -- derived, cached per version -----------------------------------------------------
     def _cached(self, key: str, make):

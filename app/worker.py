@@ -41,6 +41,7 @@ class RenderJob:
     trans: np.ndarray
     camera: object
     march: object = None  # MarchSettings for this job (None: the renderer's own)
+    levels: tuple[int, ...] | None = None  # downscale factors to render (None: the renderer's)
 
 
 @dataclass(frozen=True)
@@ -69,7 +70,8 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
                                         m.shell_voxel, m.shell_exact, index=ctx.index)
             field = model.for_pose(ctx)
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
-                                      levels=levels, cancelled=cancelled, shell=shell)
+                                      levels=job.levels or levels, cancelled=cancelled,
+                                      shell=shell)
     return render
 
 
@@ -80,10 +82,14 @@ class ProgressiveWorker:
     ``cancelled()`` argument returns True (progressive_render does, between levels and
     ray chunks). ``threads``: torch intra-op threads for the worker (None: unchanged).
     ``nice``: raise the thread's niceness by this much (Linux) so drawing comes first.
+    ``on_frame``: called (from the worker thread) after each delivered level, e.g. to wake
+    an idling UI so it shows the level at once (hello_imgui.request_refresh).
     """
 
-    def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0):
+    def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0,
+                 on_frame: Callable[[], None] | None = None):
         self._render = render
+        self._on_frame = on_frame
         self._threads = threads
         self._nice = nice
         self._lock = threading.Lock()
@@ -180,6 +186,8 @@ class ProgressiveWorker:
                         return
                     self._frame, self._fresh = frame, True
                     self.delivered.append((job.version, int(level)))
+                if self._on_frame is not None:
+                    self._on_frame()
         except Exception as exc:  # shown in the panel; the worker keeps serving
             where = traceback.extract_tb(exc.__traceback__)[-1]
             self.last_traceback = traceback.format_exc()
@@ -190,3 +198,5 @@ class ProgressiveWorker:
             with self._lock:
                 if not self._stale(job) and self._job is None:
                     self._busy = False
+            if self._on_frame is not None:
+                self._on_frame()  # the UI shows "done" (or the error) without waiting

@@ -34,7 +34,9 @@ def test_export_video_and_screenshot_buttons(tmp_path):
     assert report.is_file(), f"rc {proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
     rep = json.loads(report.read_text())
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
-    assert rep["sequence_frames"] == 5 and rep["fps"] == 30
+    # the timeline holds every frame of the file and plays at its rate; the video keeps
+    # every 4th frame (at most 30 per second of video) at the same speed
+    assert rep["sequence_frames"] == 17 and rep["fps"] == 120
     video = rep["video"]
     assert not video["error"] and video["frames"] == 5
     assert video["path"].endswith("exports/walk_2.mp4")  # walk.mp4 was taken

@@ -29,6 +29,7 @@ _API: dict[str, tuple[str, str]] = {
     "look_at": ("texvocab.capture.camera", "look_at"),
     "open_capture": ("texvocab.capture", "open"),
     "load_pose_file": ("texvocab.capture.synth", "load_pose_file"),
+    "read_pose_sequence": ("texvocab.body.pose_files", "read_pose_sequence"),
     # the method (steps 3-6)
     "Vocabulary": ("texvocab.method.vocab", "Vocabulary"),
     "VocabTexture": ("texvocab.method.vocab_texture", "VocabTexture"),

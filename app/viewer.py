@@ -1,0 +1,306 @@
+"""The viewer's shared state, one object the panels draw from: the loaded data, the
+edited pose (:class:`app.state.ViewerState`), the camera (orbit, or a capture camera as a
+preset; optionally following the root), scene options, GL resources, the neural render
+worker, screenshots and exports, and the File menu's dialogs. The window around it is
+:mod:`app.window`."""
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import moderngl
+import numpy as np
+from imgui_bundle import hello_imgui, imgui
+
+from app.arguments import NEURAL_NICE
+from app.camera import CaptureViewCamera, OrbitCamera
+from app.colors import heat_color
+from app.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
+from app.panel_neural import NeuralView, camera_key
+from app.panel_pose import load_sequence, tick_sequence
+from app.panel_vocab import ThumbnailCache
+from app.scene import SceneOptions, SceneRenderer
+from app.state import ViewerState, load_viewer_data
+from texvocab.errors import TexvocabError
+from texvocab.pipeline import march_settings
+
+
+class Viewer:
+    """Everything the panels share: loaded data, the edited pose, the orbit camera, scene
+    options, GL resources (made in :meth:`post_init`, inside the window's context) and
+    the neural render worker."""
+
+    def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1,
+                 neural_nice: int = NEURAL_NICE):
+        self.data, self.size = data, size
+        self.state = ViewerState(data)
+        self.camera = OrbitCamera()
+        self.follow = False  # the camera moves with the body's root
+        self._follow_ref = np.zeros(3)
+        self.view_size = (max(size[0] // 3, 16), max(size[1] - 60, 16))
+        self.framed = False  # the camera is framed once the 3D view's size is known
+        self.reset_camera()
+        self.options = SceneOptions()
+        self.neural_threads, self.neural_nice = neural_threads, neural_nice
+        self.neural_resolution: int | None = None  # long side of the neural render (default 256)
+        self.ctx = self.scene = self.thumbs = self.neural = None
+        self.preset = ""
+        self.sequence = None
+        self.sequence_path, self.sequence_error = "", ""
+        self.export = None  # the last app.export.Export job
+        self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
+        self.frame_ms: deque[float] = deque(maxlen=600)  # wall time between frames
+        self.frame_cpu_ms: deque[float] = deque(maxlen=600)  # of it, this thread's CPU time
+        self.idling_log: deque[tuple] = deque(maxlen=2000)  # (busy, playing, idling) per frame
+        self._last_frame = None
+        self._scene_key = None
+        self._scene_tex = None
+        self.drawn_keys: dict[str, list[tuple[int, int, float]]] = {}
+        self.neural_stale_shown = ""  # the stale banner the neural panel last drew
+        self.dialogs = FileDialogs()
+        self.reopen = None  # ViewerData chosen in File > Open: the window restarts on it
+        self.open_error = ""
+        self.smpl: str | None = None
+
+    # -- lifecycle (hello_imgui callbacks) ---------------------------------------------
+    def post_init(self) -> None:
+        self.ctx = moderngl.create_context()  # attaches to the window's current context
+        self.scene = SceneRenderer(self.ctx, self.data)
+        self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
+        if self.data.model is not None:
+            self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
+                                     self.neural_threads, self.neural_nice,
+                                     settings=self.data.settings,
+                                     on_frame=hello_imgui.request_refresh)
+            if self.neural_resolution:
+                self.neural.resolution = int(self.neural_resolution)
+
+    def before_exit(self) -> None:
+        if self.neural is not None:
+            self.neural.close()
+        if self.thumbs is not None:
+            self.thumbs.release()
+        if self.scene is not None:
+            self.scene.release()
+
+    def pre_new_frame(self) -> None:
+        now, cpu = time.perf_counter(), time.thread_time()
+        if self._last_frame is not None:
+            self.frame_ms.append((now - self._last_frame[0]) * 1000)
+            self.frame_cpu_ms.append((cpu - self._last_frame[1]) * 1000)
+        self._last_frame = (now, cpu)
+        self.poll_dialogs()
+        tick_sequence(self)
+        self.follow_root()
+        playing = self.sequence is not None and self.sequence.playing
+        busy = self.neural is not None and self.neural.busy
+        idling = hello_imgui.get_runner_params().fps_idling
+        idling.enable_idling = not playing  # a render in progress wakes the UI per level
+        self.idling_log.append((busy, playing, bool(idling.enable_idling)))
+
+    # -- cameras ------------------------------------------------------------------------
+    def root_position(self) -> np.ndarray:
+        """(3,) world position of the root joint (pelvis) in the current pose."""
+        return self.state.posed()[1][0].astype(np.float64)
+
+    def set_follow(self, on: bool) -> None:
+        """Follow mode: the camera moves with the root. Turning it on centres the root
+        horizontally in an orbit view (its height offset is kept); a capture view keeps
+        its framing and moves along."""
+        self.follow = bool(on)
+        root = self.root_position()
+        if isinstance(self.camera, CaptureViewCamera):
+            self._follow_ref = root - self.camera.shift
+        else:
+            self._follow_ref = np.array([0.0, self.camera.target[1] - root[1], 0.0])
+        self.follow_root()
+
+    def follow_root(self) -> None:
+        if not self.follow:
+            return
+        root = self.root_position()
+        if isinstance(self.camera, CaptureViewCamera):
+            self.camera.shift = root - self._follow_ref
+        else:
+            self.camera.target = root + self._follow_ref
+
+    def set_capture_view(self, index: int | None) -> None:
+        """Look through capture camera ``index`` (as ``texvocab shot --camera N``), or with
+        None go back to the orbit camera (from the capture camera's place)."""
+        cap = self.data.capture
+        if index is None:
+            if isinstance(self.camera, CaptureViewCamera):
+                self.camera = self.camera.to_orbit(self.body_centre())
+        else:
+            if cap is None or not 0 <= index < cap.num_views:
+                raise TexvocabError(f"camera {index}: no such capture view")
+            self.camera = CaptureViewCamera(cap.cameras[index], index)
+        if self.follow:
+            self.set_follow(True)
+
+    def orbit_camera(self) -> OrbitCamera:
+        """The orbit camera, leaving a capture view for the nearest orbit (a drag in the
+        3D view does this)."""
+        if isinstance(self.camera, CaptureViewCamera):
+            self.set_capture_view(None)
+        return self.camera
+
+    def body_centre(self) -> np.ndarray:
+        verts, _ = self.state.posed()
+        return (verts.min(0) + verts.max(0)).astype(np.float64) / 2.0
+
+    def neural_aspect(self) -> float:
+        """Width / height of the neural render: the capture camera's, or the 3D view's."""
+        if isinstance(self.camera, CaptureViewCamera):
+            return self.camera.aspect
+        return self.view_aspect()
+
+    def pose_label(self) -> str:
+        """What the current pose is, for the render's stale label: a sequence frame, or
+        the last edit (ViewerState.change)."""
+        seq = self.sequence
+        if seq is not None and seq.shown_version == self.state.version:
+            return f"frame {seq.frame}"
+        return self.state.change
+
+    # -- helpers for the panels ---------------------------------------------------------
+    def reset_camera(self, aspect: float | None = None) -> None:
+        """Frame the body of the current pose from the front, in a view of width / height
+        ``aspect`` (default: the 3D view's)."""
+        if isinstance(self.camera, CaptureViewCamera):
+            self.camera = OrbitCamera()
+        aspect = self.view_aspect() if aspect is None else aspect
+        verts, _ = self.state.posed()
+        lo, hi = verts.min(0), verts.max(0)
+        self.camera.target = (lo + hi) / 2.0
+        self.camera.yaw, self.camera.pitch = 0.0, 0.0
+        half = np.tan(np.radians(self.camera.fov) / 2)
+        need = max((hi[1] - lo[1]) / (2 * half), (hi[0] - lo[0]) / (2 * half * aspect))
+        self.camera.distance = 1.12 * float(need) + float(hi[2] - lo[2]) / 2
+        if self.follow:
+            self.set_follow(True)
+
+    def render_scene(self, size: tuple[int, int]):
+        """The 3D view's texture at ``size``, redrawn only when something changed."""
+        if self.scene is None:
+            return None
+        o = self.options
+        key = (self.state.version, camera_key(self.camera), tuple(size), o.textured,
+               o.part_colors, o.novelty, o.wireframe, o.skeleton)
+        if key != self._scene_key:
+            self._scene_tex = self.scene.render(self.state, self.camera, size, o)
+            self.ctx.screen.use()
+            self._scene_key = key
+        return self._scene_tex
+
+    def shot_size(self) -> tuple[int, int]:
+        """Size of a screenshot: a capture camera's own image size (what ``texvocab shot
+        --camera N`` writes), else the neural render's full level (the 3D view's size
+        without a model)."""
+        if isinstance(self.camera, CaptureViewCamera):
+            return self.camera.camera.width, self.camera.camera.height
+        if self.neural is not None:
+            return self.neural.size_for(self.view_aspect())
+        return self.view_size
+
+    def start_export(self, poses, trans, stem: str, fps: float, view3d: bool = False) -> None:
+        """Render ``poses`` (T, 24, 3) from the 3D view's camera at :meth:`shot_size` in
+        the background (app.export): an MP4, or for one pose neural.png (+ view3d.png, the
+        3D view at the same size, when ``view3d``; only that without a model)."""
+        from app.export import Export
+
+        w, h = self.shot_size()
+        camera = self.camera.to_texvocab_camera(w, h)
+        image = None
+        if view3d:
+            self.scene.render(self.state, self.camera, (w, h), self.options)
+            image = self.scene.read((w, h))
+            self.ctx.screen.use()
+        model, march = None, None
+        if self.neural is not None:
+            model = self.data.model
+            march = self.neural.march or march_settings(self.data.settings)
+        self.export = Export(model, march, camera, np.asarray(poses), np.asarray(trans), stem,
+                             fps, image)
+
+    def screenshot(self) -> None:
+        """The Screenshot button and F12: the 3D view and the neural render of the current
+        pose, written under exports/shot*/ (never replacing a file)."""
+        if self.export is None or not self.export.running:
+            self.start_export(self.state.pose[None], self.state.trans[None], "shot", 1.0,
+                              view3d=True)
+
+    def view_aspect(self) -> float:
+        w, h = self.view_size
+        return w / max(h, 1)
+
+    def view_caption(self) -> str:
+        if self.open_error:
+            return f"could not open {self.open_error}"
+        job = self.export
+        if job is not None and job.total == 1:
+            if job.running:
+                return "screenshot: rendering ..."
+            if job.error:
+                return f"screenshot failed: {job.error}"
+            if job.path is not None:
+                return f"screenshot: wrote {job.path}"
+        return "left drag: orbit   wheel: zoom   right drag: pan   F12: screenshot"
+
+    # -- File menu and its dialogs --------------------------------------------------------
+    def show_menus(self) -> None:
+        """The File menu: open a checkpoint or capture (the window restarts on it), open a
+        pose file, screenshot."""
+        missing = self.dialogs.missing()
+        if imgui.begin_menu("File"):
+            if imgui.menu_item("Open checkpoint...", "", False, not missing)[0]:
+                self.dialogs.ask("source", "Open a checkpoint", SOURCE_FILTERS)
+            if imgui.menu_item("Open pose file...", "", False, not missing)[0]:
+                self.dialogs.ask("poses", "Open a pose file", POSE_FILTERS, self.sequence_path)
+            if missing:
+                imgui.text_disabled(missing)
+            imgui.separator()
+            if imgui.menu_item("Screenshot", "F12", False, True)[0]:
+                self.screenshot()
+            imgui.end_menu()
+
+    def poll_dialogs(self) -> None:
+        """Act on a file dialog's answer (once per frame)."""
+        if self.reopen is not None:
+            hello_imgui.get_runner_params().app_shall_exit = True
+        answer = self.dialogs.poll()
+        if answer is None:
+            return
+        purpose, path = answer
+        if purpose == "poses":
+            load_sequence(self, path)
+        elif purpose == "source":
+            self.open_source(path)
+
+    def open_source(self, path: str) -> None:
+        """Load a checkpoint or capture in the background; when it loaded, the window
+        closes and reopens on it (the pose sequence stays); an error stays in the caption."""
+        import threading
+
+        def load() -> None:
+            try:
+                self.reopen = load_viewer_data(path, self.smpl)
+            except (TexvocabError, OSError, ValueError, RuntimeError) as exc:
+                self.open_error = f"{path}: {exc}"
+            hello_imgui.request_refresh()
+
+        self.open_error = ""
+        threading.Thread(target=load, name="texvocab-open", daemon=True).start()
+
+    def novelty_colours(self, n: int) -> np.ndarray:
+        return heat_color(np.linspace(0.0, 1.0, n))
+
+    def novelty_range(self) -> tuple[float, float]:
+        return 0.0, float(self.options.novelty_scale)
+
+    def neural_absent_reason(self) -> str:
+        if self.data.capture is None:
+            return ("No neural render: no checkpoint loaded (only the body). Start the viewer "
+                    "with a trained avatar: texvocab view RUN/checkpoint.pt")
+        return (f"No neural render: {self.data.source} is a capture, not a trained avatar. "
+                "Train one (texvocab train CAPTURE --out RUN) and open RUN/checkpoint.pt.")
