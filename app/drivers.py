@@ -190,8 +190,91 @@ def script_export(ctx, viewer, report: dict) -> None:
     report["screenshot"] = _wait_export(ctx, viewer)
 
 
-ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default, "export": script_export,
-                  "shot-left-arm": script_shot_left_arm, "shot-novelty": script_shot_novelty}
+def script_stale(ctx, viewer, report: dict) -> None:
+    """Full render, then a slider move: until the new pose's first level arrives, the
+    shown render must be dimmed and labelled with the pose it shows."""
+    ctx.yield_(6)
+    wait_neural(ctx, viewer, report)
+    viewer.stale_log.clear()
+    ctx.set_ref("Pose")
+    ctx.item_input_value(*LEFT_ARM_MOVE)
+    report["change"] = viewer.state.change
+    wait_neural(ctx, viewer, report)
+    report["stale_lines"] = list(viewer.stale_log)
+    report["stale_at_end"] = bool(viewer.neural.stale)
+
+
+def script_camera_view(ctx, viewer, report: dict) -> None:
+    """Capture view 1 from the camera combo, Screenshot, Follow while the sequence moves
+    the root, then a drag that leaves the preset for the nearest orbit camera."""
+    ctx.yield_(4)
+    ctx.set_ref("3D view")
+    ctx.combo_click("##camera/capture view 1")  # a "**" wildcard misses "##" labels
+    ctx.yield_(2)
+    report["camera_index"] = getattr(viewer.camera, "index", None)
+    ctx.item_click("**/Screenshot")
+    report["shot_export"] = _wait_export(ctx, viewer)
+    ctx.item_click("**/Follow")
+    root0, shift0 = viewer.root_position(), viewer.camera.shift.copy()
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_input_value("**/Sequence/##frame", len(viewer.sequence.poses) - 1)
+    ctx.yield_(2)
+    report["root_moved"] = (viewer.root_position() - root0).tolist()
+    report["camera_moved"] = (viewer.camera.shift - shift0).tolist()
+    ctx.set_ref("3D view")
+    ctx.mouse_move("**/##viewport")
+    ctx.mouse_drag_with_delta(imgui.ImVec2(40, 0))
+    report["after_drag"] = type(viewer.camera).__name__
+
+
+def script_playback(ctx, viewer, report: dict) -> None:
+    """The --poses sequence at start, Play for ~2.5 s at the file's rate, Pause; Reset all
+    then leaves the timeline (it says the pose was edited)."""
+    ctx.yield_(4)
+    seq = viewer.sequence
+    report["start_pose_matches"] = bool(np.allclose(viewer.state.pose, seq.poses[0]))
+    report["fps"], report["file_fps"] = seq.fps, seq.file_fps
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    wait_neural(ctx, viewer, report)
+    first_version = viewer.neural.version
+    ctx.item_click("**/Sequence/Play")
+    t0, f0 = time.perf_counter(), seq.frame
+    while time.perf_counter() - t0 < 2.5:
+        ctx.yield_()
+    report["played_frames"], report["played_seconds"] = seq.frame - f0, time.perf_counter() - t0
+    report["versions_shown_while_playing"] = len(
+        {v for v, _, _, _, _ in viewer.neural.history if v > first_version})
+    report["playback_level"] = viewer.neural.playback_level
+    ctx.item_click("**/Sequence/Pause")
+    ctx.set_ref("Pose")
+    ctx.item_click("**/Reset all")
+    ctx.yield_(2)
+    report["timeline_left_after_reset"] = seq.shown_version != viewer.state.version
+    wait_neural(ctx, viewer, report)
+
+
+def script_open_dialog(ctx, viewer, report: dict) -> None:
+    """Sequence > Open...: the native dialog's answer loads the pose file."""
+    ctx.yield_(4)
+    report["dialog_missing"] = viewer.dialogs.missing()
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_click("**/Sequence/Open...")
+    t0 = time.perf_counter()
+    while viewer.sequence is None and time.perf_counter() - t0 < 20:
+        ctx.yield_()
+    report["sequence_path"] = viewer.sequence_path
+    report["sequence_frames"] = None if viewer.sequence is None else len(viewer.sequence.poses)
+    report["sequence_error"] = viewer.sequence_error
+
+
+ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
+                  "export": script_export, "shot-left-arm": script_shot_left_arm,
+                  "shot-novelty": script_shot_novelty, "stale": script_stale,
+                  "camera-view": script_camera_view, "playback": script_playback,
+                  "open-dialog": script_open_dialog}
 
 
 class Driver:
@@ -245,102 +328,11 @@ class EngineDriver(Driver):
             hello_imgui.get_runner_params().app_shall_exit = True
 
 
-class BenchDriver(Driver):
-    """UI frame times while idle and while the neural render runs (bench/viewer_ui.py).
-
-    Idling is off throughout so every phase draws every frame. Phase "idle": the pose
-    and camera stay still. Phase "rendering": whenever the worker is done, the left
-    shoulder moves a little, so a new progressive render is always running; only
-    frames while the worker is busy count. Phase "dragging": the left shoulder moves
-    every frame, as under a dragged slider (new vocabulary query, blended texture,
-    posed mesh and 3D view each frame; each change restarts the neural render).
-    """
-
-    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256):
-        super().__init__("bench", viewer)
-        self.seconds, self.resolution = seconds, resolution
-        self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
-        self.times: dict[str, list[float]] = {"idle": [], "rendering": [], "dragging": []}
-        self.cpu: dict[str, list[float]] = {"idle": [], "rendering": [], "dragging": []}
-        self._last = None
-        self._nudge = 0
-        previous = rp.callbacks.pre_new_frame
-        rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
-
-    def _tick(self) -> None:
-        v = self.viewer
-        rp = hello_imgui.get_runner_params()
-        rp.fps_idling.enable_idling = False
-        now = time.perf_counter()
-        dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
-        self.count += 1
-        cpu = v.frame_cpu_ms[-1] if v.frame_cpu_ms else None
-        if self.phase == "warmup":
-            if self.count > 30:
-                self.phase, self.t0 = "idle", now
-            return
-        if self.phase == "idle":
-            if dt is not None and cpu is not None:
-                self.times["idle"].append(dt)
-                self.cpu["idle"].append(cpu)
-            if now - self.t0 > self.seconds:
-                if v.neural is None:
-                    self._done(rp, "no neural render: the source is not a checkpoint")
-                    return
-                v.neural.resolution = self.resolution
-                self.phase, self.t0 = "rendering", now
-            return
-        if self.phase == "dragging":
-            if dt is not None and cpu is not None:
-                self.times["dragging"].append(dt)
-                self.cpu["dragging"].append(cpu)
-            self._nudge += 1
-            z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
-            v.state.set_joint(16, (0.0, 0.0, z))
-            if now - self.t0 > self.seconds:
-                self._done(rp)
-            return
-        nv = v.neural
-        if nv.busy and dt is not None and cpu is not None:
-            self.times["rendering"].append(dt)
-            self.cpu["rendering"].append(cpu)
-        elif not nv.busy:
-            self._nudge += 1
-            v.state.set_joint(16, v.state.joint_deg(16) + (0, 0, 2.0 if self._nudge % 2 else -2.0))
-        if now - self.t0 > self.seconds:
-            self.phase, self.t0, self._nudge = "dragging", now, 0
-
-    def _done(self, rp, error: str | None = None) -> None:
-        v = self.viewer
-        self.report["ok"] = error is None
-        if error:
-            self.report["error"] = error
-        self.report["frame_ms"] = self.times
-        self.report["window"] = list(v.size)
-        if v.neural is not None:
-            w = v.neural.worker
-            self.report["levels_delivered"] = len(w.delivered)
-            self.report["levels"] = [[int(a), int(b), float(c), float(d), [int(x) for x in e]]
-                                     for a, b, c, d, e in v.neural.history]
-            self.report["resolution"] = self.resolution
-            f = v.neural.frame
-            self.report["last_level"] = None if f is None else {
-                "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2])}
-        self.report["frame_cpu_ms"] = self.cpu
-        self.report["summary"] = {k: _stats(t) for k, t in self.times.items() if t}
-        self.report["summary_cpu"] = {k: _stats(t) for k, t in self.cpu.items() if t}
-        rp.app_shall_exit = True
-
-
-def _stats(ms: list[float]) -> dict:
-    a = np.asarray(ms)
-    return {"frames": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)),
-            "max": float(a.max())}
-
-
 def make_driver(name: str, viewer, rp) -> Driver:
     """The driver for ``--script NAME``: an engine script or ``bench[:SECONDS[:RES]]``."""
     if name.startswith("bench"):
+        from app.bench_driver import BenchDriver
+
         parts = name.split(":")
         seconds = float(parts[1]) if len(parts) > 1 else 8.0
         res = int(parts[2]) if len(parts) > 2 else 256

@@ -29,14 +29,16 @@ class Export:
     """One background job: ``frames`` (poses (T, 24, 3), trans (T, 3)) rendered with
     ``model`` from ``camera`` (an OpenCV camera) and written as an MP4 at ``fps`` (T > 1)
     or, for one frame, as neural.png beside ``view3d`` (an (H, W, 3) uint8 3D view) in a
-    fresh folder (``model`` None: view3d alone). ``done`` / ``total`` count frames;
-    ``path`` is set when written, ``error`` on failure."""
+    fresh folder (``model`` None: view3d alone), over ``background`` as ``texvocab shot``.
+    ``done`` / ``total`` count frames; ``path`` is set when written, ``error`` on failure."""
 
     def __init__(self, model, march, camera, poses, trans, stem: str, fps: float = 30.0,
-                 view3d: np.ndarray | None = None, folder: Path = EXPORT_DIR):
+                 view3d: np.ndarray | None = None, folder: Path = EXPORT_DIR,
+                 background=(0.0, 0.0, 0.0)):
         self.model, self.march, self.camera = model, march, camera
         self.poses, self.trans, self.fps, self.view3d = poses, trans, float(fps), view3d
         self.stem, self.folder = stem, Path(folder)
+        self.background = tuple(background)
         self.done, self.total = 0, len(poses)
         self.path: Path | None = None
         self.error = ""
@@ -52,18 +54,20 @@ class Export:
 
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
-            worker = None if self.model is None else FrameWorker(self.model, self.march, 1.0,
-                                                                 threads=1)
             if self.total == 1:
                 out = fresh_path(self.folder, self.stem, "")
                 out.mkdir()
-                if worker is not None:
-                    save_png(out / "neural.png",
-                             worker.render(0, self.poses[0], self.trans[0], self.camera)[1])
+                if self.model is not None:  # as texvocab shot renders it
+                    from app.shot import render_neural
+
+                    save_png(out / "neural.png", render_neural(
+                        self.model, self.march, self.poses[0], self.trans[0], self.camera,
+                        self.background))
                 if self.view3d is not None:
                     save_png(out / "view3d.png", self.view3d)
                 self.done, self.path = 1, out
                 return
+            worker = FrameWorker(self.model, self.march, 1.0, threads=1)
             out = fresh_path(self.folder, self.stem, ".mp4")
             with tempfile.TemporaryDirectory(dir=self.folder) as tmp:
                 paths = []

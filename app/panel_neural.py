@@ -184,8 +184,7 @@ def draw_neural_panel(viewer) -> None:
     if imgui.is_item_hovered():
         imgui.set_tooltip("speed/accuracy preset of the render knobs (bench/tradeoff.py)")
     playing = viewer.sequence is not None and viewer.sequence.playing
-    nv.update(viewer.state, viewer.camera, viewer.neural_aspect(), force, viewer.pose_label(),
-              playing)
+    viewer.submit_neural(force)  # also done before the panels draw (Viewer.pre_new_frame)
     imgui.text(status_line(nv.frame, nv.busy, nv.playback_level if playing else None))
     if playing and nv.frame is not None:
         imgui.text_disabled(f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
@@ -212,3 +211,4 @@ def draw_neural_panel(viewer) -> None:
         draw.add_text(imgui.ImVec2(pos.x + 6, pos.y + 4),
                       imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), line)
     viewer.neural_stale_shown = line
+    viewer.stale_log.append(line)

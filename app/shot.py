@@ -91,12 +91,12 @@ class Shot:
     neural_seconds: float = 0.0
 
 
-def render_neural(data: ViewerData, state: ViewerState, camera, background) -> np.ndarray:
-    """(H, W, 3) uint8 render of the trained field at the state's pose, ``camera`` (an
-    OpenCV Camera), with the checkpoint's march settings."""
-    model, march = data.model, march_settings(data.settings)
+def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
+    """(H, W, 3) uint8 render of the trained field ``model`` at ``pose`` (24, 3) and
+    ``trans`` (3,), seen by ``camera`` (an OpenCV Camera), with ``march`` settings, over
+    ``background`` (the 3D view's): what ``shot`` and the viewer's Screenshot write."""
     with torch.no_grad():
-        ctx = model.pose_feature.context(state.pose, state.trans)
+        ctx = model.pose_feature.context(pose, trans)
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
                                     march.shell_voxel, march.shell_exact, index=ctx.index)
         out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
@@ -124,7 +124,8 @@ def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int
     shot = Shot(view, None, time.perf_counter() - t0)
     if neural and data.model is not None:
         t0 = time.perf_counter()
-        shot.neural = render_neural(data, state, as_camera(camera, *size), options.background)
+        shot.neural = render_neural(data.model, march_settings(data.settings), state.pose,
+                                    state.trans, as_camera(camera, *size), options.background)
         shot.neural_seconds = time.perf_counter() - t0
     return shot
 
@@ -167,7 +168,7 @@ def cmd_shot(args: argparse.Namespace) -> int:
     shot = take_shot(data, state, camera, size, options, neural=args.neural is not False)
     paths = write_shot(args.out, shot)
     print(f"3D view {size[0]}x{size[1]} in {shot.gl_seconds:.2f} s"
-          + (f", neural render in {shot.neural_seconds:.1f} s" if shot.neural is not None else ""))
+          + (f", neural render in {shot.neural_seconds:.2f} s" if shot.neural is not None else ""))
     for p in paths:
         print(f"  {p.resolve()}")
     return 0

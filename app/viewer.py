@@ -57,6 +57,7 @@ class Viewer:
         self._scene_tex = None
         self.drawn_keys: dict[str, list[tuple[int, int, float]]] = {}
         self.neural_stale_shown = ""  # the stale banner the neural panel last drew
+        self.stale_log: deque[str] = deque(maxlen=2000)  # that banner, per frame drawn
         self.dialogs = FileDialogs()
         self.reopen = None  # ViewerData chosen in File > Open: the window restarts on it
         self.open_error = ""
@@ -92,11 +93,22 @@ class Viewer:
         self.poll_dialogs()
         tick_sequence(self)
         self.follow_root()
+        self.submit_neural()
         playing = self.sequence is not None and self.sequence.playing
         busy = self.neural is not None and self.neural.busy
         idling = hello_imgui.get_runner_params().fps_idling
         idling.enable_idling = not playing  # a render in progress wakes the UI per level
         self.idling_log.append((busy, playing, bool(idling.enable_idling)))
+
+    def submit_neural(self, force: bool = False) -> None:
+        """Hand a changed pose or camera to the neural render worker (and show a finished
+        level). Called before the panels draw, so the render starts before this frame's
+        UI work (the vocabulary texture, the 3D view) rather than after it."""
+        if self.neural is None:
+            return
+        playing = self.sequence is not None and self.sequence.playing
+        self.neural.update(self.state, self.camera, self.neural_aspect(), force,
+                           self.pose_label(), playing)
 
     # -- cameras ------------------------------------------------------------------------
     def root_position(self) -> np.ndarray:
@@ -221,7 +233,7 @@ class Viewer:
             model = self.data.model
             march = self.neural.march or march_settings(self.data.settings)
         self.export = Export(model, march, camera, np.asarray(poses), np.asarray(trans), stem,
-                             fps, image)
+                             fps, image, background=self.options.background)
 
     def screenshot(self) -> None:
         """The Screenshot button and F12: the 3D view and the neural render of the current

@@ -58,6 +58,23 @@ def test_set_joint_clamps_and_versions(body):
         state.apply_preset("moonwalk")
 
 
+def test_values_outside_the_limits_are_flagged_and_kept_until_their_slider_moves(body):
+    state = ViewerState(make_data(body))
+    pose = np.zeros((24, 3))
+    pose[LEFT_KNEE] = np.radians([200.0, 30.0, 0.0])  # from a file: x and y outside
+    state.set_pose(pose, change="frame 3")
+    assert state.out_of_limits(LEFT_KNEE).tolist() == [True, True, False]
+    assert state.change == "frame 3"
+    # moving z alone keeps x = 200 and y = 30 (no snap); z is clamped to its limit
+    assert state.set_joint(LEFT_KNEE, (200.0, 30.0, -40.0))
+    np.testing.assert_allclose(state.joint_deg(LEFT_KNEE), [200.0, 30.0, -5.0])
+    assert state.change == "left knee z -5°"
+    # moving x clamps x only
+    state.set_joint(LEFT_KNEE, (100.0, 30.0, -5.0))
+    np.testing.assert_allclose(state.joint_deg(LEFT_KNEE), [100.0, 30.0, -5.0])
+    assert state.out_of_limits(LEFT_KNEE).tolist() == [False, True, False]
+
+
 def test_posed_is_cached_per_version(body):
     state = ViewerState(make_data(body))
     v0, j0 = state.posed()

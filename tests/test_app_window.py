@@ -4,21 +4,15 @@ user would; the vocabulary panel's keys and weights must follow, the screenshot 
 the body, and the app (and its neural render worker) must exit cleanly."""
 from __future__ import annotations
 
-import json
 import os
-import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 from tiny_runs import tiny_run
-
-ROOT = Path(__file__).resolve().parent.parent
-PYTHON = sys.executable
-XVFB = shutil.which("xvfb-run")
+from window_runs import PYTHON, ROOT, run_window
 
 
 @pytest.fixture(scope="module")
@@ -29,17 +23,6 @@ def tiny_checkpoint(tmp_path_factory):
                     dict(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4), texture_size=64,
                     num_keys=3, k=2, rays_per_batch=128, coarse_samples=8, fine_samples=4,
                     checkpoint_every=10, eval_views=(1,))
-
-
-def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float = 150):
-    assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
-    report, shot = tmp_path / f"{script}.json", tmp_path / f"{script}.png"
-    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", PYTHON, "-m", "app.window", str(source),
-           "--size", "1280x800", "--script", script, "--report", str(report),
-           "--screenshot", str(shot), "--neural-resolution", "48", *extra]
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
-    assert report.is_file(), f"no report; rc {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    return proc, json.loads(report.read_text()), shot
 
 
 def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):

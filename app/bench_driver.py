@@ -1,0 +1,159 @@
+"""The per-frame driver of bench/viewer_ui.py (``python -m app.window CKPT --script
+bench:SECONDS:RES``). No ImGui Test Engine, so nothing but the viewer draws.
+
+Phases, in order:
+
+- ``idle``: nothing changes, the viewer idles as it does for a user. Measured: the CPU
+  the process spends outside the neural render thread (UI, GL under llvmpipe, GLFW) per
+  second of wall time, i.e. the share of one core the idle UI takes.
+- ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all)
+  with the camera of ``texvocab shot --camera 0,0,3.2``, and the progressive render runs
+  to full resolution. Measured per render: when each level reached the screen after the
+  pose change, and the UI's CPU share meanwhile.
+- ``dragging``: the left shoulder moves every frame as under a dragged slider, with the
+  window at full speed (input keeps it awake): UI frame times and CPU per frame.
+"""
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+from imgui_bundle import hello_imgui
+
+from app.camera import DEFAULT_TARGET, OrbitCamera
+from app.drivers import Driver
+
+RENDER_POSES = ("walk", "squat")
+RENDERS = 4
+SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default --camera
+
+
+def thread_cpu_seconds(native_id: int | None) -> float:
+    """CPU seconds (user + system) of one thread of this process (Linux /proc)."""
+    if native_id is None:
+        return 0.0
+    try:
+        with open(f"/proc/self/task/{native_id}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class BenchDriver(Driver):
+    """See the module docstring; writes the measurements into the report."""
+
+    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256):
+        super().__init__("bench", viewer)
+        self.seconds, self.resolution = seconds, resolution
+        self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
+        self.drag_ms: list[float] = []
+        self.drag_cpu_ms: list[float] = []
+        self.renders: list[dict] = []
+        self._mark = None  # (wall, process CPU, worker CPU) at a phase's start
+        self._last = None
+        self._nudge = 0
+        self._render = None
+        previous = rp.callbacks.pre_new_frame
+        rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
+
+    # -- measurement helpers ---------------------------------------------------------------
+    def _worker_id(self):
+        nv = self.viewer.neural
+        return None if nv is None else nv.worker.native_id
+
+    def _clock(self) -> tuple[float, float, float]:
+        return (time.perf_counter(), time.process_time(), thread_cpu_seconds(self._worker_id()))
+
+    def _ui_share(self, mark) -> dict:
+        """CPU outside the render thread per wall second since ``mark`` (cores)."""
+        now = self._clock()
+        wall = now[0] - mark[0]
+        ui = (now[1] - mark[1]) - (now[2] - mark[2])
+        return {"seconds": wall, "ui_cpu_share": ui / max(wall, 1e-9),
+                "render_cpu_share": (now[2] - mark[2]) / max(wall, 1e-9)}
+
+    # -- the phases -------------------------------------------------------------------------
+    def _tick(self) -> None:
+        v = self.viewer
+        rp = hello_imgui.get_runner_params()
+        now = time.perf_counter()
+        self.count += 1
+        if self.phase == "warmup":
+            rp.fps_idling.enable_idling = False
+            if self.count > 30 and (v.neural is None or not v.neural.busy):
+                self.phase, self._mark = "idle", self._clock()
+                self._frames_at_mark = self.count
+            return
+        if self.phase == "idle":
+            if now - self._mark[0] >= self.seconds:
+                self.report["idle"] = self._ui_share(self._mark)
+                self.report["idle"]["frames"] = self.count - self._frames_at_mark
+                if v.neural is None:
+                    self._done(rp, "no neural render: the source is not a checkpoint")
+                    return
+                v.neural.resolution = self.resolution
+                self.phase = "render"
+            return
+        if self.phase == "render":
+            self._render_tick(now)
+            return
+        rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
+        dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
+        if dt is not None and v.frame_cpu_ms:
+            self.drag_ms.append(dt)
+            self.drag_cpu_ms.append(v.frame_cpu_ms[-1])
+        self._nudge += 1
+        z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
+        v.state.set_joint(16, (0.0, 0.0, z))
+        if now - self.t0 > self.seconds:
+            self._done(rp)
+
+    def _start_render(self, now: float) -> None:
+        v = self.viewer
+        pose = RENDER_POSES[len(self.renders) % len(RENDER_POSES)]
+        v.state.reset_all()
+        v.state.apply_preset(pose)
+        yaw, pitch, dist = SHOT_CAMERA
+        v.camera = OrbitCamera(target=np.asarray(DEFAULT_TARGET) + v.state.trans, yaw=yaw,
+                               pitch=pitch, distance=dist)
+        self._render = {"pose": pose, "start": now, "levels": [], "seen": len(v.neural.history)}
+        self._mark = self._clock()
+
+    def _render_tick(self, now: float) -> None:
+        nv = self.viewer.neural
+        r = self._render
+        if r is None:
+            self._start_render(now)
+            return
+        history = list(nv.history)
+        for version, level, ms, elapsed, shape in history[r["seen"]:]:
+            if version == nv.version:
+                r["levels"].append({"level": level, "on_screen_s": now - r["start"],
+                                    "worker_elapsed_s": elapsed, "level_ms": ms,
+                                    "size": [int(x) for x in shape]})
+        r["seen"] = len(history)
+        done = r["levels"] and r["levels"][-1]["level"] == 1 and not nv.busy
+        if done or now - r["start"] > 600:
+            r.update(self._ui_share(self._mark))
+            r.pop("seen")
+            r.pop("start")
+            self.renders.append(r)
+            self._render = None
+            if len(self.renders) >= RENDERS:
+                self.phase, self.t0 = "dragging", now
+
+    def _done(self, rp, error: str | None = None) -> None:
+        v = self.viewer
+        self.report["ok"] = error is None
+        if error:
+            self.report["error"] = error
+        self.report["renders"] = self.renders
+        self.report["dragging"] = {"frame_ms": self.drag_ms, "cpu_ms": self.drag_cpu_ms}
+        self.report["window"] = list(v.size)
+        if v.neural is not None:
+            self.report["resolution"] = self.resolution
+            self.report["neural_threads"] = v.neural_threads
+            self.report["errors"] = list(v.neural.worker.errors)
+        rp.app_shall_exit = True

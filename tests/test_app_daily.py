@@ -1,0 +1,135 @@
+"""The viewer as a daily tool, in a real window (Xvfb, ImGui Test Engine): a stale render
+says so, capture cameras as presets give what ``texvocab shot --camera N`` gives,
+sequences start from ``--poses`` and play at their file's rate, the native file dialog
+loads a pose file, follow keeps the camera on the root, and the weights panel's numbers."""
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+from tiny_runs import smallest_run
+from window_runs import PYTHON, run_window
+
+TEXVOCAB = str(Path(PYTHON).parent / "texvocab")
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    return smallest_run(tmp_path_factory.mktemp("daily"))
+
+
+def walk_file(path: Path, frames: int, fps: float | None) -> Path:
+    """An SMPL pose file: the left elbow bends and the root moves 0.5 m along +x."""
+    poses = np.zeros((frames, 24, 3), np.float32)
+    poses[:, 18, 1] = np.radians(np.linspace(-10, -100, frames))
+    trans = np.zeros((frames, 3), np.float32)
+    trans[:, 0] = np.linspace(0.0, 0.5, frames)
+    extra = {} if fps is None else {"mocap_framerate": np.float32(fps)}
+    np.savez(path, poses=poses, trans=trans, **extra)
+    return path
+
+
+def ok(proc, rep):
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"),
+                                                proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr
+
+
+def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(checkpoint,
+                                                                          tmp_path):
+    proc, rep, _ = run_window(checkpoint, "stale", tmp_path)
+    ok(proc, rep)
+    assert rep["change"] == "left shoulder z -70°"
+    lines = rep["stale_lines"]
+    expected = "stale: shows rest pose; rendering left shoulder z -70°"
+    assert expected in lines, lines[:20]
+    # the banner came first, then the first new level replaced the image (no banner after)
+    first = lines.index(expected)
+    assert "" in lines[first:] and lines[-1] == "" and rep["stale_at_end"] is False
+    assert rep["neural"]["level"] == 1 and rep["neural"]["errors"] == []
+
+
+def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
+    poses = walk_file(tmp_path / "walk.npz", 5, None)
+    work = tmp_path / "work"
+    work.mkdir()
+    proc, rep, _ = run_window(checkpoint, "camera-view", tmp_path, "--poses", str(poses),
+                              cwd=work)
+    ok(proc, rep)
+    assert rep["camera_index"] == 1
+    shot = rep["shot_export"]
+    assert not shot["error"] and shot["path"].endswith("exports/shot")
+    proc_shot = subprocess.run(
+        [TEXVOCAB, "shot", str(checkpoint), "--pose", f"{poses}:0", "--camera", "1", "--out",
+         str(tmp_path / "cli")], capture_output=True, text=True, timeout=300)
+    assert proc_shot.returncode == 0, proc_shot.stderr
+    for name in ("view3d.png", "neural.png"):
+        window = np.asarray(Image.open(work / "exports" / "shot" / name).convert("RGB"), np.int16)
+        cli = np.asarray(Image.open(tmp_path / "cli" / name).convert("RGB"), np.int16)
+        assert window.shape == cli.shape == (64, 64, 3), name  # the camera's own size
+        diff = np.abs(window - cli).max(-1)
+        # same camera, pose and renderer: equal up to one 8-bit level (GL: the window's
+        # GLX llvmpipe against shot's OSMesa llvmpipe; neural: thread count)
+        assert diff.max() <= 1, (name, int(diff.max()), float((diff > 0).mean()))
+        assert cli.std() > 5, name
+    # follow: the camera moved with the root (0.5 m along +x over the sequence)
+    np.testing.assert_allclose(rep["camera_moved"], rep["root_moved"], atol=1e-6)
+    assert rep["root_moved"][0] > 0.4
+    # a drag leaves the preset for the nearest orbit camera
+    assert rep["after_drag"] == "OrbitCamera"
+
+
+def test_texvocab_view_starts_on_poses_and_plays_at_the_files_rate(checkpoint, tmp_path):
+    poses = walk_file(tmp_path / "walk.npz", 200, 20.0)
+    proc, rep, shot = run_window(checkpoint, "playback", tmp_path, "--poses", str(poses),
+                                 command=(TEXVOCAB, "view"))
+    ok(proc, rep)
+    assert rep["start_pose_matches"] is True  # --poses: frame 0 shown at start
+    assert rep["fps"] == 20.0 and rep["file_fps"] == 20.0
+    rate = rep["played_frames"] / rep["played_seconds"]
+    assert 16.0 < rate < 22.0, rep
+    # the neural render followed the timeline (several frames shown while playing)
+    assert rep["versions_shown_while_playing"] >= 2, rep
+    assert rep["timeline_left_after_reset"] is True
+    assert rep["idling_while_playing"] == [False]
+    assert np.asarray(Image.open(shot)).std() > 10
+
+
+def test_open_dialog_loads_the_chosen_pose_file(checkpoint, tmp_path):
+    poses = walk_file(tmp_path / "walk.npz", 7, 30.0)
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    log = tmp_path / "zenity.log"
+    # the desktop's dialog program, played by a script that picks walk.npz
+    fake = bin_dir / "zenity"
+    fake.write_text(f'#!/bin/sh\necho "$@" >> {log}\n'
+                    f'case "$*" in *--version*) echo 3.44.0 ;; *) echo {poses} ;; esac\n')
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
+    proc, rep, _ = run_window(checkpoint, "open-dialog", tmp_path, env=env)
+    ok(proc, rep)
+    assert rep["dialog_missing"] == ""
+    assert rep["sequence_path"] == str(poses) and rep["sequence_frames"] == 7
+    assert "--file-selection" in log.read_text()
+
+
+def test_no_dialog_program_is_said_not_hidden(monkeypatch):
+    from app.dialogs import FileDialogs
+
+    monkeypatch.setenv("PATH", "/nonexistent")
+    assert "zenity" in FileDialogs.missing()
+
+
+def test_weights_panel_shows_distance_raw_weight_and_share():
+    from app.panel_vocab import key_caption, raw_weight
+
+    assert raw_weight("paper", 3, 0.25) == pytest.approx(2.75)
+    assert raw_weight("inverse", 3, 0.25) == pytest.approx(4.0)
+    assert raw_weight("inverse", 3, 0.0) == float("inf")
+    assert key_caption("paper", 3, 0.0123, 0.334, 3) == "d 0.0123  w 2.988  33.4% (+0.1)"
+    assert key_caption("inverse", 3, 0.0, 1.0, 3).startswith("d 0.0000  w exact  100.0%")
