@@ -270,11 +270,47 @@ def script_open_dialog(ctx, viewer, report: dict) -> None:
     report["sequence_error"] = viewer.sequence_error
 
 
+def script_look_stale(ctx, viewer, report: dict) -> None:
+    """For a screenshot: a full render, then a new pose; exits while the render is stale."""
+    ctx.yield_(4)
+    wait_neural(ctx, viewer, report)
+    ctx.set_ref("Pose")
+    viewer.neural.resolution = 512  # slower levels: the stale image stays a while
+    ctx.item_input_value(*LEFT_ARM_MOVE)
+    report["stale_line"] = viewer.neural_stale_shown
+
+
+def script_look_views(ctx, viewer, report: dict) -> None:
+    """For a screenshot: capture view 1, follow on, the --poses sequence at its last frame
+    (joints outside their limits show red), the render finished."""
+    ctx.yield_(4)
+    ctx.set_ref("3D view")
+    ctx.combo_click("##camera/capture view 1")
+    ctx.item_click("**/Follow")
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_input_value("**/Sequence/##frame", len(viewer.sequence.poses) - 1)
+    ctx.scroll_to_item("**/left_elbow/##y")
+    wait_neural(ctx, viewer, report)
+
+
+def script_look_playback(ctx, viewer, report: dict) -> None:
+    """For a screenshot: the --poses sequence playing for 4 s."""
+    ctx.yield_(4)
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_click("**/Sequence/Play")
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < 4:
+        ctx.yield_()
+
+
 ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
                   "export": script_export, "shot-left-arm": script_shot_left_arm,
                   "shot-novelty": script_shot_novelty, "stale": script_stale,
                   "camera-view": script_camera_view, "playback": script_playback,
-                  "open-dialog": script_open_dialog}
+                  "open-dialog": script_open_dialog, "look-stale": script_look_stale,
+                  "look-views": script_look_views, "look-playback": script_look_playback}
 
 
 class Driver:

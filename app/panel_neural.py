@@ -43,6 +43,7 @@ class NeuralView:
         self.resolution = 256  # long side of the full-resolution level, pixels
         self.version = 0
         self.playback_level = 8
+        self._playback_job = False  # the last submitted job is a playback render
         self._key = None
         self.frame: RenderFrame | None = None
         self.texture = None
@@ -70,8 +71,12 @@ class NeuralView:
         w, h = self.size_for(aspect)
         key = (state.version, camera_key(camera), w, h, self.preset, playing)
         changed = (self.live and key != self._key) or force
-        if changed and not (playing and self.worker.busy and not force):
+        # while playing, a playback render in progress is let finish (a full render from
+        # before Play is cancelled at once)
+        wait = playing and self.worker.busy and self._playback_job and not force
+        if changed and not wait:
             self._key = key
+            self._playback_job = playing
             self.version += 1
             self.labels[self.version] = label or f"edit {state.version}"
             for old in [v for v in self.labels if v < self.version - 64]:
@@ -144,7 +149,8 @@ def camera_key(camera) -> tuple:
 
 
 
-def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | None = None) -> str:
+def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | None = None,
+                stale: bool = False) -> str:
     """What the shown image is and how long it took; during playback, the level the render
     follows the timeline at."""
     if frame is None:
@@ -155,6 +161,8 @@ def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | Non
         nxt = "full" if playback_level == 1 else f"1/{playback_level}"
         return (f"playback: {level} ({w}x{h}) in {frame.elapsed:.2f} s per frame; following "
                 f"the timeline at {nxt} resolution")
+    if stale:
+        return f"shown: {level} ({w}x{h}) of the previous view; rendering the new one..."
     total = f"{frame.elapsed:.1f} s so far, refining..." if busy else f"{frame.elapsed:.1f} s in all"
     return f"{level} ({w}x{h}): {frame.seconds * 1000:.0f} ms; {total}"
 
@@ -185,7 +193,8 @@ def draw_neural_panel(viewer) -> None:
         imgui.set_tooltip("speed/accuracy preset of the render knobs (bench/tradeoff.py)")
     playing = viewer.sequence is not None and viewer.sequence.playing
     viewer.submit_neural(force)  # also done before the panels draw (Viewer.pre_new_frame)
-    imgui.text(status_line(nv.frame, nv.busy, nv.playback_level if playing else None))
+    imgui.text(status_line(nv.frame, nv.busy, nv.playback_level if playing else None,
+                           nv.stale))
     if playing and nv.frame is not None:
         imgui.text_disabled(f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
                             f"the timeline is at {viewer.pose_label()}")
