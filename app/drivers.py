@@ -214,6 +214,9 @@ def script_camera_view(ctx, viewer, report: dict) -> None:
     report["camera_index"] = getattr(viewer.camera, "index", None)
     ctx.item_click("**/Screenshot")
     report["shot_export"] = _wait_export(ctx, viewer)
+    ctx.mouse_move("**/##viewport")
+    ctx.key_press(imgui.Key.f12)
+    report["f12_export"] = _wait_export(ctx, viewer)
     ctx.item_click("**/Follow")
     root0, shift0 = viewer.root_position(), viewer.camera.shift.copy()
     ctx.set_ref("Pose")
@@ -270,6 +273,20 @@ def script_open_dialog(ctx, viewer, report: dict) -> None:
     report["sequence_error"] = viewer.sequence_error
 
 
+def script_open_checkpoint(ctx, viewer, report: dict) -> None:
+    """File > Open checkpoint...: the dialog's answer is loaded in the background, then the
+    window closes to reopen on it (run_viewer's loop; a scripted run stops there)."""
+    ctx.yield_(4)
+    ctx.set_ref("##MainMenuBar")  # the main viewport's menu bar (hello_imgui)
+    ctx.menu_click("File/Open checkpoint...")
+    t0 = time.perf_counter()
+    while viewer.reopen is None and not viewer.open_error and time.perf_counter() - t0 < 60:
+        ctx.yield_()
+    report["open_error"] = viewer.open_error
+    report["reopen_source"] = None if viewer.reopen is None else viewer.reopen.source
+    report["exit_requested"] = bool(hello_imgui.get_runner_params().app_shall_exit)
+
+
 def script_look_stale(ctx, viewer, report: dict) -> None:
     """For a screenshot: a full render, then a new pose; exits while the render is stale."""
     ctx.yield_(4)
@@ -309,7 +326,8 @@ ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
                   "export": script_export, "shot-left-arm": script_shot_left_arm,
                   "shot-novelty": script_shot_novelty, "stale": script_stale,
                   "camera-view": script_camera_view, "playback": script_playback,
-                  "open-dialog": script_open_dialog, "look-stale": script_look_stale,
+                  "open-dialog": script_open_dialog, "open-checkpoint": script_open_checkpoint,
+                  "look-stale": script_look_stale,
                   "look-views": script_look_views, "look-playback": script_look_playback}
 
 

@@ -64,6 +64,8 @@ def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
     assert rep["camera_index"] == 1
     shot = rep["shot_export"]
     assert not shot["error"] and shot["path"].endswith("exports/shot")
+    assert rep["f12_export"]["path"].endswith("exports/shot_2")  # F12: the same, no overwrite
+    assert (work / "exports" / "shot_2" / "neural.png").is_file()
     proc_shot = subprocess.run(
         [TEXVOCAB, "shot", str(checkpoint), "--pose", f"{poses}:0", "--camera", "1", "--out",
          str(tmp_path / "cli")], capture_output=True, text=True, timeout=300)
@@ -118,6 +120,20 @@ def test_open_dialog_loads_the_chosen_pose_file(checkpoint, tmp_path):
     assert "--file-selection" in log.read_text()
 
 
+def test_file_open_checkpoint_loads_it_and_reopens_the_window(checkpoint, tmp_path):
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fake = bin_dir / "zenity"
+    fake.write_text(f'#!/bin/sh\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {checkpoint} ;; esac\n')
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
+    proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, env=env)  # the body alone
+    ok(proc, rep)
+    assert rep["open_error"] == ""
+    assert rep["reopen_source"].startswith(f"checkpoint {checkpoint}")
+    assert rep["exit_requested"] is True
+
+
 def test_no_dialog_program_is_said_not_hidden(monkeypatch):
     from app.dialogs import FileDialogs
 
@@ -133,3 +149,24 @@ def test_weights_panel_shows_distance_raw_weight_and_share():
     assert raw_weight("inverse", 3, 0.0) == float("inf")
     assert key_caption("paper", 3, 0.0123, 0.334, 3) == "d 0.0123  w 2.988  33.4% (+0.1)"
     assert key_caption("inverse", 3, 0.0, 1.0, 3).startswith("d 0.0000  w exact  100.0%")
+
+
+def test_follow_centres_the_root_in_an_orbit_view_and_keeps_it_there():
+    from app.state import load_viewer_data
+    from app.viewer import Viewer
+
+    v = Viewer(load_viewer_data(None))  # no window needed: follow is camera arithmetic
+    v.camera.target = np.array([0.3, -0.2, 0.1])
+    root = v.root_position()
+    v.set_follow(True)
+    # centred horizontally on the root, the view's height offset kept
+    np.testing.assert_allclose(v.camera.target, [root[0], -0.2, root[2]])
+    v.state.set_trans([0.5, 0.1, -0.4])
+    v.follow_root()
+    moved = v.root_position()
+    np.testing.assert_allclose(v.camera.target, [moved[0], -0.2 + moved[1] - root[1], moved[2]],
+                               atol=1e-9)
+    v.set_follow(False)
+    v.state.set_trans([0.0, 0.0, 0.0])
+    v.follow_root()
+    np.testing.assert_allclose(v.camera.target[0], moved[0])  # off: the camera stays

@@ -19,9 +19,9 @@ def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float 
     1280x800 window with a 48 px neural render (``extra``: more arguments)."""
     assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
     report, shot = tmp_path / f"{script}.json", tmp_path / f"{script}.png"
-    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", *command, str(source),
-           "--size", "1280x800", "--script", script, "--report", str(report),
-           "--screenshot", str(shot), "--neural-resolution", "48", *extra]
+    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", *command,
+           *([] if source is None else [str(source)]), "--size", "1280x800", "--script", script,
+           "--report", str(report), "--screenshot", str(shot), "--neural-resolution", "48", *extra]
     proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
     assert report.is_file(), (f"no report; rc {proc.returncode}\n{proc.stdout[-3000:]}\n"
                               f"{proc.stderr[-3000:]}")
