@@ -137,3 +137,30 @@ def test_every_guided_knob_changes_the_render(body, knob, value):  # noqa: F811
     assert (other.stats.field_evals, other.stats.paths) != (base.stats.field_evals,
                                                             base.stats.paths)
     assert psnr(other.rgb, base.rgb) > 35  # a trade, not a different image
+
+
+def test_guided_progressive_levels_render_each_pixel_once(body):  # noqa: F811
+    """Levels are the full image's pixel grids [::L, ::L]; together they cost one full
+    render (same field evaluations) and the last level is that render."""
+    from texvocab.render import progressive_render
+    from texvocab.render.guided import GuidedImage
+
+    v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
+    with torch.no_grad():
+        full = render_image(field, cam, v, f, GUIDED, shell=body["shell"])
+        parts = GuidedImage(field, cam, v, f, GUIDED, shell=body["shell"])
+        coarse = torch.zeros(cam.height, cam.width, dtype=torch.bool)
+        coarse[::4, ::4] = True
+        parts.render(coarse)
+        after_coarse = parts.evals
+        parts.render(~coarse)
+    assert 0 < after_coarse < parts.evals
+    assert parts.evals == full.stats.field_evals  # no ray twice
+    assert torch.allclose(parts.result().rgb, full.rgb, atol=1e-5)
+    levels = list(progressive_render(field, cam, v, f, GUIDED, shell=body["shell"]))
+    assert [lv for lv, _, _ in levels] == [8, 4, 2, 1]
+    last = levels[-1][1]
+    assert torch.allclose(last, full.rgb, atol=1e-5)
+    for lv, img, _ in levels:
+        assert img.shape == (-(-cam.height // lv), -(-cam.width // lv), 3)
+        assert torch.allclose(img, last[::lv, ::lv], atol=1e-5)

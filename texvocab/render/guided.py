@@ -134,46 +134,60 @@ def render_image_guided(field, camera, vertices, faces, settings: MarchSettings 
     rays are marched by the shell marcher with the same settings; ``shell`` (the posed
     mesh's :class:`ShellGeometry`) is built for them when not given.
     """
-    s = settings or MarchSettings()
-    start = time.perf_counter()
+    image = GuidedImage(field, camera, vertices, faces, settings, background, shell)
+    image.render(None, cancelled)
+    return image.result()
 
-    def check():
-        if cancelled is not None and cancelled():
-            raise RenderCancelled
 
-    beta, delta = float(field.beta), float(s.shell_width)
-    H, W = camera.height, camera.width
-    bg = torch.as_tensor(background, dtype=torch.float32)
-    verts = torch.as_tensor(vertices).detach().float()
-    faces = torch.as_tensor(faces).long()
-    raster = rasterize_mesh(verts, faces, camera)
-    origins, dirs = camera.pixel_rays()
-    o = origins[0]
-    along_z = dirs.double() @ torch.as_tensor(camera.R[2], dtype=torch.float64)
-    t_map = (raster.depth.view(-1).double() / along_z).float().view(H, W)
-    hit = torch.isfinite(t_map).view(-1)
-    rgb_out, alpha_out, depth_out = bg.repeat(H * W, 1), torch.zeros(H * W), torch.zeros(H * W)
-    paths = {"band": 0, "fallback": 0, "background": 0}
-    kind = torch.zeros(H * W, dtype=torch.uint8)  # 0 untouched, 1 background, 2 band, 3 fallback
-    evals = 0
-    if hit.any():
+class GuidedImage:
+    """One image of the surface-guided marcher, rendered in any pixel subsets: the plan
+    (rasterisation and each ray's class) is made once for the whole image, then
+    :meth:`render` evaluates the rays of a subset; every ray's result depends only on the
+    plan and the field, so rendering the image in parts (coarse pixel grids first, as the
+    viewer's progressive levels) gives the same image with no ray rendered twice."""
+
+    def __init__(self, field, camera, vertices, faces, settings: MarchSettings | None = None,
+                 background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None):
+        s = self.settings = settings or MarchSettings()
+        self.start = time.perf_counter()
+        self.field, self.camera, self.shell = field, camera, shell
+        self.beta, delta = float(field.beta), float(s.shell_width)
+        H, W = self.H, self.W = camera.height, camera.width
+        self.bg = torch.as_tensor(background, dtype=torch.float32)
+        self.background = background
+        self.verts = torch.as_tensor(vertices).detach().float()
+        self.faces = torch.as_tensor(faces).long()
+        raster = rasterize_mesh(self.verts, self.faces, camera)
+        self.origins, dirs = camera.pixel_rays()
+        self.dirs = dirs
+        along_z = dirs.double() @ torch.as_tensor(camera.R[2], dtype=torch.float64)
+        t_map = (raster.depth.view(-1).double() / along_z).float().view(H, W)
+        hit = self.hit = torch.isfinite(t_map).view(-1)
+        self.rgb = self.bg.repeat(H * W, 1)
+        self.alpha, self.depth = torch.zeros(H * W), torch.zeros(H * W)
+        self.paths = {"band": 0, "fallback": 0, "background": 0}
+        self.kind = torch.zeros(H * W, dtype=torch.uint8)  # 0 untouched, 1 bg, 2 band, 3 fallback
+        self.evals = 0
+        self.passby = torch.zeros(H * W, dtype=torch.bool)
+        if not hit.any():
+            return
         # a surface farther than `reach` from a ray contributes < e^-miss_margin / 2β density
-        reach = min(delta, s.miss_margin * beta)
+        reach = min(delta, s.miss_margin * self.beta)
         z_min = float(raster.depth.view(-1)[hit].min())
         radius = min(int(math.ceil(reach * float(camera.K[0, 0]) / max(z_min, 1e-6))), 64)
-        t_hit = t_map.view(-1)
+        t_hit = self.t_hit = t_map.view(-1)
         front, front_pix = _frontmost_neighbour(t_map, max(radius, 1))
-        tri = verts[faces]
+        tri = self.verts[self.faces]
         normal = F.normalize(torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=1),
                              dim=1)
-        cos = torch.zeros(H * W)
+        cos = self.cos = torch.zeros(H * W)
         cos[hit] = (normal[raster.face.view(-1)[hit]] * dirs[hit]).sum(1).abs()
         # rays that pass a surface nearer than their own (or miss the mesh): a neighbour
         # hit nearer by more than δ plus what the hit face's own slope explains
         c = cos.clamp(min=s.min_cos)
         slope = radius * t_hit / float(camera.K[0, 0]) * (1 - c * c).sqrt() / c
         own = torch.where(hit & (cos >= s.min_cos), t_hit - slope, t_hit)
-        passby = (front < _FAR / 2) & (front < torch.where(hit, own, torch.inf) - delta)
+        self.passby = (front < _FAR / 2) & (front < torch.where(hit, own, torch.inf) - delta)
         # A passing ray is probed where it comes closest to the surface it passes: a miss
         # near the nearest hit pixel's surface point, a hit behind an occlusion edge near
         # the nearest surface point of its window. The silhouette's tangent point lies up
@@ -184,54 +198,80 @@ def render_image_guided(field, camera, vertices, faces, settings: MarchSettings 
         gap = torch.from_numpy(gap).float().view(-1)
         nearest = torch.where(hit, front_pix, torch.from_numpy((iy * W + ix).reshape(-1)))
         gap = torch.where(hit, float(radius), gap)
-        p_idx = torch.nonzero(passby).squeeze(1)
+        p_idx = torch.nonzero(self.passby).squeeze(1)
         q = nearest[p_idx]
-        t_pass = torch.full((H * W,), torch.inf)
-        t_pass[p_idx] = ((t_hit[q, None] * dirs[q]) * dirs[p_idx]).sum(1)
-        behind = t_pass[p_idx] * (1 + gap[p_idx] / float(camera.K[0, 0]))
-        h_idx = torch.nonzero(hit & (cos >= s.min_cos)).squeeze(1)
+        self.t_pass = torch.full((H * W,), torch.inf)
+        self.t_pass[p_idx] = ((t_hit[q, None] * dirs[q]) * dirs[p_idx]).sum(1)
+        self.t_behind = torch.full((H * W,), torch.inf)
+        self.t_behind[p_idx] = self.t_pass[p_idx] * (1 + gap[p_idx] / float(camera.K[0, 0]))
+
+    def render(self, subset: torch.Tensor | None = None, cancelled=None) -> None:
+        """Render the rays of ``subset`` ((H·W,) bool; None: all) into the image."""
+        if not self.hit.any():
+            return
+        s, beta, field = self.settings, self.beta, self.field
+        sub = torch.ones_like(self.hit) if subset is None else subset.view(-1)
+
+        def check():
+            if cancelled is not None and cancelled():
+                raise RenderCancelled
+
+        o, dirs, hit, cos, passby = self.origins[0], self.dirs, self.hit, self.cos, self.passby
+        p_idx = torch.nonzero(passby & sub).squeeze(1)
+        h_idx = torch.nonzero(hit & (cos >= s.min_cos) & sub).squeeze(1)
         idx = torch.cat([p_idx, p_idx, h_idx])
-        t_probe = torch.cat([t_pass[p_idx], behind, t_hit[h_idx]])
+        t_probe = torch.cat([self.t_pass[p_idx], self.t_behind[p_idx], self.t_hit[h_idx]])
         check()
         sdf0, rgb0 = _evaluate_sdf(field, o + t_probe[:, None] * dirs[idx], dirs[idx],
                                    s.chunk_points)
-        evals += len(idx)
+        self.evals += len(idx)
         n_p = len(p_idx)
-        close = torch.zeros(H * W, dtype=torch.bool)
+        close = torch.zeros(self.H * self.W, dtype=torch.bool)
         close[p_idx] = torch.minimum(sdf0[:n_p], sdf0[n_p:2 * n_p]) <= s.miss_margin * beta
-        paths["background"] = int((passby & ~close & ~hit).sum())
-        kind[passby & ~close & ~hit] = 1
+        empty = passby & ~close & ~hit & sub
+        self.paths["background"] += int(empty.sum())
+        self.kind[empty] = 1
         alone = ~close[h_idx]  # hits whose passed surface (if any) shows nothing
         band_idx = h_idx[alone]
-        ok = _band(field, s, beta, o, dirs, band_idx, t_hit, cos, sdf0[2 * n_p:][alone],
-                   rgb0[2 * n_p:][alone], rgb_out, alpha_out, depth_out, bg)
-        evals += len(band_idx) * s.band_samples
-        paths["band"] = int(ok.sum())
-        kind[band_idx[ok]] = 2
-        fb = close | (hit & (cos < s.min_cos))
+        ok = _band(field, s, beta, o, dirs, band_idx, self.t_hit, cos, sdf0[2 * n_p:][alone],
+                   rgb0[2 * n_p:][alone], self.rgb, self.alpha, self.depth, self.bg)
+        self.evals += len(band_idx) * s.band_samples
+        self.paths["band"] += int(ok.sum())
+        self.kind[band_idx[ok]] = 2
+        fb = close | (hit & (cos < s.min_cos) & sub)
         fb[band_idx[~ok]] = True
         f_idx = torch.nonzero(fb).squeeze(1)
-        paths["fallback"] = len(f_idx)
-        kind[f_idx] = 3
+        self.paths["fallback"] += len(f_idx)
+        self.kind[f_idx] = 3
         if len(f_idx):
+            self._fallback(f_idx, check)
+
+    def _fallback(self, f_idx: torch.Tensor, check) -> None:
+        s = self.settings
+        check()
+        if self.shell is None:
+            self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell_width),
+                                             s.shell_voxel, s.shell_exact)
+        bounds = self.shell.image_bounds(self.camera)
+        near, far = bounds.near.view(-1)[f_idx], bounds.far.view(-1)[f_idx]
+        fs = replace(s, segment=s.fallback_segment, scout_threshold=s.fallback_scout)
+        for c in range(0, len(f_idx), s.chunk_rays):
             check()
-            if shell is None:
-                shell = ShellGeometry.build(verts, faces, delta, s.shell_voxel, s.shell_exact)
-            bounds = shell.image_bounds(camera)
-            near, far = bounds.near.view(-1)[f_idx], bounds.far.view(-1)[f_idx]
-            fs = replace(s, segment=s.fallback_segment, scout_threshold=s.fallback_scout)
-            for c in range(0, len(f_idx), s.chunk_rays):
-                check()
-                sl = f_idx[c:c + s.chunk_rays]
-                out = render_rays(field, origins[sl], dirs[sl], near[c:c + s.chunk_rays],
-                                  far[c:c + s.chunk_rays], fs, None, shell, background)
-                rgb_out[sl], alpha_out[sl], depth_out[sl] = out.rgb, out.opacity, out.depth
-                evals += out.field_evals
-    stats = RenderStats(evals, paths["band"] + paths["fallback"], H * W,
-                        time.perf_counter() - start)
-    stats.paths = paths  # type: ignore[attr-defined]
-    stats.kind = kind.view(H, W)  # type: ignore[attr-defined]
-    return RenderResult(rgb_out.view(H, W, 3), alpha_out.view(H, W), depth_out.view(H, W), stats)
+            sl = f_idx[c:c + s.chunk_rays]
+            out = render_rays(self.field, self.origins[sl], self.dirs[sl],
+                              near[c:c + s.chunk_rays], far[c:c + s.chunk_rays], fs, None,
+                              self.shell, self.background)
+            self.rgb[sl], self.alpha[sl], self.depth[sl] = out.rgb, out.opacity, out.depth
+            self.evals += out.field_evals
+
+    def result(self) -> RenderResult:
+        H, W = self.H, self.W
+        stats = RenderStats(self.evals, self.paths["band"] + self.paths["fallback"], H * W,
+                            time.perf_counter() - self.start)
+        stats.paths = dict(self.paths)  # type: ignore[attr-defined]
+        stats.kind = self.kind.view(H, W)  # type: ignore[attr-defined]
+        return RenderResult(self.rgb.view(H, W, 3), self.alpha.view(H, W),
+                            self.depth.view(H, W), stats)
 
 
 def _band(field, s: MarchSettings, beta: float, o, dirs, idx, t_hit, cos, sdf0, rgb0,
@@ -269,5 +309,5 @@ def _evaluate_sdf(field, points: torch.Tensor, dirs: torch.Tensor, chunk: int):
     return evaluate_field(field.sdf_rgb, points, dirs, chunk)
 
 
-__all__ = ["composite_linear_sdf", "interval_optical_depth", "laplace_antiderivative",
-           "render_image_guided"]
+__all__ = ["GuidedImage", "composite_linear_sdf", "interval_optical_depth",
+           "laplace_antiderivative", "render_image_guided"]

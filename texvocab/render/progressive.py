@@ -1,8 +1,13 @@
 """Progressive rendering: the same view at 1/8, 1/4, 1/2 and full resolution, coarse
 levels first, so a viewer can show something at once and refine while the pose is still.
 
-The per-pose shell geometry is built once and shared by all levels; ``cancelled()`` is
-checked between levels and between ray chunks, so a newer pose aborts stale work.
+With the surface-guided marcher (``guide="raster"``) a level is every ``level``-th pixel
+of the full image in both directions, and each level renders only the pixels the coarser
+ones have not: the levels together cost one full-resolution render (its plan, the
+rasterisation, is made once), and the last level *is* that render. With the shell
+marcher each level renders the camera scaled by 1 / level. The per-pose shell geometry
+is built once and shared by all levels; ``cancelled()`` is checked between levels and
+between ray chunks, so a newer pose aborts stale work.
 """
 from __future__ import annotations
 
@@ -21,14 +26,20 @@ def progressive_render(field: Field, camera, vertices, faces,
                        cancelled: Callable[[], bool] = lambda: False,
                        background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None
                        ) -> Iterator[tuple[int, torch.Tensor, float]]:
-    """Yield ``(level, image (H_l, W_l, 3), seconds)`` for each downscale ``level``,
-    rendering ``camera.scaled(1 / level)`` without autograd.
+    """Yield ``(level, image (H_l, W_l, 3), seconds)`` for each downscale ``level``
+    without autograd: with ``settings.guide == "raster"`` the full image's pixels
+    [::level, ::level] (H_l = ceil(H / level)), rendered once each across the levels;
+    otherwise a render of ``camera.scaled(1 / level)``.
 
     ``seconds`` is the wall time of that level (the first level includes building the
     shell geometry unless ``shell`` is given). Stops, without yielding the level in
     progress, as soon as ``cancelled()`` returns True.
     """
     s = settings or MarchSettings()
+    if s.guide == "raster":
+        yield from _guided_levels(field, camera, vertices, faces, s, levels, cancelled,
+                                  background, shell)
+        return
     start = time.perf_counter()
     if shell is None:
         shell = ShellGeometry.build(vertices, faces, s.shell_width, s.shell_voxel, s.shell_exact)
@@ -42,4 +53,28 @@ def progressive_render(field: Field, camera, vertices, faces,
         except RenderCancelled:
             return
         yield level, result.rgb, time.perf_counter() - start
+        start = time.perf_counter()
+
+
+def _guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, cancelled,
+                   background, shell) -> Iterator[tuple[int, torch.Tensor, float]]:
+    from texvocab.render.guided import GuidedImage  # it builds on the marcher
+
+    start = time.perf_counter()
+    with torch.no_grad():
+        image = GuidedImage(field, camera, vertices, faces, s, background, shell)
+    done = torch.zeros(camera.height, camera.width, dtype=torch.bool)
+    for level in levels:
+        if cancelled():
+            return
+        grid = torch.zeros_like(done)
+        grid[::level, ::level] = True
+        try:
+            with torch.no_grad():
+                image.render(grid & ~done, cancelled)
+        except RenderCancelled:
+            return
+        done |= grid
+        rgb = image.rgb.view(camera.height, camera.width, 3)[::level, ::level].clone()
+        yield level, rgb, time.perf_counter() - start
         start = time.perf_counter()
