@@ -59,15 +59,22 @@ class RenderFrame:
 
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
-    once, then the levels (as :func:`texvocab.pipeline.evaluate.render_view` does for one)."""
+    once (the shell only when needed), then the levels (as
+    :func:`texvocab.pipeline.evaluate.render_view` does for one)."""
     def render(job: RenderJob, cancelled: Callable[[], bool]):
         m = job.march or march
         with torch.no_grad():
             ctx = model.pose_feature.context(job.pose, job.trans)
             if cancelled():
                 return
-            shell = ShellGeometry.build(ctx.vertices, model.body.faces, m.shell_width,
-                                        m.shell_voxel, m.shell_exact, index=ctx.index)
+
+            def shell():
+                return ShellGeometry.build(ctx.vertices, model.body.faces, m.shell_width,
+                                           m.shell_voxel, m.shell_exact, index=ctx.index)
+
+            # the surface-guided marcher builds it when a ray first falls back (after the
+            # first, preview level); the shell marcher needs it at once
+            shell = shell if m.guide == "raster" else shell()
             field = model.for_pose(ctx)
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
                                       levels=job.levels or levels, cancelled=cancelled,

@@ -144,10 +144,13 @@ class GuidedImage:
     (rasterisation and each ray's class) is made once for the whole image, then
     :meth:`render` evaluates the rays of a subset; every ray's result depends only on the
     plan and the field, so rendering the image in parts (coarse pixel grids first, as the
-    viewer's progressive levels) gives the same image with no ray rendered twice."""
+    viewer's progressive levels) gives the same image with no ray rendered twice.
+
+    ``shell``: the posed mesh's :class:`ShellGeometry`, or a function that builds it
+    (called the first time a ray falls back), or None (built then from the mesh)."""
 
     def __init__(self, field, camera, vertices, faces, settings: MarchSettings | None = None,
-                 background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None):
+                 background=(0.0, 0.0, 0.0), shell=None):
         s = self.settings = settings or MarchSettings()
         self.start = time.perf_counter()
         self.field, self.camera, self.shell = field, camera, shell
@@ -169,6 +172,7 @@ class GuidedImage:
         self.kind = torch.zeros(H * W, dtype=torch.uint8)  # 0 untouched, 1 bg, 2 band, 3 fallback
         self.evals = 0
         self.passby = torch.zeros(H * W, dtype=torch.bool)
+        self.deferred = torch.zeros(H * W, dtype=torch.bool)  # fallback rays left for later
         if not hit.any():
             return
         # a surface farther than `reach` from a ray contributes < e^-miss_margin / 2β density
@@ -205,12 +209,18 @@ class GuidedImage:
         self.t_behind = torch.full((H * W,), torch.inf)
         self.t_behind[p_idx] = self.t_pass[p_idx] * (1 + gap[p_idx] / float(camera.K[0, 0]))
 
-    def render(self, subset: torch.Tensor | None = None, cancelled=None) -> None:
-        """Render the rays of ``subset`` ((H·W,) bool; None: all) into the image."""
+    def render(self, subset: torch.Tensor | None = None, cancelled=None,
+               defer_fallback: bool = False) -> None:
+        """Render the rays of ``subset`` ((H·W,) bool; None: all) into the image, and any
+        rays an earlier call deferred. ``defer_fallback``: rays that fall back to the shell
+        marcher are not marched now but shown with their probe's colour (hits) or the
+        background (passing rays) — a preview — and rendered by the next call."""
         if not self.hit.any():
             return
         s, beta, field = self.settings, self.beta, self.field
         sub = torch.ones_like(self.hit) if subset is None else subset.view(-1)
+        sub = sub | self.deferred
+        self.deferred = torch.zeros_like(self.deferred)
 
         def check():
             if cancelled is not None and cancelled():
@@ -240,6 +250,12 @@ class GuidedImage:
         self.kind[band_idx[ok]] = 2
         fb = close | (hit & (cos < s.min_cos) & sub)
         fb[band_idx[~ok]] = True
+        if defer_fallback:
+            self.deferred = fb
+            preview = self.bg.repeat(self.H * self.W, 1)
+            preview[idx[2 * n_p:]] = rgb0[2 * n_p:]  # the colour at the mesh hit
+            self.rgb[fb] = preview[fb]
+            return
         f_idx = torch.nonzero(fb).squeeze(1)
         self.paths["fallback"] += len(f_idx)
         self.kind[f_idx] = 3
@@ -252,6 +268,8 @@ class GuidedImage:
         if self.shell is None:
             self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell_width),
                                              s.shell_voxel, s.shell_exact)
+        elif callable(self.shell):
+            self.shell = self.shell()
         bounds = self.shell.image_bounds(self.camera)
         near, far = bounds.near.view(-1)[f_idx], bounds.far.view(-1)[f_idx]
         fs = replace(s, segment=s.fallback_segment, scout_threshold=s.fallback_scout)

@@ -58,20 +58,24 @@ def progressive_render(field: Field, camera, vertices, faces,
 
 def _guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, cancelled,
                    background, shell) -> Iterator[tuple[int, torch.Tensor, float]]:
+    """The guided marcher's levels. The coarsest level is a preview: its rays that fall
+    back to the shell marcher (silhouette fringes, grazing hits) show their probe's colour
+    and are marched with the next level, so the first image needs no shell geometry
+    (``shell`` may be a function that builds it)."""
     from texvocab.render.guided import GuidedImage  # it builds on the marcher
 
     start = time.perf_counter()
     with torch.no_grad():
         image = GuidedImage(field, camera, vertices, faces, s, background, shell)
     done = torch.zeros(camera.height, camera.width, dtype=torch.bool)
-    for level in levels:
+    for i, level in enumerate(levels):
         if cancelled():
             return
         grid = torch.zeros_like(done)
         grid[::level, ::level] = True
         try:
-            with torch.no_grad():
-                image.render(grid & ~done, cancelled)
+            with torch.no_grad():  # the first of several levels is a preview (no fallback)
+                image.render(grid & ~done, cancelled, defer_fallback=i == 0 and len(levels) > 1)
         except RenderCancelled:
             return
         done |= grid
