@@ -287,6 +287,15 @@ def script_open_checkpoint(ctx, viewer, report: dict) -> None:
     report["exit_requested"] = bool(hello_imgui.get_runner_params().app_shall_exit)
 
 
+def script_reopened(ctx, viewer, report: dict) -> None:
+    """The window reopened by File > Open: what it shows."""
+    ctx.yield_(4)
+    report["source"] = viewer.data.source
+    report["sequence_path"] = viewer.sequence_path
+    report["sequence_frames"] = None if viewer.sequence is None else len(viewer.sequence.poses)
+    report["has_neural"] = viewer.neural is not None
+
+
 def script_look_stale(ctx, viewer, report: dict) -> None:
     """For a screenshot: a full render, then a new pose; exits while the render is stale."""
     ctx.yield_(4)
@@ -327,8 +336,14 @@ ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
                   "shot-novelty": script_shot_novelty, "stale": script_stale,
                   "camera-view": script_camera_view, "playback": script_playback,
                   "open-dialog": script_open_dialog, "open-checkpoint": script_open_checkpoint,
+                  "reopened": script_reopened,
                   "look-stale": script_look_stale,
                   "look-views": script_look_views, "look-playback": script_look_playback}
+
+
+#: a scripted run whose window reopens (File > Open) goes on with this script, whose
+#: report replaces the first one
+AFTER_REOPEN = {"open-checkpoint": "reopened"}
 
 
 class Driver:

@@ -17,7 +17,7 @@ import sys
 from imgui_bundle import hello_imgui, imgui, immapp
 
 from app.arguments import NEURAL_NICE, WINDOW_MIN, add_view_arguments, parse_size
-from app.drivers import make_driver
+from app.drivers import AFTER_REOPEN, make_driver
 from app.panel_neural import draw_neural_panel
 from app.panel_pose import draw_pose_panel, load_sequence
 from app.panel_view import draw_view_panel
@@ -131,8 +131,11 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
         immapp.run(rp)
         if driver is not None:
             shot = hello_imgui.final_app_window_screenshot()
-            return driver.finish(report, screenshot, shot)
-        if viewer.reopen is None:
+            rc = driver.finish(report, screenshot, shot)
+            script = AFTER_REOPEN.get(script) if viewer.reopen is not None else None
+            if script is None:
+                return rc
+        elif viewer.reopen is None:
             return 0
         data, poses = viewer.reopen, viewer.sequence_path or None  # File > Open
         print(f"opening {data.source}", flush=True)

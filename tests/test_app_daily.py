@@ -127,11 +127,14 @@ def test_file_open_checkpoint_loads_it_and_reopens_the_window(checkpoint, tmp_pa
     fake.write_text(f'#!/bin/sh\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {checkpoint} ;; esac\n')
     fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
     env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
-    proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, env=env)  # the body alone
+    poses = walk_file(tmp_path / "walk.npz", 6, 30.0)
+    # the body alone with a pose sequence; File > Open checkpoint...; the window reopens
+    proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, "--poses", str(poses),
+                              env=env)
     ok(proc, rep)
-    assert rep["open_error"] == ""
-    assert rep["reopen_source"].startswith(f"checkpoint {checkpoint}")
-    assert rep["exit_requested"] is True
+    assert rep["script"] == "reopened"  # the report of the second window
+    assert rep["source"].startswith(f"checkpoint {checkpoint}") and rep["has_neural"] is True
+    assert rep["sequence_path"] == str(poses) and rep["sequence_frames"] == 6  # kept
 
 
 def test_no_dialog_program_is_said_not_hidden(monkeypatch):
