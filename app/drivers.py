@@ -175,7 +175,8 @@ def wait_export(ctx, viewer, timeout: float = 120.0) -> dict:
 
 
 def script_export(ctx, viewer, report: dict) -> None:
-    """Load the --poses sequence, click "Export video", then "Screenshot"; wait for each."""
+    """Load the --poses sequence, turn Follow on, click "Export video", then "Screenshot";
+    wait for each."""
     ctx.yield_(4)
     ctx.set_ref("Pose")
     ctx.item_open("**/Sequence")
@@ -183,6 +184,10 @@ def script_export(ctx, viewer, report: dict) -> None:
     ctx.yield_(2)
     report["sequence_frames"] = None if viewer.sequence is None else len(viewer.sequence.poses)
     report["fps"] = None if viewer.sequence is None else viewer.sequence.fps
+    ctx.set_ref("3D view")
+    ctx.item_click("**/Follow")  # the video's cameras then move with the root
+    report["follow"] = viewer.follow
+    ctx.set_ref("Pose")
     ctx.item_click("**/Sequence/Export video")
     report["video"] = wait_export(ctx, viewer)
     ctx.set_ref("3D view")

@@ -27,10 +27,11 @@ def fresh_path(folder: Path, stem: str, suffix: str) -> Path:
 
 class Export:
     """One background job: ``frames`` (poses (T, 24, 3), trans (T, 3)) rendered with
-    ``model`` from ``camera`` (an OpenCV camera) and written as an MP4 at ``fps`` (T > 1)
-    or, for one frame, as neural.png beside ``view3d`` (an (H, W, 3) uint8 3D view) in a
-    fresh folder (``model`` None: view3d alone), over ``background`` as ``texvocab shot``.
-    ``done`` / ``total`` count frames; ``path`` is set when written, ``error`` on failure."""
+    ``model`` from ``camera`` (an OpenCV camera, or a list of one per frame) and written
+    as an MP4 at ``fps`` (T > 1) or, for one frame, as neural.png beside ``view3d`` (an
+    (H, W, 3) uint8 3D view) in a fresh folder (``model`` None: view3d alone), over
+    ``background`` as ``texvocab shot``. ``done`` / ``total`` count frames; ``path`` is
+    set when written, ``error`` on failure."""
 
     def __init__(self, model, march, camera, poses, trans, stem: str, fps: float = 30.0,
                  view3d: np.ndarray | None = None, folder: Path = EXPORT_DIR,
@@ -72,8 +73,9 @@ class Export:
             with tempfile.TemporaryDirectory(dir=self.folder) as tmp:
                 paths = []
                 for i in range(self.total):
+                    cam = self.camera[i] if isinstance(self.camera, list) else self.camera
                     paths.append(save_png(Path(tmp) / f"frame_{i:05d}.png", worker.render(
-                        i, self.poses[i], self.trans[i], self.camera)[1]))
+                        i, self.poses[i], self.trans[i], cam)[1]))
                     self.done = i + 1
                 write_mp4(paths, out, self.fps)
             self.path = out

@@ -22,7 +22,7 @@ from app.panel_vocab import ThumbnailCache
 from app.scene import SceneOptions, SceneRenderer
 from app.state import ViewerState, load_viewer_data
 from texvocab.errors import TexvocabError
-from texvocab.pipeline import march_settings
+from texvocab.pipeline import follow_camera, march_settings
 
 
 class Viewer:
@@ -223,6 +223,8 @@ class Viewer:
 
         w, h = self.shot_size()
         camera = self.camera.to_texvocab_camera(w, h)
+        if self.follow and len(poses) > 1:  # the camera moves with the root, as in the view
+            camera = follow_cameras(camera, np.asarray(trans), self.state.trans)
         image = None
         if view3d:
             self.scene.render(self.state, self.camera, (w, h), self.options)
@@ -316,3 +318,10 @@ class Viewer:
                     "with a trained avatar: texvocab view RUN/checkpoint.pt")
         return (f"No neural render: {self.data.source} is a capture, not a trained avatar. "
                 "Train one (texvocab train CAPTURE --out RUN) and open RUN/checkpoint.pt.")
+
+
+def follow_cameras(camera, trans: np.ndarray, now: np.ndarray) -> list:
+    """One camera per frame of root translations ``trans`` (T, 3): ``camera`` (the view
+    at root translation ``now``) moved with the root, as follow mode moves the view (the
+    root joint is its rest position plus the translation)."""
+    return [follow_camera(camera, t - np.asarray(now, np.float64)) for t in trans]

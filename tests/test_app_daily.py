@@ -173,3 +173,34 @@ def test_follow_centres_the_root_in_an_orbit_view_and_keeps_it_there():
     v.state.set_trans([0.0, 0.0, 0.0])
     v.follow_root()
     np.testing.assert_allclose(v.camera.target[0], moved[0])  # off: the camera stays
+
+
+def test_export_video_follows_the_root_when_follow_is_on():
+    from app.viewer import follow_cameras
+    from texvocab.pipeline import Camera
+
+    cam = Camera(np.array([[100.0, 0, 32], [0, 100.0, 32], [0, 0, 1]]), np.eye(3),
+                 np.array([0.0, 0.0, 3.0]), 64, 64)
+    trans = np.array([[0.0, 0, 0], [0.3, 0, 0], [0.6, 0.1, 0]])
+    cams = follow_cameras(cam, trans, now=trans[1])
+    for c, t in zip(cams, trans, strict=True):
+        np.testing.assert_allclose(c.center - cam.center, t - trans[1], atol=1e-12)
+        np.testing.assert_array_equal(c.R, cam.R)
+        # the root's rest position plus t lands on the same pixel in every frame
+        root = np.array([0.0, -0.2, 0.0])
+        px, _ = c.project((root + t)[None])
+        ref, _ = cam.project((root + trans[1])[None])
+        np.testing.assert_allclose(px, ref, atol=1e-9)
+
+
+def test_screenshot_without_a_model_writes_the_3d_view_alone(tmp_path):
+    from app.export import Export
+    from texvocab.pipeline import Camera
+
+    cam = Camera(np.eye(3), np.eye(3), np.zeros(3), 8, 8)
+    view = np.full((8, 8, 3), 200, np.uint8)
+    job = Export(None, None, cam, np.zeros((1, 24, 3)), np.zeros((1, 3)), "shot", 1.0, view,
+                 folder=tmp_path / "exports")
+    job.thread.join(30)
+    assert job.error == "" and job.path == tmp_path / "exports" / "shot"
+    assert sorted(p.name for p in job.path.iterdir()) == ["view3d.png"]

@@ -37,6 +37,7 @@ def test_export_video_and_screenshot_buttons(tmp_path):
     # the timeline holds every frame of the file and plays at its rate; the video keeps
     # every 4th frame (at most 30 per second of video) at the same speed
     assert rep["sequence_frames"] == 17 and rep["fps"] == 120
+    assert rep["follow"] is True  # the video was exported with per-frame follow cameras
     video = rep["video"]
     assert not video["error"] and video["frames"] == 5
     assert video["path"].endswith("exports/walk_2.mp4")  # walk.mp4 was taken

@@ -48,6 +48,7 @@ _API: dict[str, tuple[str, str]] = {
     # clips (texvocab render, the viewer's export)
     "FrameWorker": ("texvocab.pipeline.clip_worker", "FrameWorker"),
     "write_mp4": ("texvocab.pipeline.clip", "write_mp4"),
+    "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
     # files
     "save_png": ("texvocab.io.images", "save_png"),
     "to_uint8": ("texvocab.io.images", "to_uint8"),
