@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -236,7 +237,10 @@ def main(argv=None) -> int:
             if f.is_file():
                 results[(Path(j["run_dir"]).parent.name, j["seed"])] = json.loads(f.read_text())
     else:
-        with ProcessPoolExecutor(args.jobs) as pool:
+        # spawn, not fork: a worker forked after the capture's synthesis (pyrender, torch
+        # threads) hung without using any CPU
+        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) \
+                as pool:
             done = list(pool.map(train_and_evaluate, jobs))
         results = {(r["run"], r["seed"]): r for r in done}
     lines = [f"# Ablations on novel poses ({root}; base: {' '.join(args.base) or 'defaults'}; "
