@@ -46,6 +46,7 @@ def wait_neural(ctx, viewer, report: dict, timeout: float = 60.0) -> None:
     f = viewer.neural.frame
     report["neural"] = None if f is None else {
         "level": f.level, "ms": f.seconds * 1000, "size": list(f.image.shape[:2]),
+        "corner": [float(c) for c in f.image[0, 0]],
         "delivered": [list(d) for d in viewer.neural.worker.delivered],
         "errors": list(viewer.neural.worker.errors),
         "traceback": viewer.neural.worker.last_traceback}

@@ -65,11 +65,12 @@ class NeuralView:
         return _fit(max(8, round(self.resolution * self.image_scale)), aspect)
 
     def update(self, state, camera, aspect: float, force: bool = False, label: str = "",
-               playing: bool = False) -> None:
+               playing: bool = False, background=(0.0, 0.0, 0.0)) -> None:
         """Submit a job when the pose, camera or size changed (while ``playing``: only
-        once the previous one is done); upload a new level. ``label`` names the pose."""
+        once the previous one is done); upload a new level. ``label`` names the pose;
+        ``background``: the 3D view's, so both panels (and screenshots) match."""
         w, h = self.size_for(aspect)
-        key = (state.version, camera_key(camera), w, h, self.preset, playing)
+        key = (state.version, camera_key(camera), w, h, self.preset, playing, tuple(background))
         changed = (self.live and key != self._key) or force
         # while playing, a playback render in progress is let finish (a full render from
         # before Play is cancelled at once)
@@ -83,7 +84,8 @@ class NeuralView:
                 del self.labels[old]
             levels = (self.playback_level,) if playing else None
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
-                                         camera.to_texvocab_camera(w, h), self.march, levels))
+                                         camera.to_texvocab_camera(w, h), self.march, levels,
+                                         tuple(background)))
         frame = self.worker.poll()
         if frame is not None:
             self._upload(frame)

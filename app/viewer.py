@@ -108,7 +108,7 @@ class Viewer:
             return
         playing = self.sequence is not None and self.sequence.playing
         self.neural.update(self.state, self.camera, self.neural_aspect(), force,
-                           self.pose_label(), playing)
+                           self.pose_label(), playing, self.options.background)
 
     # -- cameras ------------------------------------------------------------------------
     def root_position(self) -> np.ndarray:

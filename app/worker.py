@@ -42,6 +42,7 @@ class RenderJob:
     camera: object
     march: object = None  # MarchSettings for this job (None: the renderer's own)
     levels: tuple[int, ...] | None = None  # downscale factors to render (None: the renderer's)
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] behind the body
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,7 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             field = model.for_pose(ctx)
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
                                       levels=job.levels or levels, cancelled=cancelled,
-                                      shell=shell)
+                                      background=job.background, shell=shell)
     return render
 
 

@@ -79,6 +79,8 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     # the neural render ran coarse to fine for the newest version, and its worker stopped
     neural = rep["neural"]
     assert neural["errors"] == [] and neural["level"] == 1
+    # rendered over the 3D view's background (as texvocab shot and the screenshots are)
+    assert neural["corner"] == pytest.approx([0.13, 0.14, 0.16], abs=1e-3)
     last = max(v for v, _ in neural["delivered"])
     assert [lv for v, lv in neural["delivered"] if v == last] == [8, 4, 2, 1]
     assert rep["worker_stopped"] is True
