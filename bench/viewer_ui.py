@@ -14,6 +14,9 @@ running). Prints three tables and a last line
 <= 1.5, first level <= 50 ms).
 
     .venv/bin/python bench/viewer_ui.py RUN/checkpoint.pt [--seconds 10] [--res 256]
+
+A first row times an empty hello_imgui window of the same size at full speed: what GL
+under llvmpipe and the X server cost per frame before the viewer draws anything.
 """
 from __future__ import annotations
 
@@ -51,6 +54,44 @@ def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: in
             sys.exit(f"error: the window wrote no report (rc {proc.returncode}):\n"
                      f"{proc.stderr[-3000:]}")
         return json.loads(report.read_text())
+
+
+def empty_window_child(size: str, seconds: float, out: str) -> None:
+    """Frame times of an empty hello_imgui window (one text line), idling off: what this
+    machine's GL and X server cost per frame before the viewer draws anything."""
+    import time
+
+    from imgui_bundle import hello_imgui, imgui, immapp
+
+    wall, cpu, t0 = [], [], time.perf_counter()
+
+    def gui():
+        wall.append(time.perf_counter())
+        cpu.append(time.thread_time())
+        imgui.text("empty window")
+        if wall[-1] - t0 > seconds + 1:
+            hello_imgui.get_runner_params().app_shall_exit = True
+
+    rp = hello_imgui.RunnerParams()
+    rp.app_window_params.window_geometry.size = tuple(int(v) for v in size.split("x"))
+    rp.callbacks.show_gui = gui
+    rp.ini_disable = True
+    rp.fps_idling.enable_idling = False
+    immapp.run(rp)
+    keep = [i for i, t in enumerate(wall) if t - t0 > 1][1:]  # skip the first second
+    Path(out).write_text(json.dumps({
+        "wall": [(wall[i] - wall[i - 1]) * 1000 for i in keep],
+        "cpu": [(cpu[i] - cpu[i - 1]) * 1000 for i in keep]}))
+
+
+def run_empty(size: str, seconds: float) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "empty.json"
+        subprocess.run([shutil.which("xvfb-run"), "-a", "-s", "-screen 0 1920x1200x24",
+                        sys.executable, __file__, "--empty-window-child", out.as_posix(),
+                        "--size", size, "--seconds", str(seconds), "x"], check=True,
+                       capture_output=True)
+        return json.loads(out.read_text())
 
 
 def run_shot(checkpoint: str, pose: str, size: tuple[int, int]) -> float:
@@ -95,7 +136,14 @@ def main() -> int:
     p.add_argument("--nice", type=int, default=None,
                    help="niceness of the neural render thread (default: the viewer's)")
     p.add_argument("--json", default=None, help="also write the raw report here")
+    p.add_argument("--no-baseline", action="store_true",
+                   help="skip the empty-window row (what GL and X cost with nothing drawn)")
+    p.add_argument("--empty-window-child", default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
+    if args.empty_window_child:
+        empty_window_child(args.size, args.seconds, args.empty_window_child)
+        return 0
+    empty = None if args.no_baseline else run_empty(args.size, args.seconds)
     rep = run_window(args.checkpoint, args.seconds, args.res, args.size, args.threads, args.nice)
     if not rep.get("ok"):
         sys.exit(f"error: {rep.get('error', 'the bench did not finish')}")
@@ -113,11 +161,16 @@ def main() -> int:
     print(table)
     drag = np.asarray(rep["dragging"]["frame_ms"])
     cpu = np.asarray(rep["dragging"]["cpu_ms"])
-    print("\n| dragging a slider | frames | median ms | p95 ms | UI-thread CPU ms (median) |")
+    print("\n| window at full speed | frames | median ms | p95 ms | UI-thread CPU ms (median) |")
     print("|---|---|---|---|---|")
-    if len(drag):
-        print(f"| | {len(drag)} | {np.median(drag):.1f} | {np.percentile(drag, 95):.1f} | "
-              f"{np.median(cpu):.1f} |")
+    rows = [("dragging a slider", drag, cpu)]
+    if empty is not None:
+        rows.insert(0, ("empty hello_imgui window (baseline)", np.asarray(empty["wall"]),
+                        np.asarray(empty["cpu"])))
+    for name, ms, c in rows:
+        if len(ms):
+            print(f"| {name} | {len(ms)} | {np.median(ms):.1f} | {np.percentile(ms, 95):.1f} | "
+                  f"{np.median(c):.1f} |")
     if args.json:
         Path(args.json).write_text(json.dumps(rep, indent=1))
     full = [r["levels"][-1]["on_screen_s"] for r in renders if r["levels"]]
