@@ -93,6 +93,24 @@ def test_guided_camera_inside_the_body_is_finite(body, where):  # noqa: F811
         assert torch.isfinite(x).all()
     assert (result.alpha >= 0).all() and (result.alpha <= 1 + 1e-6).all()
     assert (result.rgb >= 0).all() and (result.rgb <= 1 + 1e-6).all()
+    # the viewer's progressive levels (preview first, the shell built on demand) too
+    from texvocab.render import progressive_render
+
+    levels = list(progressive_render(body["field"], cam, v, f, GUIDED,
+                                     shell=lambda: body["shell"]))
+    assert [lv for lv, _, _ in levels] == [8, 4, 2, 1]
+    assert torch.allclose(levels[-1][1], result.rgb, atol=1e-5)
+    assert all(torch.isfinite(img).all() for _, img, _ in levels)
+
+
+def test_guided_progressive_levels_of_rays_that_all_miss(body):  # noqa: F811
+    from texvocab.render import progressive_render
+
+    bg = (0.2, 0.4, 0.6)
+    levels = list(progressive_render(body["field"], looking_away(body["camera"]), body["v"],
+                                     body["f"], GUIDED, background=bg))
+    assert [lv for lv, _, _ in levels] == [8, 4, 2, 1]
+    assert torch.equal(levels[-1][1], torch.tensor(bg).expand(64, 64, 3))
 
 
 def test_unknown_guide_is_refused(body):  # noqa: F811
