@@ -103,7 +103,9 @@ def script_open_checkpoint(ctx, viewer, report: dict) -> None:
     t0 = time.perf_counter()
     while viewer.reopen is None and not viewer.open_error and time.perf_counter() - t0 < 60:
         ctx.yield_()
+    ctx.yield_(2)
     report["open_error"] = viewer.open_error
+    report["caption"] = viewer.view_caption()
     report["reopen_source"] = None if viewer.reopen is None else viewer.reopen.source
     report["exit_requested"] = bool(hello_imgui.get_runner_params().app_shall_exit)
 

@@ -137,6 +137,22 @@ def test_file_open_checkpoint_loads_it_and_reopens_the_window(checkpoint, tmp_pa
     assert rep["sequence_path"] == str(poses) and rep["sequence_frames"] == 6  # kept
 
 
+def test_file_open_of_a_bad_file_says_why_and_keeps_the_window(tmp_path):
+    bad = tmp_path / "notes.pt"
+    bad.write_text("not a checkpoint")
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fake = bin_dir / "zenity"
+    fake.write_text(f'#!/bin/sh\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {bad} ;; esac\n')
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
+    proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, env=env)
+    ok(proc, rep)
+    assert rep["script"] == "open-checkpoint"  # no second window
+    assert rep["open_error"].startswith(f"{bad}:") and rep["exit_requested"] is False
+    assert rep["caption"].startswith(f"could not open {bad}:")
+
+
 def test_no_dialog_program_is_said_not_hidden(monkeypatch):
     from app.dialogs import FileDialogs
 
