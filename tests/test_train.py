@@ -51,6 +51,26 @@ def test_loss_falls_and_psnr_rises(capture, tmp_path):
     assert (tmp_path / "run" / "checkpoint.pt").is_file()
 
 
+def test_trainable_encoder_frames_keep_no_feature_maps(capture, tmp_path):
+    """A trainable encoder's maps are recomputed for each step's frame, so the frame cache
+    holds none between steps (kept for every frame they exhausted 24 GB with
+    resnet34-scratch); frames drawn again still train the encoder."""
+    cap = open_capture(capture)
+    trainer = Trainer(cap, tiny_settings(encoder="small", iterations=8), tmp_path / "run",
+                      progress=False)
+    encoder = trainer.model.pose_feature.encoder
+    before = [p.detach().clone() for p in encoder.parameters()]
+    drawn = []
+    for _ in range(8):
+        log = trainer.train_step()
+        assert np.isfinite(log["loss"])
+        assert all(fd.ctx.features is None for fd in trainer.frames.values())
+        drawn.append(len(trainer.frames))
+    assert drawn[-1] < 8  # 4 training frames: some were drawn again from the cache
+    assert any(not torch.equal(a, b.detach()) for a, b in zip(before, encoder.parameters(),
+                                                              strict=True))
+
+
 @pytest.fixture
 def one_thread():
     """Bit-exact comparisons need one thread: with several, oneDNN's convolution backward
