@@ -23,6 +23,12 @@ def script_stale(ctx, viewer, report: dict) -> None:
     wait_neural(ctx, viewer, report)
     report["stale_lines"] = list(viewer.stale_log)
     report["stale_at_end"] = bool(viewer.neural.stale)
+    ctx.set_ref("Neural render")
+    ctx.item_click("**/Live")  # off: a new pose leaves the image stale, and it says why
+    ctx.set_ref("Pose")
+    ctx.item_input_value("**/left_shoulder/##z", -40.0)
+    ctx.yield_(3)
+    report["live_off_line"] = viewer.neural_stale_shown
 
 
 def script_camera_view(ctx, viewer, report: dict) -> None:

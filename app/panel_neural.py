@@ -48,6 +48,9 @@ class NeuralView:
         self.frame: RenderFrame | None = None
         self.texture = None
         self.labels: dict[int, str] = {}  # version -> what it shows ("frame 12", "edit 40")
+        self.keys: dict[int, tuple] = {}  # version -> the view it renders (pose, camera, ...)
+        self._current: tuple | None = None  # those of the view now
+        self._current_label = ""
         #: (version, level, milliseconds, seconds since the job started, (h, w)) per shown level
         self.history: deque[tuple] = deque(maxlen=200)
 
@@ -57,8 +60,9 @@ class NeuralView:
 
     @property
     def stale(self) -> bool:
-        """True while the shown image belongs to an older pose, camera or size."""
-        return self.frame is not None and self.frame.version != self.version
+        """True while the shown image belongs to an older pose, camera or size (also with
+        Live off, when nothing new is being rendered)."""
+        return self.frame is not None and self.keys.get(self.frame.version) != self._current
 
     def size_for(self, aspect: float) -> tuple[int, int]:
         """(w, h) of the full-resolution level for a view of ``aspect``."""
@@ -70,7 +74,9 @@ class NeuralView:
         once the previous one is done); upload a new level. ``label`` names the pose;
         ``background``: the 3D view's, so both panels (and screenshots) match."""
         w, h = self.size_for(aspect)
-        key = (state.version, camera_key(camera), w, h, self.preset, playing, tuple(background))
+        view = (state.version, camera_key(camera), w, h, self.preset, tuple(background))
+        key = (*view, playing)
+        self._current, self._current_label = view, label or f"edit {state.version}"
         changed = (self.live and key != self._key) or force
         # while playing, a playback render in progress is let finish (a full render from
         # before Play is cancelled at once)
@@ -79,9 +85,10 @@ class NeuralView:
             self._key = key
             self._playback_job = playing
             self.version += 1
-            self.labels[self.version] = label or f"edit {state.version}"
+            self.labels[self.version] = self._current_label
+            self.keys[self.version] = view  # pose, camera, size, preset, background
             for old in [v for v in self.labels if v < self.version - 64]:
-                del self.labels[old]
+                del self.labels[old], self.keys[old]
             levels = (self.playback_level,) if playing else None
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
                                          camera.to_texvocab_camera(w, h), self.march, levels,
@@ -113,6 +120,8 @@ class NeuralView:
         if not self.stale:
             return ""
         shown = self.labels.get(self.frame.version, "an older pose")
+        if self.keys.get(self.version) != self._current:  # Live is off: nothing on its way
+            return f"stale: shows {shown}; Live is off (Render now)"
         return f"stale: shows {shown}; rendering {self.labels.get(self.version, 'the new pose')}"
 
     def _upload(self, frame: RenderFrame) -> None:

@@ -52,6 +52,9 @@ def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(check
     first = lines.index(expected)
     assert "" in lines[first:] and lines[-1] == "" and rep["stale_at_end"] is False
     assert rep["neural"]["level"] == 1 and rep["neural"]["errors"] == []
+    # with Live off nothing new renders: the image stays marked, and the banner says why
+    assert rep["live_off_line"] == ("stale: shows left shoulder z -70°; Live is off "
+                                    "(Render now)")
 
 
 def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
