@@ -145,7 +145,7 @@ def script_look_views(ctx, viewer, report: dict) -> None:
     ctx.set_ref("Pose")
     ctx.item_open("**/Sequence")
     ctx.item_input_value("**/Sequence/##frame", len(viewer.sequence.poses) - 1)
-    ctx.scroll_to_item("**/left_elbow/##y")
+    ctx.scroll_to_item("**/left_elbow/##y", imgui.internal.Axis.y)
     wait_neural(ctx, viewer, report)
 
 

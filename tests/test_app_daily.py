@@ -223,3 +223,14 @@ def test_screenshot_without_a_model_writes_the_3d_view_alone(tmp_path):
     job.thread.join(30)
     assert job.error == "" and job.path == tmp_path / "exports" / "shot"
     assert sorted(p.name for p in job.path.iterdir()) == ["view3d.png"]
+
+
+@pytest.mark.parametrize("script", ["look-stale", "look-views", "look-playback"])
+def test_screenshot_scripts_end_in_their_state(checkpoint, tmp_path, script):
+    """The look-* scripts that produce the README's window screenshots still run."""
+    poses = walk_file(tmp_path / "walk.npz", 12, 30.0)
+    proc, rep, shot = run_window(checkpoint, script, tmp_path, "--poses", str(poses))
+    ok(proc, rep)
+    assert np.asarray(Image.open(shot)).std() > 10
+    if script == "look-stale":
+        assert rep["stale_line"].startswith("stale: shows frame 0; rendering left shoulder")
