@@ -34,6 +34,19 @@ def walk_file(path: Path, frames: int, fps: float | None) -> Path:
     return path
 
 
+def fake_zenity(tmp_path: Path, answer: Path) -> tuple[dict, Path]:
+    """The desktop's dialog program, played by a script on PATH that answers ``answer``
+    (portable-file-dialogs runs it for real); (environment, its argument log)."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    log = tmp_path / "zenity.log"
+    fake = bin_dir / "zenity"
+    fake.write_text(f'#!/bin/sh\necho "$@" >> {log}\n'
+                    f'case "$*" in *--version*) echo 3.44.0 ;; *) echo {answer} ;; esac\n')
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    return dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}"), log
+
+
 def ok(proc, rep):
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"),
                                                 proc.stderr[-2000:])
@@ -107,15 +120,7 @@ def test_texvocab_view_starts_on_poses_and_plays_at_the_files_rate(checkpoint, t
 
 def test_open_dialog_loads_the_chosen_pose_file(checkpoint, tmp_path):
     poses = walk_file(tmp_path / "walk.npz", 7, 30.0)
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    log = tmp_path / "zenity.log"
-    # the desktop's dialog program, played by a script that picks walk.npz
-    fake = bin_dir / "zenity"
-    fake.write_text(f'#!/bin/sh\necho "$@" >> {log}\n'
-                    f'case "$*" in *--version*) echo 3.44.0 ;; *) echo {poses} ;; esac\n')
-    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
-    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
+    env, log = fake_zenity(tmp_path, poses)  # the dialog picks walk.npz
     proc, rep, _ = run_window(checkpoint, "open-dialog", tmp_path, env=env)
     ok(proc, rep)
     assert rep["dialog_missing"] == ""
@@ -124,12 +129,7 @@ def test_open_dialog_loads_the_chosen_pose_file(checkpoint, tmp_path):
 
 
 def test_file_open_checkpoint_loads_it_and_reopens_the_window(checkpoint, tmp_path):
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    fake = bin_dir / "zenity"
-    fake.write_text(f'#!/bin/sh\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {checkpoint} ;; esac\n')
-    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
-    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
+    env, _ = fake_zenity(tmp_path, checkpoint)
     poses = walk_file(tmp_path / "walk.npz", 6, 30.0)
     # the body alone with a pose sequence; File > Open checkpoint...; the window reopens
     proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, "--poses", str(poses),
@@ -143,12 +143,7 @@ def test_file_open_checkpoint_loads_it_and_reopens_the_window(checkpoint, tmp_pa
 def test_file_open_of_a_bad_file_says_why_and_keeps_the_window(tmp_path):
     bad = tmp_path / "notes.pt"
     bad.write_text("not a checkpoint")
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    fake = bin_dir / "zenity"
-    fake.write_text(f'#!/bin/sh\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {bad} ;; esac\n')
-    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
-    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}")
+    env, _ = fake_zenity(tmp_path, bad)
     proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, env=env)
     ok(proc, rep)
     assert rep["script"] == "open-checkpoint"  # no second window

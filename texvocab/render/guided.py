@@ -157,7 +157,6 @@ class GuidedImage:
         self.beta, delta = float(field.beta), float(s.shell_width)
         H, W = self.H, self.W = camera.height, camera.width
         self.bg = torch.as_tensor(background, dtype=torch.float32)
-        self.background = background
         self.verts = torch.as_tensor(vertices).detach().float()
         self.faces = torch.as_tensor(faces).long()
         raster = rasterize_mesh(self.verts, self.faces, camera)
@@ -278,7 +277,7 @@ class GuidedImage:
             sl = f_idx[c:c + s.chunk_rays]
             out = render_rays(self.field, self.origins[sl], self.dirs[sl],
                               near[c:c + s.chunk_rays], far[c:c + s.chunk_rays], fs, None,
-                              self.shell, self.background)
+                              self.shell, self.bg)
             self.rgb[sl], self.alpha[sl], self.depth[sl] = out.rgb, out.opacity, out.depth
             self.evals += out.field_evals
 
