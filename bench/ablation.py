@@ -37,7 +37,10 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
 SET = "novel_poses"
-DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean"]
+DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean",
+                "train_guide=shell"]
+# base settings that name no run folder: every run before the setting existed had them
+UNNAMED = {"train_guide=shell"}
 GROUPS: dict[str, dict[str, list[str]]] = {
     "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
                    "none": ["strategy=none"]},
@@ -47,6 +50,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
                    "lpips-vgg": ["perceptual=lpips-vgg"]},
     "weighting": {"paper": [], "inverse": ["weighting=inverse"]},
     "views": {"mean": [], "cosine": ["view_weighting=cosine"]},
+    "training": {"shell": [], "raster": ["train_guide=raster"]},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }
@@ -70,7 +74,7 @@ def make_capture(out: Path, motion: str = "compositional") -> Path:
 
 def run_name(base: list[str], extra: list[str]) -> str:
     """Folder name of a run: its settings beyond the defaults, sorted (shared by groups)."""
-    items = dict(i.split("=", 1) for i in base + extra)
+    items = dict(i.split("=", 1) for i in base + extra if i not in UNNAMED)
     return ",".join(f"{k}={v}" for k, v in sorted(items.items())) or "defaults"
 
 
@@ -100,7 +104,7 @@ def train_and_evaluate(job: dict) -> dict:
     trainer.resume()
     t0 = time.perf_counter()
     steps0 = trainer.step
-    trainer.run()
+    logs = trainer.run()
     step_s = (time.perf_counter() - t0) / max(1, trainer.step - steps0)
     trainer.model.eval()
     sets = {SET: build_sets(cap, settings, job["per_set"], generated=())[SET]}
@@ -115,6 +119,9 @@ def train_and_evaluate(job: dict) -> dict:
     result = {"run": run_dir.parent.name, "seed": job["seed"], "steps": trainer.step,
               "seconds_per_step": step_s, "threads": job["threads"],
               "kid": table[SET].get("kid"),
+              # training PSNR of each step's batch (this session's steps; resumed runs
+              # have only the steps after the resume)
+              "train_psnr": [r["psnr"] for r in logs] if steps0 == 0 else None,
               "per_image": {m: [r.get(m) for r in records if r["set"] == SET] for m in METRICS}}
     blob = json.dumps(result)
     atomic_write_bytes(done, lambda t: Path(t).write_text(blob))
@@ -176,7 +183,41 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
                    if len(d) > 1 else "n/a")
             better = f"{(d > 0).mean():.0%}" if len(d) else "n/a"
             lines.append(f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} |")
-    return lines + [""]
+    return lines + curve_report(labels, variants, results, seeds) + [""]
+
+
+def curve_report(labels: list[str], variants: dict[str, str], results: dict, seeds: list[int],
+                 window: int = 100) -> list[str]:
+    """Markdown table of the training PSNR (each step's batch) per window of ``window``
+    steps: per variant the mean over seeds (spread = max - min over seeds), and each
+    variant minus the reference, paired by seed (mean [min, max]). Empty unless every run
+    of the group recorded its curve."""
+    curves = {(lab, s): results[(variants[lab], s)].get("train_psnr")
+              for lab in labels for s in seeds if (variants[lab], s) in results}
+    if not curves or any(c is None for c in curves.values()):
+        return []
+    n = min(len(c) for c in curves.values())
+    edges = list(range(0, n, window))
+    win = {k: [float(np.mean(c[a:a + window])) for a in edges] for k, c in curves.items()}
+    ref = labels[0]
+    lines = ["", f"Training PSNR (dB, each step's batch) per {window} steps: mean over seeds "
+             f"(spread); then minus {ref}, paired by seed: mean [min, max].", "",
+             "| variant | " + " | ".join(f"{a}-{min(a + window, n)}" for a in edges) + " |",
+             "|---" * (len(edges) + 1) + "|"]
+    for lab in labels:
+        cells = []
+        for i in range(len(edges)):
+            v = [win[(lab, s)][i] for s in seeds if (lab, s) in win]
+            cells.append(f"{np.mean(v):.2f} ({max(v) - min(v):.2f})")
+        lines.append(f"| {lab} | " + " | ".join(cells) + " |")
+    for lab in labels[1:]:
+        cells = []
+        for i in range(len(edges)):
+            d = [win[(lab, s)][i] - win[(ref, s)][i] for s in seeds
+                 if (lab, s) in win and (ref, s) in win]
+            cells.append(f"{np.mean(d):+.2f} [{min(d):+.2f}, {max(d):+.2f}]" if d else "n/a")
+        lines.append(f"| {lab} - {ref} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def side_by_side(group: str, variants: dict[str, str], seed: int, out: Path) -> Path | None:

@@ -10,7 +10,7 @@ import torch
 from tests.test_render import DELTA, body, looking_away, psnr  # noqa: F401
 from texvocab.capture.camera import Camera
 from texvocab.render import MarchSettings, render_image
-from texvocab.render.guided import composite_linear_sdf, interval_optical_depth
+from texvocab.render.band import composite_linear_sdf, interval_optical_depth
 
 SHELL = MarchSettings(shell_width=DELTA, coarse_samples=36, fine_samples=16,
                       early_stop_eps=1e-4)

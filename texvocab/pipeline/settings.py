@@ -19,7 +19,8 @@ from texvocab.render import GUIDES, MarchSettings
 PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
 # What a setting absent from a stored settings dict (a checkpoint written before the
 # setting existed) meant then; its default today may differ.
-LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0}
+LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0,
+          "train_guide": "shell"}
 
 
 @dataclass
@@ -54,6 +55,9 @@ class Settings:
     iterations: int = 2000
     rays_per_batch: int = 1024
     fg_fraction: float = 0.8  # share of rays drawn inside the mask
+    train_guide: str = "shell"  # raster: rays in the mask that hit the posed mesh are
+    # rendered by the surface band (probe + band_samples, closed-form VolSDF opacity), the
+    # rest by the shell marcher | shell: every ray by the shell marcher (README "Training")
     lr: float = 5e-4
     lambda_color: float = 1.0
     lambda_mask: float = 0.1
@@ -89,6 +93,7 @@ class Settings:
             ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
             ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
             ("guide", self.guide in GUIDES, " or ".join(GUIDES)),
+            ("train_guide", self.train_guide in GUIDES, " or ".join(GUIDES)),
             ("k", self.k <= self.num_keys, f"<= num_keys ({self.num_keys}): K of the M keys"),
             ("iterations", self.iterations >= 1, ">= 1"),
             ("checkpoint_every", self.checkpoint_every >= 1, ">= 1"),

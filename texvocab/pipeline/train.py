@@ -20,12 +20,12 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import torch
 from tqdm import tqdm
 
 from texvocab.errors import TexvocabError
-from texvocab.geometry.raster import rasterize_mesh
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.method.encoder import build_encoder
 from texvocab.method.feature import PoseFeature
@@ -36,7 +36,8 @@ from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
-from texvocab.render import ShellGeometry, render_rays
+from texvocab.render import ShellGeometry
+from texvocab.render.band import plan_surface, render_rays_banded
 
 log = logging.getLogger("texvocab")
 SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --resume
@@ -101,6 +102,22 @@ def perceptual_term(s: Settings) -> torch.nn.Module | None:
     return net
 
 
+class ViewData(NamedTuple):
+    """One training view of one frame, per pixel (H·W, row-major): img (·, 3), mask,
+    hit (the ray meets the shell), near, far (ray bounds), t_band (mesh hit of the band
+    rays, inf elsewhere), cos (float16, the hit face's cosine), t_passing (·, 2) (where
+    rays outside the mask that miss the mesh pass closest to it, inf elsewhere)."""
+
+    img: torch.Tensor
+    mask: torch.Tensor
+    hit: torch.Tensor
+    near: torch.Tensor
+    far: torch.Tensor
+    t_band: torch.Tensor
+    cos: torch.Tensor
+    t_passing: torch.Tensor
+
+
 @dataclass
 class FrameData:
     """Per-frame cache: pose context (geometry), shell, and per-view images/masks/bounds."""
@@ -155,32 +172,43 @@ class Trainer:
             self.frames[t] = FrameData(ctx, shell)
         return self.frames[t]
 
-    def _view(self, fd: FrameData, t: int, v: int):
-        """Image, mask and per-pixel ray bounds of a view (cached). Rays that hit the body
-        end δ behind its first surface: the interior is opaque, so nothing behind it can
-        contribute, and training then evaluates no samples there."""
+    def _view(self, fd: FrameData, t: int, v: int) -> ViewData:
+        """Image, mask, per-pixel ray bounds and surface band of a view (cached). Rays that
+        hit the body end δ behind its first surface: the interior is opaque, so nothing
+        behind it can contribute, and training then evaluates no samples there. With
+        ``train_guide=raster`` the band rays inside the mask keep their mesh hit and the
+        rays outside it that miss the mesh their two probe places
+        (:func:`~texvocab.render.band.plan_surface`); the band cannot lower a ray's
+        opacity (it ends inside), so rays outside the mask never take it."""
         if v not in fd.views:
             cam = self.capture.cameras[v]
             img = torch.from_numpy(self.capture.image(v, t)).view(-1, 3)
             mask = torch.from_numpy(self.capture.mask(v, t)).view(-1)
             b = fd.shell.image_bounds(cam)
             far = b.far.view(-1).clone()
-            depth = rasterize_mesh(fd.ctx.vertices.detach(), self.capture.body.faces, cam).depth
             _, dirs = cam.pixel_rays()
-            t_hit = depth.view(-1) / (dirs.double() @ torch.as_tensor(cam.R[2])).float()
-            first = torch.isfinite(t_hit)
-            far[first] = torch.minimum(far[first], t_hit[first] + self.s.field.shell_width)
-            fd.views[v] = (img, mask, b.hit.view(-1), b.near.view(-1), far)
+            delta = self.s.field.shell_width
+            plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
+                                delta, delta, self.march.min_cos)
+            first = plan.hit
+            far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
+            raster = self.s.train_guide == "raster"
+            t_band = torch.where(plan.band & mask & raster, plan.t_hit, torch.inf)
+            passing = plan.passby & ~first & ~mask & raster
+            t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind],
+                                                                  1), torch.inf)
+            fd.views[v] = ViewData(img, mask, b.hit.view(-1), b.near.view(-1), far, t_band,
+                                   plan.cos.half(), t_passing)
         return fd.views[v]
 
     def _patch(self, fd: FrameData, t: int, v: int, p: int):
         """Rays of a random ``p``×``p`` patch inside the mask's bounding box of view v
         (clamped to the image); pixels whose ray misses the shell render the background."""
-        img, mask, hit, near, far = self._view(fd, t, v)
+        vd = self._view(fd, t, v)
         cam = self.capture.cameras[v]
         w, h = cam.width, cam.height
         p = min(p, w, h)
-        ys, xs = torch.nonzero(mask.view(h, w), as_tuple=True)
+        ys, xs = torch.nonzero(vd.mask.view(h, w), as_tuple=True)
         lo = (int(ys.min()), int(xs.min())) if len(ys) else (0, 0)
         hi = (int(ys.max()), int(xs.max())) if len(ys) else (h - 1, w - 1)
         corner = []
@@ -193,13 +221,14 @@ class Trainer:
                                 indexing="ij")
         pix = (yy * w + xx).reshape(-1)
         o, d = cam.pixel_rays(torch.stack([xx.reshape(-1), yy.reshape(-1)], 1).numpy())
-        far_p = torch.where(hit[pix], far[pix], near[pix])  # no shell: background only
-        return o, d, near[pix], far_p, img[pix], mask[pix].float()
+        far_p = torch.where(vd.hit[pix], vd.far[pix], vd.near[pix])  # no shell: background only
+        return (o, d, vd.near[pix], far_p, vd.img[pix], vd.mask[pix].float(), vd.t_band[pix],
+                vd.cos[pix].float(), vd.t_passing[pix])
 
     def _rays(self, fd: FrameData, t: int, v: int, n: int):
-        img, mask, hit, near, far = self._view(fd, t, v)
-        fg = torch.nonzero(hit & mask).squeeze(1)
-        bg = torch.nonzero(hit & ~mask).squeeze(1)
+        vd = self._view(fd, t, v)
+        fg = torch.nonzero(vd.hit & vd.mask).squeeze(1)
+        bg = torch.nonzero(vd.hit & ~vd.mask).squeeze(1)
         n_fg = min(len(fg), round(n * self.s.fg_fraction)) if len(bg) else min(len(fg), n)
         picks = [fg[torch.randint(len(fg), (n_fg,), generator=self.gen)]] if len(fg) else []
         if len(bg):
@@ -208,7 +237,8 @@ class Trainer:
         cam = self.capture.cameras[v]
         w = cam.width
         o, d = cam.pixel_rays(torch.stack([pix % w, pix // w], 1).numpy())
-        return o, d, near[pix], far[pix], img[pix], mask[pix].float()
+        return (o, d, vd.near[pix], vd.far[pix], vd.img[pix], vd.mask[pix].float(),
+                vd.t_band[pix], vd.cos[pix].float(), vd.t_passing[pix])
 
     def _eikonal(self, fd: FrameData, n: int, evaluate: bool = True) -> torch.Tensor:
         verts = fd.ctx.vertices.detach()
@@ -240,7 +270,8 @@ class Trainer:
             p = int(round(len(batch[0][0]) ** 0.5))
         batch.append(self._rays(fd, t, vs[0], max(1, half - p * p)))
         batch.append(self._rays(fd, t, vs[1], s.rays_per_batch - half))
-        o, d, near, far, gt, m = (torch.cat(x) for x in zip(*batch, strict=True))
+        o, d, near, far, gt, m, t_band, cos, t_pass = (torch.cat(x)
+                                                       for x in zip(*batch, strict=True))
         # every process draws the whole batch from the shared stream and renders its shard:
         # the patch and the eikonal term on rank 0, the other rays dealt round; each term is
         # scaled so the mean over processes of the shards' gradients is the whole batch's
@@ -248,11 +279,12 @@ class Trainer:
         if self.world > 1:
             rest = torch.arange(p * p, total)[self.rank::self.world]
             mine = torch.cat([torch.arange(p * p), rest]) if lead else rest
-            o, d, near, far, gt, m = (x[mine] for x in (o, d, near, far, gt, m))
+            o, d, near, far, gt, m, t_band, cos, t_pass = (
+                x[mine] for x in (o, d, near, far, gt, m, t_band, cos, t_pass))
             gen = torch.Generator().manual_seed(s.seed * 1_000_003 + self.step * 64 + self.rank)
         share = self.world * len(o) / total
-        out = render_rays(self.model.for_pose(fd.ctx), o, d, near, far, self.march, gen,
-                          fd.shell)
+        out = render_rays_banded(self.model.for_pose(fd.ctx), self.model.beta, o, d, near, far,
+                                 t_band, cos, self.march, gen, fd.shell, t_passing=t_pass)
         eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
                  "eikonal": torch.zeros(()) if eikonal is None else eikonal,
@@ -269,7 +301,7 @@ class Trainer:
                       if self.checkpoint_path.is_file() else "no checkpoint was written")
                 raise TexvocabError(f"training stopped at step {self.step + 1}: the {name} "
                                     f"term is {float(terms[name].detach())}; {ck}")
-        terms["field_evals"] = out.field_evals
+        terms["field_evals"], terms["banded"] = out.field_evals, out.banded
         terms["frame"] = fd
         return terms
 
@@ -290,7 +322,8 @@ class Trainer:
         return {"loss": float(terms["loss"].detach()), "psnr": psnr,
                 "eikonal": float(terms["eikonal"].detach()),
                 "perceptual": float(terms["perceptual"].detach()),
-                "beta": float(self.model.beta.detach()), "evals": terms["field_evals"]}
+                "beta": float(self.model.beta.detach()), "evals": terms["field_evals"],
+                "banded": terms["banded"]}
 
     def state(self) -> dict:
         return {"step": self.step, "settings": self.s.to_dict(),

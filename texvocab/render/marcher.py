@@ -121,12 +121,15 @@ class RenderCancelled(Exception):
 @dataclass
 class RayResult:
     """rgb (R, 3) over the background; opacity (R,); depth (R,): expected ray distance of
-    the surface, sum(w t) / opacity (0 for empty rays); field_evals: points evaluated."""
+    the surface, sum(w t) / opacity (0 for empty rays); field_evals: points evaluated;
+    banded: rays resolved by the surface band (:func:`texvocab.render.band.render_rays_banded`).
+    """
 
     rgb: torch.Tensor
     opacity: torch.Tensor
     depth: torch.Tensor
     field_evals: int
+    banded: int = 0
 
 
 @dataclass

@@ -1,0 +1,122 @@
+"""The surface band shared by the guided renderer and training
+(texvocab.render.band.render_rays_banded): the same colours as the shell marcher for far
+fewer evaluations, gradients that reach the field and β, passing rays that cost two probes,
+and the trainer's use of it (``train_guide``)."""
+import pytest
+import torch
+
+from tests.test_render import DELTA, body, looking_away, psnr  # noqa: F401
+from tests.test_train import capture, tiny_settings  # noqa: F401
+from texvocab.capture import open as open_capture
+from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.train import Trainer
+from texvocab.render import MarchSettings, render_rays
+from texvocab.render.band import plan_surface, render_rays_banded
+
+MARCH = MarchSettings(shell_width=DELTA, coarse_samples=36, fine_samples=16, early_stop_eps=0,
+                      segment=512, scout_threshold=None)
+
+
+def rays_of(body, camera):  # noqa: F811
+    """Every pixel ray of ``camera`` that meets the shell: origins, dirs, near, far, and the
+    plan's band hits and passing probes (inf where a ray is neither)."""
+    bounds = body["shell"].image_bounds(camera)
+    pix = torch.nonzero(bounds.hit.view(-1)).squeeze(1)
+    o, d = camera.pixel_rays()
+    plan = plan_surface(body["v"], body["f"], camera, d, DELTA, DELTA, MARCH.min_cos)
+    t_band = torch.where(plan.band, plan.t_hit, torch.inf)
+    passing = plan.passby & ~plan.hit
+    t_pass = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind], 1),
+                         torch.inf)
+    return (o[pix], d[pix], bounds.near.view(-1)[pix], bounds.far.view(-1)[pix], t_band[pix],
+            plan.cos[pix], t_pass[pix])
+
+
+def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):  # noqa: F811
+    o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
+    field = body["field"]
+    with torch.no_grad():
+        ref = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
+        out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
+                                 body["shell"], t_passing=t_pass)
+    assert out.banded > 0.5 * int(torch.isfinite(t_band).sum()) > 0
+    assert psnr(out.rgb, ref.rgb) > 40
+    assert (out.opacity - ref.opacity).abs().max() < 0.05
+    assert out.field_evals < 0.5 * ref.field_evals
+    shell_only = render_rays_banded(field, field.beta, o, d, near, far, torch.full_like(t_band,
+                                    torch.inf), cos, MARCH, None, body["shell"])
+    assert shell_only.banded == 0 and shell_only.field_evals == ref.field_evals
+
+
+def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body):  # noqa: F811
+    o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
+    band = torch.isfinite(t_band)
+    o, d, near, far, t_band, cos = (x[band] for x in (o, d, near, far, t_band, cos))
+    grads = {}
+    for name in ("band", "shell"):
+        field = body["field"]
+        field.albedo = field.albedo.detach().clone().requires_grad_(True)
+        field.beta = field.beta.detach().clone().requires_grad_(True)
+        t = t_band if name == "band" else torch.full_like(t_band, torch.inf)
+        out = render_rays_banded(field, field.beta, o, d, near, far, t, cos, MARCH, None,
+                                 body["shell"])
+        (out.rgb.sum() + out.rgb[:, 0].pow(2).sum()).backward()
+        grads[name] = (field.albedo.grad.clone(), field.beta.grad.clone())
+    field.albedo, field.beta = field.albedo.detach(), field.beta.detach()
+    (ga, gb), (sa, _) = grads["band"], grads["shell"]
+    assert torch.isfinite(ga).all() and float(ga.abs().min()) > 0
+    assert torch.allclose(ga, sa, rtol=0.02)  # band rays: the colour's gradient is the same
+    assert torch.isfinite(gb) and float(gb) != 0.0
+
+
+def test_passing_rays_cost_two_probes_and_show_the_background(body):  # noqa: F811
+    """Rays that pass the body farther than miss_margin β read the background for two
+    evaluations each; rays that pass close are marched."""
+    cam = body["camera"]
+    o, d, near, far, t_band, cos, t_pass = rays_of(body, cam)
+    field = body["field"]
+    passing = torch.isfinite(t_pass[:, 0])
+    assert passing.sum() > 10
+    idx = torch.nonzero(passing).squeeze(1)
+    bg = (0.1, 0.2, 0.3)
+    with torch.no_grad():
+        out = render_rays_banded(field, field.beta, o[idx], d[idx], near[idx], far[idx],
+                                 t_band[idx], cos[idx], MARCH, None, body["shell"], bg, t_pass[idx])
+        probe = field.sdf((o[idx, None] + t_pass[idx, :, None] * d[idx, None]).reshape(-1, 3))
+    far_away = probe.view(-1, 2).min(1).values > MARCH.miss_margin * float(field.beta)
+    assert 0 < int(far_away.sum()) < len(idx)  # both kinds occur on this view
+    assert torch.allclose(out.rgb[far_away], torch.tensor(bg).expand(int(far_away.sum()), 3))
+    assert (out.opacity[far_away] == 0).all()
+    marched = render_rays(field, o[idx][~far_away], d[idx][~far_away], near[idx][~far_away],
+                          far[idx][~far_away], MARCH, None, body["shell"], bg)
+    assert out.field_evals == 2 * len(idx) + marched.field_evals
+    assert torch.allclose(out.rgb[~far_away], marched.rgb, atol=1e-6)
+
+
+@pytest.mark.parametrize("guide", ["raster", "shell"])
+def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path, guide):  # noqa: F811
+    cap = open_capture(capture)
+    trainer = Trainer(cap, tiny_settings(train_guide=guide, iterations=3), tmp_path / "run",
+                      progress=False)
+    before = [p.detach().clone() for p in trainer.model.parameters() if p.requires_grad]
+    logs = trainer.run()
+    banded = sum(r["banded"] for r in logs)
+    assert (banded > 0) == (guide == "raster")
+    after = [p for p in trainer.model.parameters() if p.requires_grad]
+    assert any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
+    for fd in trainer.frames.values():
+        for vd in fd.views.values():  # rays outside the mask never take the band
+            assert not (torch.isfinite(vd.t_band) & ~vd.mask).any()
+            assert not (torch.isfinite(vd.t_passing[:, 0]) & vd.mask).any()
+            if guide == "shell":
+                assert not torch.isfinite(vd.t_band).any()
+
+
+def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
+    from texvocab.errors import TexvocabError
+
+    with pytest.raises(TexvocabError, match="train_guide"):
+        Settings(train_guide="mesh")
+    old = Settings().to_dict()
+    del old["train_guide"]
+    assert Settings.from_dict(old).train_guide == "shell"
