@@ -55,7 +55,7 @@ class Settings:
     iterations: int = 2000
     rays_per_batch: int = 1024
     fg_fraction: float = 0.8  # share of rays drawn inside the mask
-    train_guide: str = "shell"  # raster: rays in the mask that hit the posed mesh are
+    train_guide: str = "raster"  # raster: rays in the mask that hit the posed mesh are
     # rendered by the surface band (probe + band_samples, closed-form VolSDF opacity), the
     # rest by the shell marcher | shell: every ray by the shell marcher (README "Training")
     lr: float = 5e-4

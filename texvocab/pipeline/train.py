@@ -1,8 +1,10 @@
 """``texvocab train``: fit the avatar to a capture (Sec. 3.5).
 
 Each step picks a training frame and views, draws rays inside the shell around the posed
-body (``fg_fraction`` of them inside the mask), renders them with the coarse-to-fine
-marcher and minimises λ_c·MSE(colour) + λ_m·MAE(opacity, mask) + λ_e·eikonal
+body (``fg_fraction`` of them inside the mask), renders them — with the surface band
+where the posed mesh's rasterisation allows (``train_guide=raster``,
+:func:`~texvocab.render.band.render_rays_banded`), else with the coarse-to-fine shell
+marcher — and minimises λ_c·MSE(colour) + λ_m·MAE(opacity, mask) + λ_e·eikonal
 + λ_p·perceptual. For the perceptual term one ``patch_size``² patch of contiguous pixels,
 placed at random inside the mask's bounding box of the first view, is rendered as part of
 the batch (it replaces that many random rays, so a step renders the same number of rays)
@@ -152,6 +154,8 @@ class Trainer:
         self.step = 0
         self.march = march_settings(settings, training=True)
         self.frames: dict[int, FrameData] = {}
+        self.cache_seconds = 0.0  # spent building the frame and view caches (one-off each)
+        self.pixel_dirs: dict[int, torch.Tensor] = {}  # view -> (H·W, 3) ray directions
         self.progress = progress
         self.perceptual = perceptual_term(settings)
         # data-parallel training (texvocab.pipeline.ddp): this process computes shard
@@ -165,11 +169,13 @@ class Trainer:
 
     def _frame(self, t: int) -> FrameData:
         if t not in self.frames:
+            t0 = time.perf_counter()
             pf = self.model.pose_feature
             ctx = pf.context(self.capture.poses[t], self.capture.trans[t])
             shell = ShellGeometry.build(ctx.vertices.detach(), self.capture.body.faces,
                                         self.s.field.shell_width, index=ctx.index)
             self.frames[t] = FrameData(ctx, shell)
+            self.cache_seconds += time.perf_counter() - t0
         return self.frames[t]
 
     def _view(self, fd: FrameData, t: int, v: int) -> ViewData:
@@ -181,12 +187,15 @@ class Trainer:
         (:func:`~texvocab.render.band.plan_surface`); the band cannot lower a ray's
         opacity (it ends inside), so rays outside the mask never take it."""
         if v not in fd.views:
+            t0 = time.perf_counter()
             cam = self.capture.cameras[v]
             img = torch.from_numpy(self.capture.image(v, t)).view(-1, 3)
             mask = torch.from_numpy(self.capture.mask(v, t)).view(-1)
             b = fd.shell.image_bounds(cam)
             far = b.far.view(-1).clone()
-            _, dirs = cam.pixel_rays()
+            if v not in self.pixel_dirs:  # a camera's pixel rays are the same every frame
+                self.pixel_dirs[v] = cam.pixel_rays()[1]
+            dirs = self.pixel_dirs[v]
             delta = self.s.field.shell_width
             plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
                                 delta, delta, self.march.min_cos)
@@ -199,6 +208,7 @@ class Trainer:
                                                                   1), torch.inf)
             fd.views[v] = ViewData(img, mask, b.hit.view(-1), b.near.view(-1), far, t_band,
                                    plan.cos.half(), t_passing)
+            self.cache_seconds += time.perf_counter() - t0
         return fd.views[v]
 
     def _patch(self, fd: FrameData, t: int, v: int, p: int):

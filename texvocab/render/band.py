@@ -104,15 +104,30 @@ class SurfacePlan:
         return torch.isfinite(self.t_hit)
 
 
-def _frontmost_neighbour(t_map: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _frontmost_neighbour(t_map: torch.Tensor, radius: int) -> torch.Tensor:
     """For each pixel of t_map (H, W) (ray distance of the mesh hit, inf where missed):
-    the smallest hit distance within its (2 radius + 1)² window (_FAR where none) and the
-    flat index of the pixel that has it."""
-    hit = torch.isfinite(t_map)
+    the smallest hit distance within its (2 radius + 1)² window (_FAR where none), as a
+    separable minimum filter (rows, then columns)."""
     k = 2 * radius + 1
-    neg, idx = F.max_pool2d(-torch.where(hit, t_map, _FAR)[None, None], k, 1, radius,
-                            return_indices=True)
-    return -neg[0, 0].reshape(-1), idx[0, 0].reshape(-1)
+    neg = -torch.where(torch.isfinite(t_map), t_map, _FAR)[None, None]
+    neg = F.max_pool2d(F.max_pool2d(neg, (k, 1), 1, (radius, 0)), (1, k), 1, (0, radius))
+    return -neg.reshape(-1)
+
+
+def _frontmost_pixel(t_map: torch.Tensor, radius: int, pix: torch.Tensor) -> torch.Tensor:
+    """The flat index of the frontmost hit pixel in the window of each pixel of ``pix``
+    (n,) (flat indices into t_map (H, W))."""
+    H, W = t_map.shape
+    if len(pix) == 0:
+        return pix.clone()
+    d = torch.arange(-radius, radius + 1)
+    y = (pix // W)[:, None, None] + d[None, :, None]
+    x = (pix % W)[:, None, None] + d[None, None, :]
+    inside = (y >= 0) & (y < H) & (x >= 0) & (x < W)
+    flat = (y.clamp(0, H - 1) * W + x.clamp(0, W - 1)).reshape(len(pix), -1)
+    t = torch.where(torch.isfinite(t_map), t_map, _FAR).reshape(-1)[flat]
+    t = torch.where(inside.reshape(len(pix), -1), t, 2 * _FAR)
+    return flat.gather(1, t.argmin(1, keepdim=True)).squeeze(1)
 
 
 def plan_surface(vertices: torch.Tensor, faces: torch.Tensor, camera, dirs: torch.Tensor,
@@ -132,7 +147,7 @@ def plan_surface(vertices: torch.Tensor, faces: torch.Tensor, camera, dirs: torc
         return SurfacePlan(t_hit, cos, nothing, none, none.clone(), nothing)
     z_min = float(raster.depth.view(-1)[hit].min())
     radius = max(min(int(math.ceil(reach * float(camera.K[0, 0]) / max(z_min, 1e-6))), 64), 1)
-    front, front_pix = _frontmost_neighbour(t_hit.view(H, W), radius)
+    front = _frontmost_neighbour(t_hit.view(H, W), radius)
     tri = vertices.detach().float()[faces]
     normal = F.normalize(torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=1),
                          dim=1)
@@ -151,9 +166,11 @@ def plan_surface(vertices: torch.Tensor, faces: torch.Tensor, camera, dirs: torc
     gap, (iy, ix) = ndimage.distance_transform_edt(~hit.view(H, W).numpy(),
                                                    return_indices=True)
     gap = torch.from_numpy(gap).float().view(-1)
-    nearest = torch.where(hit, front_pix, torch.from_numpy((iy * W + ix).reshape(-1)))
+    nearest = torch.from_numpy((iy * W + ix).reshape(-1)).long()
     gap = torch.where(hit, float(radius), gap)
     p_idx = torch.nonzero(passby).squeeze(1)
+    behind = hit[p_idx]  # hits behind an occlusion edge: the window's frontmost hit
+    nearest[p_idx[behind]] = _frontmost_pixel(t_hit.view(H, W), radius, p_idx[behind])
     q = nearest[p_idx]
     t_pass, t_behind = none, none.clone()
     t_pass[p_idx] = ((t_hit[q, None] * dirs[q]) * dirs[p_idx]).sum(1)

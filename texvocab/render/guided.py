@@ -1,7 +1,7 @@
 """Surface-guided marcher: the posed mesh's rasterisation tells each ray where its surface
 is, the field's SDF refines it, and a few samples around it are composited with the
-VolSDF opacity integrated in closed form (render time only; training keeps the shell
-marcher, :func:`texvocab.render.marcher.render_rays`).
+VolSDF opacity integrated in closed form (:mod:`texvocab.render.band`, which training
+shares through :func:`~texvocab.render.band.render_rays_banded`).
 
 The avatar's SDF is the posed body's signed distance plus a residual, and its density is
 zero beyond the shell (δ from the mesh) — so a ray's first surface lies within δ of the
