@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
 
 import torch
 from tqdm import tqdm
@@ -38,8 +36,8 @@ from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
-from texvocab.render import ShellGeometry
-from texvocab.render.band import plan_surface, render_rays_banded
+from texvocab.pipeline.training_rays import FrameData, TrainingRays
+from texvocab.render.band import render_rays_banded
 
 log = logging.getLogger("texvocab")
 SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --resume
@@ -104,31 +102,6 @@ def perceptual_term(s: Settings) -> torch.nn.Module | None:
     return net
 
 
-class ViewData(NamedTuple):
-    """One training view of one frame, per pixel (H·W, row-major): img (·, 3), mask,
-    hit (the ray meets the shell), near, far (ray bounds), t_band (mesh hit of the band
-    rays, inf elsewhere), cos (float16, the hit face's cosine), t_passing (·, 2) (where
-    rays outside the mask that miss the mesh pass closest to it, inf elsewhere)."""
-
-    img: torch.Tensor
-    mask: torch.Tensor
-    hit: torch.Tensor
-    near: torch.Tensor
-    far: torch.Tensor
-    t_band: torch.Tensor
-    cos: torch.Tensor
-    t_passing: torch.Tensor
-
-
-@dataclass
-class FrameData:
-    """Per-frame cache: pose context (geometry), shell, and per-view images/masks/bounds."""
-
-    ctx: object
-    shell: ShellGeometry
-    views: dict = field(default_factory=dict)
-
-
 class Trainer:
     """Owns the model, the optimiser, the random stream and the per-frame caches."""
 
@@ -153,9 +126,7 @@ class Trainer:
         self.gen = torch.Generator().manual_seed(settings.seed)
         self.step = 0
         self.march = march_settings(settings, training=True)
-        self.frames: dict[int, FrameData] = {}
-        self.cache_seconds = 0.0  # spent building the frame and view caches (one-off each)
-        self.pixel_dirs: dict[int, torch.Tensor] = {}  # view -> (H·W, 3) ray directions
+        self.rays = TrainingRays(capture, settings, self.model, self.march.min_cos)
         self.progress = progress
         self.perceptual = perceptual_term(settings)
         # data-parallel training (texvocab.pipeline.ddp): this process computes shard
@@ -164,91 +135,17 @@ class Trainer:
         self.rank, self.world, self.sync, self.agree = 0, 1, None, None
 
     @property
+    def frames(self) -> dict[int, FrameData]:
+        """The per-frame caches built so far (:class:`TrainingRays`)."""
+        return self.rays.frames
+
+    @property
+    def cache_seconds(self) -> float:
+        return self.rays.cache_seconds
+
+    @property
     def checkpoint_path(self) -> Path:
         return self.out / "checkpoint.pt"
-
-    def _frame(self, t: int) -> FrameData:
-        if t not in self.frames:
-            t0 = time.perf_counter()
-            pf = self.model.pose_feature
-            ctx = pf.context(self.capture.poses[t], self.capture.trans[t])
-            shell = ShellGeometry.build(ctx.vertices.detach(), self.capture.body.faces,
-                                        self.s.field.shell_width, index=ctx.index)
-            self.frames[t] = FrameData(ctx, shell)
-            self.cache_seconds += time.perf_counter() - t0
-        return self.frames[t]
-
-    def _view(self, fd: FrameData, t: int, v: int) -> ViewData:
-        """Image, mask, per-pixel ray bounds and surface band of a view (cached). Rays that
-        hit the body end δ behind its first surface: the interior is opaque, so nothing
-        behind it can contribute, and training then evaluates no samples there. With
-        ``train_guide=raster`` the band rays inside the mask keep their mesh hit and the
-        rays outside it that miss the mesh their two probe places
-        (:func:`~texvocab.render.band.plan_surface`); the band cannot lower a ray's
-        opacity (it ends inside), so rays outside the mask never take it."""
-        if v not in fd.views:
-            t0 = time.perf_counter()
-            cam = self.capture.cameras[v]
-            img = torch.from_numpy(self.capture.image(v, t)).view(-1, 3)
-            mask = torch.from_numpy(self.capture.mask(v, t)).view(-1)
-            b = fd.shell.image_bounds(cam)
-            far = b.far.view(-1).clone()
-            if v not in self.pixel_dirs:  # a camera's pixel rays are the same every frame
-                self.pixel_dirs[v] = cam.pixel_rays()[1]
-            dirs = self.pixel_dirs[v]
-            delta = self.s.field.shell_width
-            plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
-                                delta, delta, self.march.min_cos)
-            first = plan.hit
-            far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
-            raster = self.s.train_guide == "raster"
-            t_band = torch.where(plan.band & mask & raster, plan.t_hit, torch.inf)
-            passing = plan.passby & ~first & ~mask & raster
-            t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind],
-                                                                  1), torch.inf)
-            fd.views[v] = ViewData(img, mask, b.hit.view(-1), b.near.view(-1), far, t_band,
-                                   plan.cos.half(), t_passing)
-            self.cache_seconds += time.perf_counter() - t0
-        return fd.views[v]
-
-    def _patch(self, fd: FrameData, t: int, v: int, p: int):
-        """Rays of a random ``p``×``p`` patch inside the mask's bounding box of view v
-        (clamped to the image); pixels whose ray misses the shell render the background."""
-        vd = self._view(fd, t, v)
-        cam = self.capture.cameras[v]
-        w, h = cam.width, cam.height
-        p = min(p, w, h)
-        ys, xs = torch.nonzero(vd.mask.view(h, w), as_tuple=True)
-        lo = (int(ys.min()), int(xs.min())) if len(ys) else (0, 0)
-        hi = (int(ys.max()), int(xs.max())) if len(ys) else (h - 1, w - 1)
-        corner = []
-        for first, last, size in ((lo[0], hi[0], h), (lo[1], hi[1], w)):
-            a = min(first, size - p)  # the patch starts inside the box and fits the image
-            b = max(a, min(last - p + 1, size - p))
-            corner.append(int(torch.randint(a, b + 1, (1,), generator=self.gen)))
-        y0, x0 = corner
-        yy, xx = torch.meshgrid(torch.arange(y0, y0 + p), torch.arange(x0, x0 + p),
-                                indexing="ij")
-        pix = (yy * w + xx).reshape(-1)
-        o, d = cam.pixel_rays(torch.stack([xx.reshape(-1), yy.reshape(-1)], 1).numpy())
-        far_p = torch.where(vd.hit[pix], vd.far[pix], vd.near[pix])  # no shell: background only
-        return (o, d, vd.near[pix], far_p, vd.img[pix], vd.mask[pix].float(), vd.t_band[pix],
-                vd.cos[pix].float(), vd.t_passing[pix])
-
-    def _rays(self, fd: FrameData, t: int, v: int, n: int):
-        vd = self._view(fd, t, v)
-        fg = torch.nonzero(vd.hit & vd.mask).squeeze(1)
-        bg = torch.nonzero(vd.hit & ~vd.mask).squeeze(1)
-        n_fg = min(len(fg), round(n * self.s.fg_fraction)) if len(bg) else min(len(fg), n)
-        picks = [fg[torch.randint(len(fg), (n_fg,), generator=self.gen)]] if len(fg) else []
-        if len(bg):
-            picks.append(bg[torch.randint(len(bg), (n - n_fg,), generator=self.gen)])
-        pix = torch.cat(picks)
-        cam = self.capture.cameras[v]
-        w = cam.width
-        o, d = cam.pixel_rays(torch.stack([pix % w, pix // w], 1).numpy())
-        return (o, d, vd.near[pix], vd.far[pix], vd.img[pix], vd.mask[pix].float(),
-                vd.t_band[pix], vd.cos[pix].float(), vd.t_passing[pix])
 
     def _eikonal(self, fd: FrameData, n: int, evaluate: bool = True) -> torch.Tensor:
         verts = fd.ctx.vertices.detach()
@@ -269,17 +166,17 @@ class Trainer:
         ``field_evals`` and the step's ``frame`` (its :class:`FrameData`)."""
         s = self.s
         t = int(torch.randint(self.capture.num_train, (1,), generator=self.gen))
-        fd = self._frame(t)
+        fd = self.rays.frame(t)
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             fd.ctx.features = self.model.pose_feature.feature_maps(fd.ctx.frames)
         vs = [self.views[int(i)] for i in torch.randint(len(self.views), (2,), generator=self.gen)]
         half = s.rays_per_batch // 2
         batch, p = [], 0
         if self.perceptual is not None:
-            batch.append(self._patch(fd, t, vs[0], s.patch_size))
+            batch.append(self.rays.patch(fd, t, vs[0], s.patch_size, self.gen))
             p = int(round(len(batch[0][0]) ** 0.5))
-        batch.append(self._rays(fd, t, vs[0], max(1, half - p * p)))
-        batch.append(self._rays(fd, t, vs[1], s.rays_per_batch - half))
+        batch.append(self.rays.draw(fd, t, vs[0], max(1, half - p * p), self.gen))
+        batch.append(self.rays.draw(fd, t, vs[1], s.rays_per_batch - half, self.gen))
         o, d, near, far, gt, m, t_band, cos, t_pass = (torch.cat(x)
                                                        for x in zip(*batch, strict=True))
         # every process draws the whole batch from the shared stream and renders its shard:

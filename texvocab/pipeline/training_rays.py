@@ -1,0 +1,137 @@
+"""Training rays: the per-frame and per-view caches a training step draws its rays from
+(pose context, shell, image, mask, ray bounds and the surface plan of each view) and the
+draws themselves — random rays, ``fg_fraction`` of them inside the mask, and the
+perceptual term's patch. Each cache is built once, on first use, and its build time is
+counted (``cache_seconds``; bench/train_speed.py reports steps with and without it).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import torch
+
+from texvocab.render import ShellGeometry
+from texvocab.render.band import plan_surface
+
+
+class ViewData(NamedTuple):
+    """One training view of one frame, per pixel (H·W, row-major): img (·, 3), mask,
+    hit (the ray meets the shell), near, far (ray bounds), t_band (mesh hit of the band
+    rays, inf elsewhere), cos (float16, the hit face's cosine), t_passing (·, 2) (where
+    rays outside the mask that miss the mesh pass closest to it, inf elsewhere)."""
+
+    img: torch.Tensor
+    mask: torch.Tensor
+    hit: torch.Tensor
+    near: torch.Tensor
+    far: torch.Tensor
+    t_band: torch.Tensor
+    cos: torch.Tensor
+    t_passing: torch.Tensor
+
+
+@dataclass
+class FrameData:
+    """Per-frame cache: pose context (geometry), shell, and per-view images/masks/bounds."""
+
+    ctx: object
+    shell: ShellGeometry
+    views: dict = field(default_factory=dict)
+
+
+class TrainingRays:
+    """Caches and ray draws of one training run: ``capture``, its ``settings``, the
+    ``model`` (its pose contexts) and the band's ``min_cos``."""
+
+    def __init__(self, capture, settings, model, min_cos: float):
+        self.capture, self.s, self.model, self.min_cos = capture, settings, model, min_cos
+        self.frames: dict[int, FrameData] = {}
+        self.cache_seconds = 0.0  # spent building the frame and view caches (one-off each)
+        self.pixel_dirs: dict[int, torch.Tensor] = {}  # view -> (H·W, 3) ray directions
+
+    def frame(self, t: int) -> FrameData:
+        """Frame t's cache (pose context and shell), built on first use."""
+        if t not in self.frames:
+            t0 = time.perf_counter()
+            pf = self.model.pose_feature
+            ctx = pf.context(self.capture.poses[t], self.capture.trans[t])
+            shell = ShellGeometry.build(ctx.vertices.detach(), self.capture.body.faces,
+                                        self.s.field.shell_width, index=ctx.index)
+            self.frames[t] = FrameData(ctx, shell)
+            self.cache_seconds += time.perf_counter() - t0
+        return self.frames[t]
+
+    def view(self, fd: FrameData, t: int, v: int) -> ViewData:
+        """Image, mask, per-pixel ray bounds and surface band of a view (cached). Rays that
+        hit the body end δ behind its first surface: the interior is opaque, so nothing
+        behind it can contribute, and training then evaluates no samples there. With
+        ``train_guide=raster`` the band rays inside the mask keep their mesh hit and the
+        rays outside it that miss the mesh their two probe places
+        (:func:`~texvocab.render.band.plan_surface`); the band cannot lower a ray's
+        opacity (it ends inside), so rays outside the mask never take it."""
+        if v not in fd.views:
+            t0 = time.perf_counter()
+            cam = self.capture.cameras[v]
+            img = torch.from_numpy(self.capture.image(v, t)).view(-1, 3)
+            mask = torch.from_numpy(self.capture.mask(v, t)).view(-1)
+            b = fd.shell.image_bounds(cam)
+            far = b.far.view(-1).clone()
+            if v not in self.pixel_dirs:  # a camera's pixel rays are the same every frame
+                self.pixel_dirs[v] = cam.pixel_rays()[1]
+            dirs = self.pixel_dirs[v]
+            delta = self.s.field.shell_width
+            plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
+                                delta, delta, self.min_cos)
+            first = plan.hit
+            far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
+            raster = self.s.train_guide == "raster"
+            t_band = torch.where(plan.band & mask & raster, plan.t_hit, torch.inf)
+            passing = plan.passby & ~first & ~mask & raster
+            t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind],
+                                                                  1), torch.inf)
+            fd.views[v] = ViewData(img, mask, b.hit.view(-1), b.near.view(-1), far, t_band,
+                                   plan.cos.half(), t_passing)
+            self.cache_seconds += time.perf_counter() - t0
+        return fd.views[v]
+
+    def patch(self, fd: FrameData, t: int, v: int, p: int, gen: torch.Generator):
+        """Rays of a random ``p``×``p`` patch inside the mask's bounding box of view v
+        (clamped to the image); pixels whose ray misses the shell render the background."""
+        vd = self.view(fd, t, v)
+        cam = self.capture.cameras[v]
+        w, h = cam.width, cam.height
+        p = min(p, w, h)
+        ys, xs = torch.nonzero(vd.mask.view(h, w), as_tuple=True)
+        lo = (int(ys.min()), int(xs.min())) if len(ys) else (0, 0)
+        hi = (int(ys.max()), int(xs.max())) if len(ys) else (h - 1, w - 1)
+        corner = []
+        for first, last, size in ((lo[0], hi[0], h), (lo[1], hi[1], w)):
+            a = min(first, size - p)  # the patch starts inside the box and fits the image
+            b = max(a, min(last - p + 1, size - p))
+            corner.append(int(torch.randint(a, b + 1, (1,), generator=gen)))
+        y0, x0 = corner
+        yy, xx = torch.meshgrid(torch.arange(y0, y0 + p), torch.arange(x0, x0 + p),
+                                indexing="ij")
+        pix = (yy * w + xx).reshape(-1)
+        o, d = cam.pixel_rays(torch.stack([xx.reshape(-1), yy.reshape(-1)], 1).numpy())
+        far_p = torch.where(vd.hit[pix], vd.far[pix], vd.near[pix])  # no shell: background only
+        return (o, d, vd.near[pix], far_p, vd.img[pix], vd.mask[pix].float(), vd.t_band[pix],
+                vd.cos[pix].float(), vd.t_passing[pix])
+
+    def draw(self, fd: FrameData, t: int, v: int, n: int, gen: torch.Generator):
+        """``n`` random rays of view v, ``fg_fraction`` of them inside the mask."""
+        vd = self.view(fd, t, v)
+        fg = torch.nonzero(vd.hit & vd.mask).squeeze(1)
+        bg = torch.nonzero(vd.hit & ~vd.mask).squeeze(1)
+        n_fg = min(len(fg), round(n * self.s.fg_fraction)) if len(bg) else min(len(fg), n)
+        picks = [fg[torch.randint(len(fg), (n_fg,), generator=gen)]] if len(fg) else []
+        if len(bg):
+            picks.append(bg[torch.randint(len(bg), (n - n_fg,), generator=gen)])
+        pix = torch.cat(picks)
+        cam = self.capture.cameras[v]
+        w = cam.width
+        o, d = cam.pixel_rays(torch.stack([pix % w, pix // w], 1).numpy())
+        return (o, d, vd.near[pix], vd.far[pix], vd.img[pix], vd.mask[pix].float(),
+                vd.t_band[pix], vd.cos[pix].float(), vd.t_passing[pix])
