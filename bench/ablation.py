@@ -10,10 +10,12 @@ Groups (each varies one knob from the common base; the first variant is its refe
 ``strategies`` (part/joint/global/none, Table 4 of the paper), ``encoders`` (pyramid,
 small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
-``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M). The base is ``--base`` on top of the
-defaults (by default ``encoder=pyramid perceptual=off weighting=paper view_weighting=mean``:
-the project before this ablation chose its defaults), so a variant
-differs from its reference in exactly its own setting; identical settings share one run.
+``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``training`` (train_guide: shell,
+raster; its report adds the training PSNR curve per 100 steps, paired by seed). The
+base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
+weighting=paper view_weighting=mean train_guide=shell``: the project before this ablation
+chose its defaults), so a variant differs from its reference in exactly its own setting;
+identical settings share one run.
 
 Without CAPTURE a compositional synthetic capture is made under OUT (``texvocab synth
 --motion compositional``): its novel frames put part poses seen in training into
