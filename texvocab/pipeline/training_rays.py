@@ -49,7 +49,8 @@ class TrainingRays:
         self.capture, self.s, self.model, self.min_cos = capture, settings, model, min_cos
         self.frames: dict[int, FrameData] = {}
         self.cache_seconds = 0.0  # spent building the frame and view caches (one-off each)
-        self.pixel_dirs: dict[int, torch.Tensor] = {}  # view -> (H·W, 3) ray directions
+        # view -> (origins, directions) (H·W, 3) of every pixel: the same every frame
+        self.pixel_rays: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
 
     def frame(self, t: int) -> FrameData:
         """Frame t's cache (pose context and shell), built on first use."""
@@ -78,9 +79,7 @@ class TrainingRays:
             mask = torch.from_numpy(self.capture.mask(v, t)).view(-1)
             b = fd.shell.image_bounds(cam)
             far = b.far.view(-1).clone()
-            if v not in self.pixel_dirs:  # a camera's pixel rays are the same every frame
-                self.pixel_dirs[v] = cam.pixel_rays()[1]
-            dirs = self.pixel_dirs[v]
+            _, dirs = self.rays_of(v)
             delta = self.s.field.shell_width
             plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
                                 delta, delta, self.min_cos)
@@ -95,6 +94,19 @@ class TrainingRays:
                                    plan.cos.half(), t_passing)
             self.cache_seconds += time.perf_counter() - t0
         return fd.views[v]
+
+    def rays_of(self, v: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Origins and directions (H·W, 3) of view v's pixel rays (computed once)."""
+        if v not in self.pixel_rays:
+            self.pixel_rays[v] = self.capture.cameras[v].pixel_rays()
+        return self.pixel_rays[v]
+
+    def _batch(self, vd: ViewData, v: int, pix: torch.Tensor, far: torch.Tensor):
+        """The rays of pixels ``pix`` (n,) of view v: origins, dirs, near, far (given),
+        colour, mask, band hit, cosine, passing probes."""
+        o, d = self.rays_of(v)
+        return (o[pix], d[pix], vd.near[pix], far, vd.img[pix], vd.mask[pix].float(),
+                vd.t_band[pix], vd.cos[pix].float(), vd.t_passing[pix])
 
     def patch(self, fd: FrameData, t: int, v: int, p: int, gen: torch.Generator):
         """Rays of a random ``p``×``p`` patch inside the mask's bounding box of view v
@@ -115,10 +127,8 @@ class TrainingRays:
         yy, xx = torch.meshgrid(torch.arange(y0, y0 + p), torch.arange(x0, x0 + p),
                                 indexing="ij")
         pix = (yy * w + xx).reshape(-1)
-        o, d = cam.pixel_rays(torch.stack([xx.reshape(-1), yy.reshape(-1)], 1).numpy())
         far_p = torch.where(vd.hit[pix], vd.far[pix], vd.near[pix])  # no shell: background only
-        return (o, d, vd.near[pix], far_p, vd.img[pix], vd.mask[pix].float(), vd.t_band[pix],
-                vd.cos[pix].float(), vd.t_passing[pix])
+        return self._batch(vd, v, pix, far_p)
 
     def draw(self, fd: FrameData, t: int, v: int, n: int, gen: torch.Generator):
         """``n`` random rays of view v, ``fg_fraction`` of them inside the mask."""
@@ -130,8 +140,4 @@ class TrainingRays:
         if len(bg):
             picks.append(bg[torch.randint(len(bg), (n - n_fg,), generator=gen)])
         pix = torch.cat(picks)
-        cam = self.capture.cameras[v]
-        w = cam.width
-        o, d = cam.pixel_rays(torch.stack([pix % w, pix // w], 1).numpy())
-        return (o, d, vd.near[pix], vd.far[pix], vd.img[pix], vd.mask[pix].float(),
-                vd.t_band[pix], vd.cos[pix].float(), vd.t_passing[pix])
+        return self._batch(vd, v, pix, vd.far[pix])
