@@ -93,6 +93,35 @@ def test_passing_rays_cost_two_probes_and_show_the_background(body):  # noqa: F8
     assert torch.allclose(out.rgb[~far_away], marched.rgb, atol=1e-6)
 
 
+def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(body):  # noqa: F811
+    """A band ray that also passes a surface (behind an occlusion edge) is banded when both
+    passing probes read beyond miss_margin β, and marched as the shell marcher does when
+    one of them reads close."""
+    o, d, near, far, t_band, cos, _ = rays_of(body, body["camera"])
+    idx = torch.nonzero(torch.isfinite(t_band)).squeeze(1)[:200]
+    o, d, near, far, t_band, cos = (x[idx] for x in (o, d, near, far, t_band, cos))
+    field = body["field"]
+    with torch.no_grad():
+        alone = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
+                                   body["shell"])
+        # passed surface far away: probes in front of the body (the ray's shell entry)
+        far_probes = torch.stack([near, near], 1)
+        far_away = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
+                                      None, body["shell"], t_passing=far_probes)
+        # a close passed surface: probes on the surface itself
+        close = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
+                                   body["shell"], t_passing=torch.stack([t_band, t_band], 1))
+        marched = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
+        entry = field.sdf(o + near[:, None] * d)
+    assert (entry > MARCH.miss_margin * float(field.beta)).all()
+    assert far_away.banded == alone.banded > 0.5 * len(idx)
+    assert torch.equal(far_away.rgb, alone.rgb)
+    assert far_away.field_evals == alone.field_evals + 2 * len(idx)
+    assert close.banded == 0
+    assert torch.allclose(close.rgb, marched.rgb, atol=1e-6)
+    assert close.field_evals == marched.field_evals + 2 * len(idx)
+
+
 @pytest.mark.parametrize("guide", ["raster", "shell"])
 def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path, guide):  # noqa: F811
     cap = open_capture(capture)
@@ -108,7 +137,9 @@ def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path,
     for fd in trainer.frames.values():
         for vd in fd.views.values():  # rays outside the mask never take the band
             assert not (torch.isfinite(vd.t_band) & ~vd.mask).any()
-            assert not (torch.isfinite(vd.t_passing[:, 0]) & vd.mask).any()
+            # inside the mask only band rays (behind an occlusion edge) get passing probes
+            assert not (torch.isfinite(vd.t_passing[:, 0]) & vd.mask
+                        & ~torch.isfinite(vd.t_band)).any()
             if guide == "shell":
                 assert not torch.isfinite(vd.t_band).any()
 

@@ -20,7 +20,8 @@ class ViewData(NamedTuple):
     """One training view of one frame, per pixel (H·W, row-major): img (·, 3), mask,
     hit (the ray meets the shell), near, far (ray bounds), t_band (mesh hit of the band
     rays, inf elsewhere), cos (float16, the hit face's cosine), t_passing (·, 2) (where
-    rays outside the mask that miss the mesh pass closest to it, inf elsewhere)."""
+    band rays behind an occlusion edge and rays outside the mask that miss the mesh pass
+    closest to the surface they pass, inf elsewhere)."""
 
     img: torch.Tensor
     mask: torch.Tensor
@@ -70,8 +71,9 @@ class TrainingRays:
         behind it can contribute, and training then evaluates no samples there. With
         ``train_guide=raster`` the band rays inside the mask keep their mesh hit and the
         rays outside it that miss the mesh their two probe places
-        (:func:`~texvocab.render.band.plan_surface`); the band cannot lower a ray's
-        opacity (it ends inside), so rays outside the mask never take it."""
+        (:func:`~texvocab.render.band.plan_surface`), as do the band rays behind an
+        occlusion edge; the band cannot lower a ray's opacity (it ends inside), so rays
+        outside the mask never take it."""
         if v not in fd.views:
             t0 = time.perf_counter()
             cam = self.capture.cameras[v]
@@ -86,8 +88,11 @@ class TrainingRays:
             first = plan.hit
             far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
             raster = self.s.train_guide == "raster"
-            t_band = torch.where(plan.band & mask & raster, plan.t_hit, torch.inf)
-            passing = plan.passby & ~first & ~mask & raster
+            # inside the mask every hit at a cosine >= min_cos is a band ray; one behind an
+            # occlusion edge (passby) takes the band only if the passed surface reads far
+            banded = first & (plan.cos >= self.min_cos) & mask & raster
+            t_band = torch.where(banded, plan.t_hit, torch.inf)
+            passing = plan.passby & raster & torch.where(mask, banded, ~first)
             t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind],
                                                                   1), torch.inf)
             fd.views[v] = ViewData(img, mask, b.hit.view(-1), b.near.view(-1), far, t_band,

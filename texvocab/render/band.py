@@ -225,12 +225,14 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
                        t_passing: torch.Tensor | None = None):
     """Volume-render rays as :func:`texvocab.render.marcher.render_rays` does, but:
 
-    * rays with a finite ``t_hit`` (R,) (band rays: mesh hit at ``cos`` (R,) >= min_cos,
-      no nearer surface passed) by the band — a probe and ``band_samples`` evaluations;
-    * rays with finite ``t_passing`` (R, 2) (rays that pass the surface, the places they
-      come closest to it) by two probes without gradient: where both read an SDF beyond
-      ``miss_margin`` β the ray shows the background (its density there is below
-      e^-miss_margin / 2β, and so is the gradient the marcher would give it);
+    * rays with finite ``t_passing`` (R, 2) (rays that pass a surface nearer than their
+      own, the places they come closest to it) first get two probes without gradient:
+      where both read an SDF beyond ``miss_margin`` β the passed surface shows nothing (its
+      density there is below e^-miss_margin / 2β, and so is the gradient the marcher would
+      give it), and the ray shows the background when it has no ``t_hit``; otherwise the
+      ray is marched;
+    * rays with a finite ``t_hit`` (R,) (mesh hit at ``cos`` (R,) >= min_cos) and no close
+      passed surface by the band — a probe and ``band_samples`` evaluations;
     * the rest, and the rays these do not resolve, by the shell marcher over [near, far].
 
     Differentiable w.r.t. the field's outputs and ``beta`` (float or the model's β
@@ -241,13 +243,8 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     s = settings
     R = len(origins)
     bg = torch.as_tensor(background, dtype=origins.dtype)
-    b_idx = torch.nonzero(torch.isfinite(t_hit)).squeeze(1)
-    o, d, t_b = origins[b_idx], dirs[b_idx], t_hit[b_idx]
-    sdf0, rgb0 = evaluate_sdf(field, o + t_b[:, None] * d, d, s.chunk_points)
-    acc, color, depth, ok = band_composite(field, s, beta, o, d, t_b, cos[b_idx], sdf0, rgb0)
-    evals = len(b_idx) * (1 + s.band_samples)
-    marched = torch.ones(R, dtype=torch.bool)
-    marched[b_idx[ok]] = False
+    close = torch.zeros(R, dtype=torch.bool)  # the ray passes a surface within the margin
+    evals = 0
     if t_passing is not None:
         p_idx = torch.nonzero(torch.isfinite(t_passing[:, 0])).squeeze(1)
         o, d = origins[p_idx], dirs[p_idx]
@@ -255,7 +252,16 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
             sdf_p, _ = evaluate_sdf(field, (o[:, None] + t_passing[p_idx, :, None] * d[:, None])
                                     .reshape(-1, 3), d.repeat_interleave(2, 0), s.chunk_points)
         evals += 2 * len(p_idx)
-        marched[p_idx[sdf_p.view(-1, 2).min(1).values > s.miss_margin * _value(beta)]] = False
+        close[p_idx] = sdf_p.view(-1, 2).min(1).values <= s.miss_margin * _value(beta)
+    b_idx = torch.nonzero(torch.isfinite(t_hit) & ~close).squeeze(1)
+    o, d, t_b = origins[b_idx], dirs[b_idx], t_hit[b_idx]
+    sdf0, rgb0 = evaluate_sdf(field, o + t_b[:, None] * d, d, s.chunk_points)
+    acc, color, depth, ok = band_composite(field, s, beta, o, d, t_b, cos[b_idx], sdf0, rgb0)
+    evals += len(b_idx) * (1 + s.band_samples)
+    marched = torch.ones(R, dtype=torch.bool)
+    marched[b_idx[ok]] = False
+    if t_passing is not None:  # misses that pass a surface far away: the background
+        marched[torch.isfinite(t_passing[:, 0]) & ~close & ~torch.isfinite(t_hit)] = False
     m_idx = torch.nonzero(marched).squeeze(1)
     rest = render_rays(field, origins[m_idx], dirs[m_idx], near[m_idx], far[m_idx], s,
                        generator, shell, background) if len(m_idx) else None
