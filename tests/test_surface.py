@@ -271,3 +271,44 @@ def test_torch_in_torch_out_and_index_reuse(posed):
         project_to_surface(pts, verts, faces[:10], index=index)
     empty = index.project(np.zeros((0, 3)))
     assert empty.face.shape == (0,) and empty.closest.shape == (0, 3)
+
+
+def reference_slot_layout(centroids: np.ndarray, leaf: int = 4) -> np.ndarray:
+    """The numpy median split the compiled one replaced (texvocab <= session 8)."""
+    n = len(centroids)
+    size = 1 << max(int(np.ceil(np.log2(max(n, leaf)))), 2)
+    order, seg, cap = np.arange(n), np.zeros(n, np.int64), size
+    while True:
+        counts = np.bincount(seg, minlength=size // cap)
+        starts = np.cumsum(counts) - counts
+        rank = np.arange(n) - starts[seg]
+        if cap == leaf:
+            slot_face = np.full(size, -1)
+            slot_face[seg * leaf + rank] = order
+            return slot_face
+        c = centroids[order]
+        used = starts[counts > 0]
+        axis = np.zeros(len(counts), np.int64)
+        axis[counts > 0] = (np.maximum.reduceat(c, used) - np.minimum.reduceat(c, used)).argmax(1)
+        perm = np.lexsort((c[np.arange(n), axis[seg]], seg))
+        order, seg = order[perm], seg[perm]
+        seg = 2 * seg + (rank >= (counts[seg] + 1) // 2)
+        cap //= 2
+
+
+def test_compiled_slot_layout_equals_the_numpy_median_split():
+    """The hierarchy's face layout is the same as before it was compiled (so every query
+    answer, ties included, is too), on the body and on point sets with equal coordinates."""
+    from texvocab.geometry.surface import _slot_layout
+
+    body = default_body()
+    tri = body.v_template.double().numpy()[body.faces.numpy()]
+    assert np.array_equal(_slot_layout(tri.mean(1)), reference_slot_layout(tri.mean(1)))
+    rng = np.random.default_rng(0)
+    for n in (1, 3, 4, 5, 17, 100, 1000):
+        c = rng.normal(size=(n, 3))
+        c[: n // 3, 1] = 0.5  # equal keys: the sort must be stable
+        c[: n // 4, 0] = c[: n // 4, 2] = 0.0
+        layout = _slot_layout(c)
+        assert np.array_equal(layout, reference_slot_layout(c))
+        assert sorted(layout[layout >= 0].tolist()) == list(range(n))

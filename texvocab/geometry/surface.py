@@ -29,6 +29,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
+from texvocab.geometry._layout_jit import slot_layout
 from texvocab.geometry._nearest_jit import closest_and_distance, interpolate, nearest_faces
 
 _LEAF = _FAN = 4  # faces per leaf box, children per inner box (the kernel assumes 4)
@@ -175,26 +176,11 @@ def closest_on_triangles(points, a, b, c) -> np.ndarray:
 def _slot_layout(centroids: np.ndarray) -> np.ndarray:
     """(S,) face in each of S = 2^k >= F slots, -1 for empty slots: a top-down median split
     (each segment sorted along its longest axis, its first half left) in slot space, so
-    every implicit node of the hierarchy holds a spatially tight group of faces."""
+    every implicit node of the hierarchy holds a spatially tight group of faces
+    (compiled: :func:`texvocab.geometry._layout_jit.slot_layout`)."""
     n = len(centroids)
     size = 1 << max(int(np.ceil(np.log2(max(n, _LEAF)))), 2)
-    order, seg, cap = np.arange(n), np.zeros(n, np.int64), size
-    while True:
-        counts = np.bincount(seg, minlength=size // cap)
-        starts = np.cumsum(counts) - counts
-        rank = np.arange(n) - starts[seg]
-        if cap == _LEAF:
-            slot_face = np.full(size, -1)
-            slot_face[seg * _LEAF + rank] = order
-            return slot_face
-        c = centroids[order]
-        used = starts[counts > 0]
-        axis = np.zeros(len(counts), np.int64)
-        axis[counts > 0] = (np.maximum.reduceat(c, used) - np.minimum.reduceat(c, used)).argmax(1)
-        perm = np.lexsort((c[np.arange(n), axis[seg]], seg))
-        order, seg = order[perm], seg[perm]
-        seg = 2 * seg + (rank >= (counts[seg] + 1) // 2)
-        cap //= 2
+    return slot_layout(np.ascontiguousarray(centroids, dtype=np.float64), size, _LEAF)
 
 
 class SurfaceIndex:
