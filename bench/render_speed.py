@@ -58,9 +58,22 @@ def parse_variant(text: str):
         if not eq or key not in known:
             raise SystemExit(f"error: --variant {text!r}: expected name:key=value,... with keys "
                              f"from MarchSettings ({', '.join(known)})")
-        kw[key] = None if value == "None" else (float(value) if "." in value or "e" in value
-                                                 else int(value))
+        kw[key] = _value(value)
     return name, kw
+
+
+def _value(text: str):
+    """A --variant value: None, an int, a float, true/false, else the text (e.g. guide=raster)."""
+    if text == "None":
+        return None
+    if text in ("true", "false"):
+        return text == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 def small_capture(root: Path) -> Path:
