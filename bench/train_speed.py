@@ -31,9 +31,7 @@ VARIANTS = {
     "encoder small (trained)": ["encoder=small"] + SHELL[1:],
     "encoder resnet34-scratch": ["encoder=resnet34-scratch"] + SHELL[1:],
     "texture maps cosine-weighted": SHELL + ["view_weighting=cosine"],
-    "train_guide raster, band only": SHELL[:2] + ["train_guide=raster", "train_passing=false"],
-    "train_guide raster, band + passing band": SHELL[:2] + ["train_guide=raster",
-                                                            "train_passing=true"],
+    "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster"],
     "defaults": [],
 }
 

@@ -2,8 +2,6 @@
 (texvocab.render.band.render_rays_banded): the same colours as the shell marcher for far
 fewer evaluations, gradients that reach the field and β, passing rays that cost two probes,
 and the trainer's use of it (``train_guide``)."""
-import dataclasses
-
 import pytest
 import torch
 
@@ -81,11 +79,9 @@ def test_passing_rays_cost_two_probes_and_show_the_background(body):  # noqa: F8
     assert passing.sum() > 10
     idx = torch.nonzero(passing).squeeze(1)
     bg = (0.1, 0.2, 0.3)
-    no_passing_band = dataclasses.replace(MARCH, pass_coarse=0)
     with torch.no_grad():
         out = render_rays_banded(field, field.beta, o[idx], d[idx], near[idx], far[idx],
-                                 t_band[idx], cos[idx], no_passing_band, None, body["shell"],
-                                 bg, t_pass[idx])
+                                 t_band[idx], cos[idx], MARCH, None, body["shell"], bg, t_pass[idx])
         probe = field.sdf((o[idx, None] + t_pass[idx, :, None] * d[idx, None]).reshape(-1, 3))
     far_away = probe.view(-1, 2).min(1).values > MARCH.miss_margin * float(field.beta)
     assert 0 < int(far_away.sum()) < len(idx)  # both kinds occur on this view
@@ -95,38 +91,6 @@ def test_passing_rays_cost_two_probes_and_show_the_background(body):  # noqa: F8
                           far[idx][~far_away], MARCH, None, body["shell"], bg)
     assert out.field_evals == 2 * len(idx) + marched.field_evals
     assert torch.allclose(out.rgb[~far_away], marched.rgb, atol=1e-6)
-
-
-def test_close_passing_rays_take_the_passing_band_like_the_marcher(body):  # noqa: F811
-    """Misses that pass within miss_margin β get pass_coarse + pass_fine samples composited
-    in closed form: their opacity and colour are the shell marcher's (to a few per cent of
-    opacity), β gets a gradient through them, and pass_coarse=0 marches them instead."""
-    o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
-    field = body["field"]
-    idx = torch.nonzero(torch.isfinite(t_pass[:, 0])).squeeze(1)
-    with torch.no_grad():
-        probe = field.sdf((o[idx, None] + t_pass[idx, :, None] * d[idx, None]).reshape(-1, 3))
-    idx = idx[probe.view(-1, 2).min(1).values <= MARCH.miss_margin * float(field.beta)]
-    assert len(idx) > 10
-    o, d, near, far, t_band, cos, t_pass = (x[idx] for x in (o, d, near, far, t_band, cos,
-                                                             t_pass))
-    field.beta = field.beta.detach().clone().requires_grad_(True)
-    out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
-                             body["shell"], t_passing=t_pass)
-    out.opacity.sum().backward()
-    beta_grad, field.beta = field.beta.grad, field.beta.detach()
-    with torch.no_grad():
-        ref = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
-        off = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos,
-                                 dataclasses.replace(MARCH, pass_coarse=0), None,
-                                 body["shell"], t_passing=t_pass)
-    assert out.banded > 0.5 * len(idx)
-    assert float(ref.opacity.max()) > 0.05  # the fringe shows: there is something to match
-    assert (out.opacity - ref.opacity).abs().max() < 0.05
-    assert psnr(out.rgb, ref.rgb) > 35
-    assert out.field_evals < 0.35 * ref.field_evals  # 2 probes + 20 samples vs ~100 a ray
-    assert torch.isfinite(beta_grad) and float(beta_grad) != 0.0
-    assert off.banded == 0 and torch.allclose(off.rgb, ref.rgb, atol=1e-6)
 
 
 def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(body):  # noqa: F811
@@ -188,11 +152,3 @@ def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
     old = Settings().to_dict()
     del old["train_guide"]
     assert Settings.from_dict(old).train_guide == "shell"
-    from texvocab.pipeline.settings import march_settings
-
-    assert march_settings(Settings(), training=True).pass_coarse > 0
-    assert march_settings(Settings(train_passing=False), training=True).pass_coarse == 0
-    del old["train_passing"]  # written before the passing band: trained without it
-    assert Settings.from_dict(old).train_passing is False
-    with pytest.raises(TexvocabError, match="train_passing"):
-        Settings.from_dict({**Settings().to_dict(), "train_passing": "yes"})

@@ -20,7 +20,7 @@ PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
 # What a setting absent from a stored settings dict (a checkpoint written before the
 # setting existed) meant then; its default today may differ.
 LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0,
-          "train_guide": "shell", "train_passing": False}
+          "train_guide": "shell"}
 
 
 @dataclass
@@ -58,9 +58,6 @@ class Settings:
     train_guide: str = "raster"  # raster: rays in the mask that hit the posed mesh are
     # rendered by the surface band (probe + band_samples, closed-form VolSDF opacity), the
     # rest by the shell marcher | shell: every ray by the shell marcher (README "Training")
-    train_passing: bool = True  # with train_guide=raster, rays outside the mask that pass
-    # within miss_margin β of the surface take the passing band (pass_coarse + pass_fine
-    # samples, closed form) instead of the shell marcher
     lr: float = 5e-4
     lambda_color: float = 1.0
     lambda_mask: float = 0.1
@@ -276,7 +273,6 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
                       guide=s.guide)
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
-        m.pass_coarse = m.pass_coarse if s.train_passing else 0
     elif m.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact
         # grid builds 3-4x faster (0.15 -> 0.04 s) for slightly longer in-shell paths

@@ -206,47 +206,6 @@ def band_composite(field, s, beta, o: torch.Tensor, d: torch.Tensor, t_hit: torc
     return acc, color, depth, ok.detach()
 
 
-def passing_band(field, s, beta, o: torch.Tensor, d: torch.Tensor, near: torch.Tensor,
-                 far: torch.Tensor):
-    """Resolve rays (R,) that pass close to a surface without entering it: o, d (R, 3) or
-    o (3,), their in-shell interval [near, far] (R,). ``s.pass_coarse`` samples at the
-    interval's bin centres find where the ray comes closest (least SDF); ``s.pass_fine``
-    more are spread over the two bins around it; the union is composited with the
-    closed-form VolSDF opacity of a piecewise-linear SDF (:func:`composite_linear_sdf`).
-    Differentiable w.r.t. the field's outputs and β (sample places carry no gradient).
-    Returns opacity (R,), colour (R, 3) (not over a background), depth (R,) and ok (R,):
-    rays whose samples all read a positive SDF and whose coarse SDF has one local minimum
-    within ``miss_margin`` β (the others enter the body or pass a second surface: march
-    them). Needs pass_coarse >= 2."""
-    R = len(d)
-    if R == 0:
-        z = d.new_zeros(0)
-        return z, d.new_zeros(0, 3), z, torch.zeros(0, dtype=torch.bool)
-    n_c, n_f = s.pass_coarse, s.pass_fine
-    o = o[:, None] if o.dim() == 2 else o
-    length = (far - near).clamp(min=0)
-    t_c = near[:, None] + length[:, None] * (torch.arange(n_c) + 0.5) / n_c  # (R, n_c)
-    sdf_c, rgb_c = evaluate_sdf(field, (o + t_c[..., None] * d[:, None]).reshape(-1, 3),
-                                d.repeat_interleave(n_c, 0), s.chunk_points)
-    sdf_c, rgb_c = sdf_c.view(R, n_c), rgb_c.view(R, n_c, 3)
-    closest = t_c.gather(1, sdf_c.detach().argmin(1, keepdim=True))  # (R, 1)
-    u = (torch.arange(n_f) + 1) / (n_f + 1) * 2 - 1  # (-1, 1), the bins either side
-    t_f = closest + u * (length / n_c)[:, None]
-    sdf_f, rgb_f = evaluate_sdf(field, (o + t_f[..., None] * d[:, None]).reshape(-1, 3),
-                                d.repeat_interleave(n_f, 0), s.chunk_points)
-    t_all, order = torch.cat([t_c, t_f], 1).sort(1)
-    sdf_all = torch.cat([sdf_c, sdf_f.view(R, n_f)], 1).gather(1, order)
-    rgb_all = torch.cat([rgb_c, rgb_f.view(R, n_f, 3)], 1).gather(
-        1, order[..., None].expand(-1, -1, 3))
-    acc, color, depth, _ = composite_linear_sdf(t_all, sdf_all, rgb_all, beta)
-    # one surface passed: at most one local minimum of the coarse SDF within the margin
-    sc = sdf_c.detach()
-    minima = torch.cat([sc[:, :1] < sc[:, 1:2], (sc[:, 1:-1] <= sc[:, :-2])
-                        & (sc[:, 1:-1] < sc[:, 2:]), sc[:, -1:] < sc[:, -2:-1]], 1)
-    alone = (minima & (sc <= s.miss_margin * _value(beta))).sum(1) <= 1
-    return acc, color, depth, (sdf_all.detach().min(1).values > 0) & alone
-
-
 def _value(beta) -> float:
     """β as a float (a tensor's value without its gradient)."""
     return float(beta.detach()) if torch.is_tensor(beta) else float(beta)
@@ -274,14 +233,11 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
       ray is marched;
     * rays with a finite ``t_hit`` (R,) (mesh hit at ``cos`` (R,) >= min_cos) and no close
       passed surface by the band — a probe and ``band_samples`` evaluations;
-    * misses that pass close (with ``pass_coarse`` > 0) by the passing band
-      (:func:`passing_band`, ``pass_coarse + pass_fine`` evaluations over [near, far]);
     * the rest, and the rays these do not resolve, by the shell marcher over [near, far].
 
     Differentiable w.r.t. the field's outputs and ``beta`` (float or the model's β
     tensor); the band's sample places carry no gradient (as importance samples do not).
-    Returns a :class:`~texvocab.render.marcher.RayResult` (``banded``: rays the band or
-    the passing band resolved)."""
+    Returns a :class:`~texvocab.render.marcher.RayResult` (``banded``: band rays)."""
     from texvocab.render.marcher import RayResult, render_rays  # the marcher builds on us
 
     s = settings
@@ -304,25 +260,15 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     evals += len(b_idx) * (1 + s.band_samples)
     marched = torch.ones(R, dtype=torch.bool)
     marched[b_idx[ok]] = False
-    good, acc, color, depth = b_idx[ok], acc[ok], color[ok], depth[ok]
     if t_passing is not None:  # misses that pass a surface far away: the background
-        miss = torch.isfinite(t_passing[:, 0]) & ~torch.isfinite(t_hit)
-        marched[miss & ~close] = False
-        if s.pass_coarse > 0:  # misses that pass close: the passing band
-            q_idx = torch.nonzero(miss & close).squeeze(1)
-            q = passing_band(field, s, beta, origins[q_idx], dirs[q_idx], near[q_idx],
-                             far[q_idx])
-            evals += len(q_idx) * (s.pass_coarse + s.pass_fine)
-            marched[q_idx[q[3]]] = False
-            good, acc, color, depth = (torch.cat([a, b[q[3]]]) for a, b in
-                                       zip((good, acc, color, depth), (q_idx, *q[:3]),
-                                           strict=True))
+        marched[torch.isfinite(t_passing[:, 0]) & ~close & ~torch.isfinite(t_hit)] = False
     m_idx = torch.nonzero(marched).squeeze(1)
     rest = render_rays(field, origins[m_idx], dirs[m_idx], near[m_idx], far[m_idx], s,
                        generator, shell, background) if len(m_idx) else None
-    rgb = bg.repeat(R, 1).index_put((good,), color + (1 - acc)[:, None] * bg)
-    opacity = origins.new_zeros(R).index_put((good,), acc)
-    depth = origins.new_zeros(R).index_put((good,), depth)
+    good = b_idx[ok]
+    rgb = bg.repeat(R, 1).index_put((good,), color[ok] + (1 - acc[ok])[:, None] * bg)
+    opacity = origins.new_zeros(R).index_put((good,), acc[ok])
+    depth = origins.new_zeros(R).index_put((good,), depth[ok])
     if rest is not None:
         rgb = rgb.index_put((m_idx,), rest.rgb)
         opacity = opacity.index_put((m_idx,), rest.opacity)

@@ -24,11 +24,7 @@ mesh's first hit, known for every pixel from one rasterisation. Per pixel:
   passed surface (at the nearest surface point, and a pixel footprint per pixel of
   distance behind it, where a silhouette's tangent point lies). Both beyond
   ``miss_margin`` β: the passed surface shows nothing (density < e^-miss_margin / 2β),
-  and a miss sees the background. Otherwise a miss takes the *passing band*
-  (:func:`~texvocab.render.band.passing_band`): ``pass_coarse`` samples over its in-shell
-  path find where it comes closest, ``pass_fine`` more sample the two bins around that
-  place, and the union is composited in closed form; a ray whose samples enter the body
-  or find a second close surface, and a hit behind a close edge, fall back.
+  and a miss sees the background. Otherwise the ray falls back.
 * **fallback** (close passing rays, grazing hits, failed bands): the shell marcher
   (:func:`texvocab.render.marcher.render_rays`) with the same settings over the ray's
   in-shell path, in larger calls (``fallback_segment``) — exact up to its sampling.
@@ -50,7 +46,6 @@ from texvocab.render.band import (
     evaluate_sdf,
     interval_optical_depth,
     laplace_antiderivative,
-    passing_band,
     plan_surface,
 )
 from texvocab.render.marcher import (
@@ -72,8 +67,8 @@ def render_image_guided(field, camera, vertices, faces, settings: MarchSettings 
     has ``sdf_rgb(points, dirs) -> (sdf (N,), rgb (N, 3))`` and ``beta`` (float), with
     density = VolSDF(sdf, beta) (:class:`texvocab.method.field.PoseField`, the analytic
     fields of texvocab.render.analytic). Not differentiable (render time only).
-    ``stats.paths`` counts the rays of each kind (band, passing, fallback, background) and
-    ``stats.kind`` (H, W) marks them (1 background, 2 band, 3 fallback, 4 passing). The fallback
+    ``stats.paths`` counts the rays of each kind (band, fallback, background) and
+    ``stats.kind`` (H, W) marks them (1 background, 2 band, 3 fallback). The fallback
     rays are marched by the shell marcher with the same settings; ``shell`` (the posed
     mesh's :class:`ShellGeometry`) is built for them when not given.
     """
@@ -111,10 +106,8 @@ class GuidedImage:
         self.t_hit, self.cos, self.passby = plan.t_hit, plan.cos, plan.passby
         self.rgb = self.bg.repeat(H * W, 1)
         self.alpha, self.depth = torch.zeros(H * W), torch.zeros(H * W)
-        self.paths = {"band": 0, "passing": 0, "fallback": 0, "background": 0}
-        # 0 untouched, 1 background, 2 band, 3 fallback, 4 passing band
-        self.kind = torch.zeros(H * W, dtype=torch.uint8)
-        self.bounds: tuple[torch.Tensor, torch.Tensor] | None = None  # see _bounds
+        self.paths = {"band": 0, "fallback": 0, "background": 0}
+        self.kind = torch.zeros(H * W, dtype=torch.uint8)  # 0 untouched, 1 bg, 2 band, 3 fallback
         self.evals = 0
         self.deferred = torch.zeros(H * W, dtype=torch.bool)  # fallback rays left for later
         if not hit.any():
@@ -168,43 +161,22 @@ class GuidedImage:
             preview[idx[2 * n_p:]] = rgb0[2 * n_p:]  # the colour at the mesh hit
             self.rgb[fb] = preview[fb]
             return
-        pass_idx = torch.nonzero(close & ~hit).squeeze(1)  # misses passing close
-        if len(pass_idx) and s.pass_coarse > 0:
-            check()
-            near, far = self._bounds()
-            acc, color, depth, ok = passing_band(field, s, beta, o, dirs[pass_idx],
-                                                 near[pass_idx], far[pass_idx])
-            self.evals += len(pass_idx) * (s.pass_coarse + s.pass_fine)
-            good = pass_idx[ok]
-            self.rgb[good] = color[ok] + (1 - acc[ok])[:, None] * self.bg
-            self.alpha[good], self.depth[good] = acc[ok], depth[ok]
-            self.paths["passing"] += len(good)
-            self.kind[good] = 4
-            fb[good] = False
         f_idx = torch.nonzero(fb).squeeze(1)
         self.paths["fallback"] += len(f_idx)
         self.kind[f_idx] = 3
         if len(f_idx):
             self._fallback(f_idx, check)
 
-    def _bounds(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Every pixel ray's in-shell interval near, far (H·W,), the shell built (or its
-        builder called) the first time."""
-        if self.bounds is None:
-            s = self.settings
-            if self.shell is None:
-                self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell_width),
-                                                 s.shell_voxel, s.shell_exact)
-            elif callable(self.shell):
-                self.shell = self.shell()
-            b = self.shell.image_bounds(self.camera)
-            self.bounds = (b.near.view(-1), b.far.view(-1))
-        return self.bounds
-
     def _fallback(self, f_idx: torch.Tensor, check) -> None:
         s = self.settings
         check()
-        near, far = (x[f_idx] for x in self._bounds())
+        if self.shell is None:
+            self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell_width),
+                                             s.shell_voxel, s.shell_exact)
+        elif callable(self.shell):
+            self.shell = self.shell()
+        bounds = self.shell.image_bounds(self.camera)
+        near, far = bounds.near.view(-1)[f_idx], bounds.far.view(-1)[f_idx]
         fs = replace(s, segment=s.fallback_segment, scout_threshold=s.fallback_scout)
         for c in range(0, len(f_idx), s.chunk_rays):
             check()
@@ -217,8 +189,7 @@ class GuidedImage:
 
     def result(self) -> RenderResult:
         H, W = self.H, self.W
-        stats = RenderStats(self.evals, self.paths["band"] + self.paths["passing"]
-                            + self.paths["fallback"], H * W,
+        stats = RenderStats(self.evals, self.paths["band"] + self.paths["fallback"], H * W,
                             time.perf_counter() - self.start)
         stats.paths = dict(self.paths)  # type: ignore[attr-defined]
         stats.kind = self.kind.view(H, W)  # type: ignore[attr-defined]

@@ -85,11 +85,6 @@ class MarchSettings:
         bracket the surface (or leave more than ``band_leftover`` transmittance) fall
         back to this shell marcher with ``fallback_segment`` scouts per step and
         ``fallback_scout`` as scout threshold (few rays: fewer, larger field calls).
-        Rays that miss the mesh but pass within ``miss_margin`` β of the surface first
-        get ``pass_coarse`` samples over their in-shell path and ``pass_fine`` around the
-        closest one, composited in closed form (:func:`texvocab.render.band.passing_band`);
-        those whose samples enter the body, or pass a second surface, fall back
-        (``pass_coarse = 0``: all of them fall back).
     """
 
     shell_width: float = 0.04
@@ -112,8 +107,6 @@ class MarchSettings:
     band_leftover: float = 0.1
     min_cos: float = 0.25
     miss_margin: float = 8.0
-    pass_coarse: int = 12
-    pass_fine: int = 8
     fallback_segment: int = 8
     fallback_scout: float | None = 1e-3
 
