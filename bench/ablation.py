@@ -53,6 +53,9 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "weighting": {"paper": [], "inverse": ["weighting=inverse"]},
     "views": {"mean": [], "cosine": ["view_weighting=cosine"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
+    # the shell marcher's coarse step for the rays training still marches (run with
+    # --base ... train_guide=raster)
+    "train_marcher": {"coarse 18": [], "coarse 9": ["train_coarse_samples=9"]},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }
@@ -80,6 +83,20 @@ def run_name(base: list[str], extra: list[str]) -> str:
     return ",".join(f"{k}={v}" for k, v in sorted(items.items())) or "defaults"
 
 
+def run_settings(job: dict):
+    """(training settings, evaluation settings) of a job: the run's overrides and seed; the
+    evaluation also takes the preset's render knobs. Before session 9 training took them
+    too (its marched rays at the fast preset's coarse 6, fine 2, early stop 1e-2); jobs
+    with ``train_with_preset`` still do, to extend the groups run then comparably."""
+    from texvocab.pipeline.settings import Settings, preset_overrides, render_overrides
+
+    pre = preset_overrides(job["preset"], render_only=True) if job["preset"] else []
+    trained = Settings(iterations=job["iterations"]).with_overrides(
+        (pre if job.get("train_with_preset") else []) + job["overrides"]
+        + [f"seed={job['seed']}"])
+    return trained, render_overrides(trained, job["preset"], [])
+
+
 def train_and_evaluate(job: dict) -> dict:
     """Train (or resume) one run and evaluate it on the novel-pose set; cached in
     result.json. ``job``: root, run_dir, overrides, seed, iterations, per_set, preset,
@@ -88,7 +105,7 @@ def train_and_evaluate(job: dict) -> dict:
 
     from texvocab.capture import open as open_capture
     from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
-    from texvocab.pipeline.settings import Settings, march_settings, preset_overrides
+    from texvocab.pipeline.settings import march_settings
     from texvocab.pipeline.train import Trainer
 
     run_dir = Path(job["run_dir"])
@@ -99,9 +116,7 @@ def train_and_evaluate(job: dict) -> dict:
             return result
     torch.set_num_threads(job["threads"])
     cap = open_capture(job["root"])
-    pre = preset_overrides(job["preset"], render_only=True) if job["preset"] else []
-    settings = Settings(iterations=job["iterations"]).with_overrides(
-        pre + job["overrides"] + [f"seed={job['seed']}"])
+    settings, shown = run_settings(job)
     trainer = Trainer(cap, settings, run_dir, progress=False)
     trainer.resume()
     t0 = time.perf_counter()
@@ -110,7 +125,7 @@ def train_and_evaluate(job: dict) -> dict:
     step_s = (time.perf_counter() - t0) / max(1, trainer.step - steps0)
     trainer.model.eval()
     sets = {SET: build_sets(cap, settings, job["per_set"], generated=())[SET]}
-    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(settings),
+    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(shown),
                                           grid_rows=job["grid_rows"], progress=False)
     write_report(run_dir / "eval", table, records, grids,
                  {"checkpoint": str(trainer.checkpoint_path), "step": trainer.step,
@@ -252,6 +267,9 @@ def main(argv=None) -> int:
     ap.add_argument("--base", nargs="*", default=DEFAULT_BASE, metavar="KEY=VALUE")
     ap.add_argument("--out", default="out/bench/ablation")
     ap.add_argument("--report-only", action="store_true", help="tables from finished runs")
+    ap.add_argument("--train-with-preset", action="store_true",
+                    help="train with the preset's render knobs too, as runs before session 9 "
+                         "did (to add seeds to their groups comparably)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     root = Path(args.capture) if args.capture else make_capture(out)
@@ -271,6 +289,7 @@ def main(argv=None) -> int:
                              "overrides": args.base + extra, "seed": seed,
                              "iterations": args.iterations, "per_set": args.per_set or None,
                              "preset": args.preset, "grid_rows": args.grid_rows,
+                             "train_with_preset": args.train_with_preset,
                              "threads": 1 if args.jobs > 1 else 2})
     jobs.sort(key=lambda j: j["seed"])  # every variant's first seed before any second one
     if args.report_only:

@@ -32,6 +32,8 @@ VARIANTS = {
     "encoder resnet34-scratch": ["encoder=resnet34-scratch"] + SHELL[1:],
     "texture maps cosine-weighted": SHELL + ["view_weighting=cosine"],
     "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster"],
+    "train_guide raster, train_coarse_samples 9": SHELL[:2] + ["train_guide=raster",
+                                                             "train_coarse_samples=9"],
     "defaults": [],
 }
 

@@ -152,3 +152,12 @@ def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
     old = Settings().to_dict()
     del old["train_guide"]
     assert Settings.from_dict(old).train_guide == "shell"
+    from texvocab.pipeline.settings import march_settings
+
+    assert march_settings(Settings(), training=True).coarse_samples == Settings().coarse_samples
+    assert march_settings(Settings(train_coarse_samples=9), training=True).coarse_samples == 9
+    assert march_settings(Settings(train_coarse_samples=9)).coarse_samples == 18  # rendering
+    del old["train_coarse_samples"]  # written before the setting: trained at coarse_samples
+    assert Settings.from_dict(old).train_coarse_samples is None
+    with pytest.raises(TexvocabError, match="train_coarse_samples"):
+        Settings().with_overrides(["train_coarse_samples=2.5"])

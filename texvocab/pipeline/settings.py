@@ -19,8 +19,9 @@ from texvocab.render import GUIDES, MarchSettings
 PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
 # What a setting absent from a stored settings dict (a checkpoint written before the
 # setting existed) meant then; its default today may differ.
+OPTIONAL_INTS = ("train_coarse_samples",)  # settings that are an integer or None
 LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0,
-          "train_guide": "shell"}
+          "train_guide": "shell", "train_coarse_samples": None}
 
 
 @dataclass
@@ -58,6 +59,8 @@ class Settings:
     train_guide: str = "raster"  # raster: rays in the mask that hit the posed mesh are
     # rendered by the surface band (probe + band_samples, closed-form VolSDF opacity), the
     # rest by the shell marcher | shell: every ray by the shell marcher (README "Training")
+    train_coarse_samples: int | None = None  # coarse_samples of the rays training marches
+    # (None: coarse_samples); with the band, only silhouette and occlusion-edge rays
     lr: float = 5e-4
     lambda_color: float = 1.0
     lambda_mask: float = 0.1
@@ -88,6 +91,8 @@ class Settings:
             ("lambda_perceptual", self.lambda_perceptual >= 0, ">= 0"),
             ("patch_size", MIN_PATCH <= self.patch_size, f">= {MIN_PATCH}"),
             ("coarse_samples", self.coarse_samples >= 1, ">= 1"),
+            ("train_coarse_samples", self.train_coarse_samples is None
+             or self.train_coarse_samples >= 1, ">= 1 or none"),
             ("fine_samples", self.fine_samples >= 0, ">= 0"),
             ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),
             ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
@@ -145,6 +150,8 @@ class Settings:
                 elif f.name in ("max_minutes", "shell_width"):
                     ok = value is None or _finite(value)
                     what = "a finite number or none"
+                elif f.name in OPTIONAL_INTS:
+                    ok, what = value is None or type(value) is int, "an integer or none"
                 elif isinstance(default, bool):
                     ok, what = isinstance(value, bool), "true or false"
                 elif isinstance(default, int):
@@ -225,9 +232,10 @@ def _parse(raw: str, current, key: str):
         if isinstance(current, list) or "views" in key:
             return [int(v) for v in raw.split(",") if v]
         if current is None:
-            return float(raw)
+            return int(raw) if key in OPTIONAL_INTS else float(raw)
     except ValueError:
-        raise TexvocabError(f"--set {key}={raw}: expected a {type(current).__name__}") from None
+        what = "an integer or none" if key in OPTIONAL_INTS else f"a {type(current).__name__}"
+        raise TexvocabError(f"--set {key}={raw}: expected {what}") from None
     return raw
 
 
@@ -273,6 +281,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
                       guide=s.guide)
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
+        m.coarse_samples = s.train_coarse_samples or s.coarse_samples
     elif m.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact
         # grid builds 3-4x faster (0.15 -> 0.04 s) for slightly longer in-shell paths
