@@ -154,7 +154,9 @@ def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
     assert Settings.from_dict(old).train_guide == "shell"
     from texvocab.pipeline.settings import march_settings
 
-    assert march_settings(Settings(), training=True).coarse_samples == Settings().coarse_samples
+    assert march_settings(Settings(), training=True).coarse_samples == 9  # the default
+    assert march_settings(Settings(train_coarse_samples=None), training=True).coarse_samples \
+        == Settings().coarse_samples == 18  # none: the render's coarse_samples
     assert march_settings(Settings(train_coarse_samples=9), training=True).coarse_samples == 9
     assert march_settings(Settings(train_coarse_samples=9)).coarse_samples == 18  # rendering
     del old["train_coarse_samples"]  # written before the setting: trained at coarse_samples

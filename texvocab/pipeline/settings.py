@@ -59,8 +59,9 @@ class Settings:
     train_guide: str = "raster"  # raster: rays in the mask that hit the posed mesh are
     # rendered by the surface band (probe + band_samples, closed-form VolSDF opacity), the
     # rest by the shell marcher | shell: every ray by the shell marcher (README "Training")
-    train_coarse_samples: int | None = None  # coarse_samples of the rays training marches
-    # (None: coarse_samples); with the band, only silhouette and occlusion-edge rays
+    train_coarse_samples: int | None = 9  # coarse_samples of the rays training marches
+    # (none: coarse_samples); with the band, only silhouette and occlusion-edge rays are
+    # marched; 9 against 18: the same loss curve, +0.54 dB novel PSNR (README "Training")
     lr: float = 5e-4
     lambda_color: float = 1.0
     lambda_mask: float = 0.1
