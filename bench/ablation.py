@@ -13,9 +13,12 @@ weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, c
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The
 base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
-weighting=paper view_weighting=mean train_guide=shell``: the project before this ablation
-chose its defaults), so a variant differs from its reference in exactly its own setting;
-identical settings share one run.
+weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none``: the
+project before this ablation chose its defaults), so a variant differs from its
+reference in exactly its own setting; identical settings share one run. ``train_marcher``
+(train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster``. To add seeds to
+a group run before session 9, pass ``--train-with-preset`` (those runs trained at the
+evaluation preset's marcher knobs).
 
 Without CAPTURE a compositional synthetic capture is made under OUT (``texvocab synth
 --motion compositional``): its novel frames put part poses seen in training into
@@ -40,9 +43,9 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
 SET = "novel_poses"
 DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean",
-                "train_guide=shell"]
+                "train_guide=shell", "train_coarse_samples=none"]
 # base settings that name no run folder: every run before the setting existed had them
-UNNAMED = {"train_guide=shell"}
+UNNAMED = {"train_guide=shell", "train_coarse_samples=none"}
 GROUPS: dict[str, dict[str, list[str]]] = {
     "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
                    "none": ["strategy=none"]},

@@ -163,3 +163,5 @@ def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
     assert Settings.from_dict(old).train_coarse_samples is None
     with pytest.raises(TexvocabError, match="train_coarse_samples"):
         Settings().with_overrides(["train_coarse_samples=2.5"])
+    assert Settings().with_overrides(["train_coarse_samples=none"]).train_coarse_samples is None
+    assert Settings().with_overrides(["train_coarse_samples=12"]).train_coarse_samples == 12

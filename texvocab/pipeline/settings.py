@@ -219,6 +219,8 @@ def _finite(value) -> bool:
 
 
 def _parse(raw: str, current, key: str):
+    if key in OPTIONAL_INTS and raw.lower() == "none":
+        return None
     try:
         if isinstance(current, bool):
             if raw.lower() not in ("true", "false", "1", "0"):
