@@ -29,7 +29,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-from texvocab.geometry._layout_jit import slot_layout
+from texvocab.geometry._build_jit import face_centroids, pseudo_normals, slot_layout, slot_tables
 from texvocab.geometry._nearest_jit import closest_and_distance, interpolate, nearest_faces
 
 _LEAF = _FAN = 4  # faces per leaf box, children per inner box (the kernel assumes 4)
@@ -83,11 +83,6 @@ def _edge_topology(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, in
             _TOPOLOGY.clear()
         _TOPOLOGY[key] = (inverse.reshape(-1), len(uniq), closed)
     return _TOPOLOGY[key]
-
-
-def _scatter_add(index: np.ndarray, values: np.ndarray, size: int) -> np.ndarray:
-    """(size, 3) sums of values (N, 3) at index (N,) (np.add.at, by bincount: faster)."""
-    return np.stack([np.bincount(index, values[:, c], minlength=size) for c in range(3)], 1)
 
 
 def _default_workers() -> int:
@@ -177,7 +172,7 @@ def _slot_layout(centroids: np.ndarray) -> np.ndarray:
     """(S,) face in each of S = 2^k >= F slots, -1 for empty slots: a top-down median split
     (each segment sorted along its longest axis, its first half left) in slot space, so
     every implicit node of the hierarchy holds a spatially tight group of faces
-    (compiled: :func:`texvocab.geometry._layout_jit.slot_layout`)."""
+    (compiled: :func:`texvocab.geometry._build_jit.slot_layout`)."""
     n = len(centroids)
     size = 1 << max(int(np.ceil(np.log2(max(n, _LEAF)))), 2)
     return slot_layout(np.ascontiguousarray(centroids, dtype=np.float64), size, _LEAF)
@@ -198,49 +193,14 @@ class SurfaceIndex:
         if not len(self.faces):
             raise ValueError("SurfaceIndex needs at least one face")
         self.workers = workers  # None: decided per query (_default_workers)
-        tri = self.vertices[self.faces]  # (F, 3, 3)
-        self._slot_face = _slot_layout(tri.mean(1))
-        slot_tri = tri[np.maximum(self._slot_face, 0)]
-        self._table = _face_table(*(slot_tri[:, k] for k in range(3)))
-        empty = (self._slot_face < 0)[:, None]
-        levels = self._build_boxes(np.where(empty, np.inf, slot_tri.min(1)),
-                                   np.where(empty, -np.inf, slot_tri.max(1)))
-        self._box_lo = np.ascontiguousarray(np.concatenate([lo for lo, _ in levels]))
-        self._box_hi = np.ascontiguousarray(np.concatenate([hi for _, hi in levels]))
-        self._box_offset = np.cumsum([0] + [len(lo) for lo, _ in levels]).astype(np.int64)
-        self._pseudo_normals(tri)
-
-    @staticmethod
-    def _build_boxes(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Box levels (lo (n, 3), hi (n, 3)), finest (one per slot) first; node i of level
-        l + 1 holds nodes i*4 .. i*4+3 of level l (empty boxes: lo = inf, hi = -inf)."""
-        levels = []
-        while True:
-            levels.append((lo, hi))
-            if len(lo) <= _FAN:
-                return levels
-            lo, hi = lo.reshape(-1, _FAN, 3).min(1), hi.reshape(-1, _FAN, 3).max(1)
-
-    def _pseudo_normals(self, tri: np.ndarray) -> None:
-        """Angle-weighted pseudo-normals of faces, edges and vertices; closedness test."""
-        f = self.faces
-        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        norm = np.linalg.norm(cross, axis=1, keepdims=True)
-        self._face_normal = np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0)
-        nv = len(self.vertices)
-        self._vertex_normal = np.zeros_like(self.vertices)
-        for k in range(3):
-            e1, e2 = tri[:, (k + 1) % 3] - tri[:, k], tri[:, (k + 2) % 3] - tri[:, k]
-            angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), (e1 * e2).sum(1))
-            self._vertex_normal += _scatter_add(f[:, k], angle[:, None] * self._face_normal, nv)
-        # edge k of a face joins corners k and k+1; its pseudo-normal sums the faces on it
-        inverse, edges, self.closed = _edge_topology(f, nv)
-        edge_sum = _scatter_add(inverse, np.repeat(self._face_normal, 3, axis=0), edges)
-        self._edge_normal = edge_sum[inverse].reshape(-1, 3, 3)  # (F, 3 edges, 3)
-        corners = tri.reshape(-1, 3)
-        t = tri - (corners.min(0) + corners.max(0)) / 2  # centred: a better-rounded volume
-        volume = (t[:, 0] * np.cross(t[:, 1], t[:, 2])).sum() / 6.0
-        self._orientation = -1.0 if volume < 0 else 1.0
+        self._slot_face = _slot_layout(face_centroids(self.vertices, self.faces))
+        self._table, self._box_lo, self._box_hi, self._box_offset = slot_tables(
+            self.vertices, self.faces, self._slot_face, _DEGENERATE, _FAN)
+        # pseudo-normals of faces, edges (edge k of a face joins corners k and k + 1; its
+        # pseudo-normal sums the faces on it) and vertices; closedness from the topology
+        inverse, edges, self.closed = _edge_topology(self.faces, len(self.vertices))
+        (self._face_normal, self._vertex_normal, self._edge_normal,
+         self._orientation) = pseudo_normals(self.vertices, self.faces, inverse, edges)
 
     def project(self, points, vt=None, ft=None, weights=None,
                 max_distance: float | None = None) -> SurfaceProjection:
