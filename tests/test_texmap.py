@@ -101,6 +101,21 @@ def test_texel_map_inverts_the_uv_layout():
     assert np.all(tmap.bary >= -1e-9) and np.allclose(tmap.bary.sum(1), 1)
 
 
+def test_texel_fill_is_the_nearest_covered_texel():
+    """to_image's fill (one gather) equals scattering the covered texels and copying
+    each texel's nearest covered one, for vector and scalar values, dtype kept."""
+    tmap = texel_map(default_body(), 64)
+    rng = np.random.default_rng(0)
+    n = int(tmap.covered.sum())
+    for values in (rng.random((n, 3)).astype(np.float32), rng.random(n)):
+        ref = np.zeros((64, 64) + values.shape[1:], values.dtype)
+        ref[tmap.covered] = values
+        out = tmap.to_image(values, fill=True)
+        assert out.dtype == values.dtype and np.array_equal(out, ref[tmap.nearest])
+        assert np.array_equal(tmap.to_image(values, fill=False), ref)
+    assert (~tmap.covered).any()  # the fill is exercised
+
+
 def _maps_of(root, body, **settings):
     from texvocab.pipeline.settings import Settings
     from texvocab.pipeline.train import load_textures

@@ -7,7 +7,7 @@ the top (v = 1). Texel centres sit at ``(i + 0.5) / size``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import torch
@@ -56,9 +56,20 @@ class TexelMap:
         """(N, C) per-texel barycentric interpolation of per-vertex values (V, C)."""
         return np.einsum("nk,nkc->nc", self.bary, values[faces[self.face]])
 
+    @cached_property
+    def source(self) -> np.ndarray:
+        """(S·S,) for every texel (row-major) the index among the N covered texels of the
+        nearest covered one (itself when covered): ``to_image``'s fill as one gather."""
+        index = np.full(self.covered.shape, -1, np.int64)
+        index[self.covered] = np.arange(int(self.covered.sum()))
+        return index[self.nearest].reshape(-1)
+
     def to_image(self, values: np.ndarray, fill: bool = True) -> np.ndarray:
         """Scatter (N, ...) texel values into an (S, S, ...) image; uncovered texels copy
         their nearest covered texel when ``fill``, else stay zero."""
+        values = np.asarray(values)
+        if fill and len(values):
+            return values[self.source].reshape((self.size, self.size) + values.shape[1:])
         img = np.zeros((self.size, self.size) + values.shape[1:], dtype=values.dtype)
         img[self.covered] = values
         return img[self.nearest] if fill else img
