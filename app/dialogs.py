@@ -8,6 +8,8 @@ their path fields.
 """
 from __future__ import annotations
 
+import functools
+import os
 import shutil
 import sys
 
@@ -19,6 +21,12 @@ POSE_FILTERS = ["Pose files (.npz)", "*.npz", "All files", "*"]
 SOURCE_FILTERS = ["Checkpoints (.pt)", "*.pt", "All files", "*"]
 
 
+@functools.lru_cache(maxsize=4)
+def _dialog_program_found(path: str) -> bool:
+    """Whether a dialog program (zenity, kdialog, ...) is on the search path ``path``."""
+    return any(shutil.which(p, path=path) for p in DIALOG_PROGRAMS)
+
+
 class FileDialogs:
     """At most one open dialog; ``purpose`` tells the caller what its answer is for."""
 
@@ -28,8 +36,10 @@ class FileDialogs:
 
     @staticmethod
     def missing() -> str:
-        """Why no native dialog can open here ("" when one can)."""
-        if sys.platform.startswith("linux") and not any(shutil.which(p) for p in DIALOG_PROGRAMS):
+        """Why no native dialog can open here ("" when one can). The menu asks every
+        frame; the search runs once per PATH value (:func:`_dialog_program_found`)."""
+        path = os.environ.get("PATH", os.defpath)
+        if sys.platform.startswith("linux") and not _dialog_program_found(path):
             return ("no file dialog program found (install zenity or kdialog); type the path "
                     "instead")
         return ""

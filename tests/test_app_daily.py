@@ -229,3 +229,19 @@ def test_screenshot_scripts_end_in_their_state(checkpoint, tmp_path, script):
     assert np.asarray(Image.open(shot)).std() > 10
     if script == "look-stale":
         assert rep["stale_line"].startswith("stale: shows frame 0; rendering left shoulder")
+
+
+def test_dialog_program_search_follows_path(monkeypatch, tmp_path):
+    """The per-frame check is cached per PATH value: a dialog program that appears on a
+    new PATH is found, and the empty PATH still says none."""
+    from app.dialogs import FileDialogs
+
+    program = tmp_path / "zenity"
+    program.write_text("#!/bin/sh\n")
+    program.chmod(0o755)
+    monkeypatch.setenv("PATH", "/nonexistent")
+    assert "zenity" in FileDialogs.missing()
+    monkeypatch.setenv("PATH", str(tmp_path))
+    assert FileDialogs.missing() == ""
+    monkeypatch.setenv("PATH", "/nonexistent")
+    assert "zenity" in FileDialogs.missing()
