@@ -123,3 +123,14 @@ def test_median_split_layout_follows_its_rule_with_ties():
         layout = _slot_layout(c)
         assert np.array_equal(layout, reference_slot_layout(c))
         assert sorted(layout[layout >= 0].tolist()) == list(range(n))
+
+
+def test_faces_outside_the_vertex_range_are_refused():
+    """The compiled build reads vertices[faces] without bounds checks: the index refuses
+    out-of-range faces with a ValueError instead of reading past the array."""
+    import pytest
+
+    verts = np.zeros((3, 3))
+    for bad in ([[0, 1, 3]], [[0, -1, 2]]):
+        with pytest.raises(ValueError, match="faces index vertices 0..2"):
+            SurfaceIndex(verts, np.array(bad))

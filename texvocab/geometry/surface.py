@@ -170,7 +170,7 @@ def closest_on_triangles(points, a, b, c) -> np.ndarray:
 
 def _slot_layout(centroids: np.ndarray) -> np.ndarray:
     """(S,) face in each of S = 2^k >= F slots, -1 for empty slots: a top-down median split
-    (each segment sorted along its longest axis, its first half left) in slot space, so
+    (each segment's first half along its longest axis left, ties by face id) in slot space, so
     every implicit node of the hierarchy holds a spatially tight group of faces
     (compiled: :func:`texvocab.geometry._build_jit.slot_layout`)."""
     n = len(centroids)
@@ -192,6 +192,10 @@ class SurfaceIndex:
         self.faces = _numpy(faces, np.int64).reshape(-1, 3)
         if not len(self.faces):
             raise ValueError("SurfaceIndex needs at least one face")
+        if self.faces.min() < 0 or self.faces.max() >= len(self.vertices):
+            # the compiled build reads vertices[faces] unchecked
+            raise ValueError(f"faces index vertices 0..{len(self.vertices) - 1}, got "
+                             f"{self.faces.min()}..{self.faces.max()}")
         self.workers = workers  # None: decided per query (_default_workers)
         self._slot_face = _slot_layout(face_centroids(self.vertices, self.faces))
         self._table, self._box_lo, self._box_hi, self._box_offset = slot_tables(
