@@ -26,8 +26,10 @@ def field():
     body = default_body()
     vocab = Vocabulary.build(np.random.default_rng(0).normal(0, 0.2, (4, 24, 3)), num_keys=4, k=2)
     textures = torch.rand(4, 3, 32, 32, generator=torch.Generator().manual_seed(1))
-    pf = PoseFeature(body, vocab, textures, build_encoder("small"))
-    f = AvatarField(pf, FieldSettings(hidden=32))
+    with torch.random.fork_rng():  # the layers' default init draws from the global stream:
+        torch.manual_seed(0)  # seeded, so the weights do not depend on the tests run before
+        pf = PoseFeature(body, vocab, textures, build_encoder("small"))
+        f = AvatarField(pf, FieldSettings(hidden=32))
     gen = torch.Generator().manual_seed(2)
     with torch.no_grad():  # a "trained" residual: the zero-initialised last layer made non-zero
         for p in f.parameters():
@@ -66,7 +68,9 @@ def test_folded_pose_layer_matches_concatenation_values_and_gradients(field, mon
 def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
     pose, trans = preset("squat")
     cam = default_cameras(SynthSettings(size=256))[1].scaled(1 / 8)
-    settings = MarchSettings()
+    # no thresholds (scouting, early stop, empty rays): a float-rounding difference in
+    # the field cannot flip a marching decision, so the images must agree to rounding
+    settings = MarchSettings(scout_threshold=None, early_stop_eps=0.0, empty_opacity=0.0)
     with torch.no_grad():
         ctx = field.pose_feature.context(pose, trans)
         shell = ShellGeometry.build(ctx.vertices, field.body.faces, settings.shell_width,
