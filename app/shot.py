@@ -100,7 +100,7 @@ def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
         shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
                                     march.shell_voxel, march.shell_exact, index=ctx.index)
         out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
-                           background=tuple(background), shell=shell)
+                           background=tuple(background), shell=shell, index=ctx.index)
     return to_uint8(out.rgb.numpy())
 
 

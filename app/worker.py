@@ -79,7 +79,8 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             field = model.for_pose(ctx)
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
                                       levels=job.levels or levels, cancelled=cancelled,
-                                      background=job.background, shell=shell)
+                                      background=job.background, shell=shell,
+                                      index=ctx.index)
     return render
 
 

@@ -168,7 +168,7 @@ def timed_render(model, item, march):
                                     march.shell_voxel, march.shell_exact, index=ctx.index)
         t2 = time.perf_counter()
         out = render_image(Timed(model.for_pose(ctx), spent), cam, ctx.vertices,
-                           model.body.faces, march, shell=shell)
+                           model.body.faces, march, shell=shell, index=ctx.index)
     t3 = time.perf_counter()
     row = {"context": t1 - wall0, "shell": t2 - t1, "field": spent["field"],
            "evals": spent["evals"], "march": t3 - t2 - spent["field"], "total": t3 - wall0,

@@ -73,9 +73,10 @@ def test_guided_matches_the_shell_marcher_with_fewer_evaluations(body):  # noqa:
     assert psnr(guided.rgb, shell.rgb) > 40
     assert (guided.alpha - shell.alpha).abs().max() < 0.1
     paths = guided.stats.paths
-    assert paths["band"] > paths["fallback"] > 0 and paths["background"] > 0
+    assert paths["band"] > paths["residual"] > 0 and paths["background"] > 0
     kind = guided.stats.kind
-    assert int((kind == 2).sum()) == paths["band"] and int((kind == 3).sum()) == paths["fallback"]
+    for code, path in ((2, "band"), (3, "fallback"), (4, "residual")):
+        assert int((kind == code).sum()) == paths[path]
     assert guided.stats.field_evals < 0.5 * shell.stats.field_evals
     # the band path's rays hold the surface colour the shell marcher finds
     band = kind == 2
@@ -158,13 +159,18 @@ def test_a_one_point_field_call_works(body):  # noqa: F811
 @pytest.mark.parametrize("knob,value", [("band_samples", 6), ("band_spacing", 3.0),
                                         ("min_cos", 0.6), ("miss_margin", 6.0),
                                         ("band_leftover", 1e-6), ("fallback_segment", 64),
-                                        ("fallback_scout", None)])
+                                        ("fallback_scout", None), ("residual_rays", False),
+                                        ("residual_tolerance", 0.1), ("band_newton", False)])
 def test_every_guided_knob_changes_the_render(body, knob, value):  # noqa: F811
-    """Each documented knob of the guided marcher changes what it evaluates."""
+    """Each documented knob of the guided marcher changes what it evaluates (the ones
+    that only act on the 4-sample band or on marched rays, with those in use)."""
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
+    marched = {"band_samples", "fallback_segment", "fallback_scout"}
+    start = dataclasses.replace(GUIDED, band_newton=False, residual_rays=False) \
+        if knob in marched else GUIDED
     with torch.no_grad():
-        base = render_image(field, cam, v, f, GUIDED, shell=body["shell"])
-        other = render_image(field, cam, v, f, dataclasses.replace(GUIDED, **{knob: value}),
+        base = render_image(field, cam, v, f, start, shell=body["shell"])
+        other = render_image(field, cam, v, f, dataclasses.replace(start, **{knob: value}),
                              shell=body["shell"])
     assert (other.stats.field_evals, other.stats.paths) != (base.stats.field_evals,
                                                             base.stats.paths)

@@ -50,7 +50,7 @@ def render_view(model, pose, trans, camera, march, scale: float = 1.0):
                                     march.shell_voxel, march.shell_exact, index=ctx.index)
         cam = camera if scale == 1.0 else camera.scaled(scale)
         out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
-                           shell=shell)
+                           shell=shell, index=ctx.index)
         rgb = out.rgb
         if scale != 1.0:
             rgb = torch.nn.functional.interpolate(

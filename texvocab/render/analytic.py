@@ -113,3 +113,48 @@ class MeshSDFField:
     def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
         """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
         return self.sdf(points), smooth_colour(points, self.albedo, self.freq)
+
+
+class MeshResidualField:
+    """The avatar field's structure without a network: the posed mesh's exact signed
+    distance (``band`` beyond ``band``, where the density is nil) plus a residual
+    ``amplitude`` sin(``wavenumber`` x·(1, 0.7, 0.4) + 1) that moves the surface by up
+    to ``amplitude`` and varies over 2π / ``wavenumber`` metres, as the avatar's SDF
+    network does on top of the body; VolSDF density and a smooth colour.
+
+    Args:
+        vertices: (V, 3), faces: (F, 3) closed, consistently oriented mesh.
+        beta: VolSDF scale (metres). amplitude, wavenumber: the residual.
+    """
+
+    def __init__(self, vertices, faces, beta: float = 0.003, amplitude: float = 0.002,
+                 wavenumber: float = 20.0, band: float = 0.06, albedo=(0.9, 0.7, 0.5),
+                 freq: float = 12.0):
+        v = np.asarray(torch.as_tensor(vertices).detach().cpu(), dtype=np.float64)
+        self.index = SurfaceIndex(v, faces)
+        if not self.index.closed:
+            raise ValueError("MeshResidualField needs a closed, consistently oriented mesh")
+        self.beta = torch.tensor(float(beta))
+        self.amplitude, self.wavenumber, self.band = float(amplitude), float(wavenumber), band
+        self.albedo = torch.tensor(albedo, dtype=torch.float32)
+        self.freq = freq
+
+    def residual(self, points: torch.Tensor) -> torch.Tensor:
+        """(N,) the residual at points (N, 3)."""
+        axis = torch.tensor([1.0, 0.7, 0.4], dtype=points.dtype)
+        return self.amplitude * torch.sin(self.wavenumber * points @ axis + 1.0)
+
+    def sdf(self, points: torch.Tensor) -> torch.Tensor:
+        """(N,) the mesh's signed distance plus the residual; ``band`` beyond band."""
+        proj = self.index.project(points.detach().double().numpy(), max_distance=self.band)
+        d = torch.from_numpy(np.where(proj.face >= 0, proj.distance, self.band))
+        return torch.where(d < self.band, d.to(points.dtype) + self.residual(points),
+                           torch.full_like(points[:, 0], self.band))
+
+    def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
+        return volsdf_density(self.sdf(points), self.beta), \
+            smooth_colour(points, self.albedo, self.freq)
+
+    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
+        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
+        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)

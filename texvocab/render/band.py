@@ -52,7 +52,8 @@ def interval_optical_depth(s_a: torch.Tensor, s_b: torch.Tensor, length: torch.T
     return length * torch.where(flat, density, exact) / beta
 
 
-def composite_linear_sdf(t: torch.Tensor, sdf: torch.Tensor, rgb: torch.Tensor, beta
+def composite_linear_sdf(t: torch.Tensor, sdf: torch.Tensor, rgb: torch.Tensor, beta,
+                         front: bool = True
                          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Volume-render rays from sorted samples (R, S) of a piecewise-linear SDF.
 
@@ -63,23 +64,38 @@ def composite_linear_sdf(t: torch.Tensor, sdf: torch.Tensor, rgb: torch.Tensor, 
     the ray ends in the body) and to the background otherwise (it passed by).
 
     Returns opacity (R,), colour (R, 3) (not over a background), expected depth (R,)
-    and the transmittance (R,) left after the last sample.
+    and the transmittance (R,) left after the last sample. ``front=False`` leaves out
+    the part in front of the first sample (where the samples start far enough out that
+    it holds no density, but their first interval may be flat).
     """
-    dt = (t[:, 1:] - t[:, :-1]).clamp(min=0)
-    tau = interval_optical_depth(sdf[:, :-1], sdf[:, 1:], dt, beta)
-    slope = ((sdf[:, 0] - sdf[:, 1]) / dt[:, 0].clamp(min=1e-9)).clamp(min=1e-3)
-    tau_pre = (-laplace_antiderivative(sdf[:, 0], beta) / (beta * slope)).clamp(min=0)
-    taus = torch.cat([tau_pre[:, None], tau], 1)  # (R, S)
-    before = torch.cumsum(taus, 1) - taus
-    weights = torch.exp(-before) * -torch.expm1(-taus)
+    weights, ends, rest = linear_sdf_weights(t, sdf, beta, front)
     colours = torch.cat([rgb[:, :1], 0.5 * (rgb[:, 1:] + rgb[:, :-1])], 1)
     places = torch.cat([t[:, :1], 0.5 * (t[:, 1:] + t[:, :-1])], 1)
-    rest = torch.exp(-taus.sum(1))
-    ends = (sdf[:, -1] < 0).to(rest.dtype) * rest  # absorbed by the last sample
     color = (weights[..., None] * colours).sum(1) + ends[:, None] * rgb[:, -1]
     acc = weights.sum(1) + ends
     depth = ((weights * places).sum(1) + ends * t[:, -1]) / acc.clamp(min=1e-6)
     return acc, color, depth, rest
+
+
+def linear_sdf_weights(t: torch.Tensor, sdf: torch.Tensor, beta, front: bool = True
+                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The quadrature of :func:`composite_linear_sdf`: weights (R, S) of the part in
+    front of the first sample (zero when not ``front``) and of each interval between
+    samples (t, sdf (R, S)), the weight ``ends`` (R,) the last sample absorbs (the ray
+    ends inside) and the transmittance ``rest`` (R,) left after the last sample."""
+    dt = (t[:, 1:] - t[:, :-1]).clamp(min=0)
+    tau = interval_optical_depth(sdf[:, :-1], sdf[:, 1:], dt, beta)
+    if front:
+        slope = ((sdf[:, 0] - sdf[:, 1]) / dt[:, 0].clamp(min=1e-9)).clamp(min=1e-3)
+        tau_pre = (-laplace_antiderivative(sdf[:, 0], beta) / (beta * slope)).clamp(min=0)
+    else:
+        tau_pre = torch.zeros_like(t[:, 0])
+    taus = torch.cat([tau_pre[:, None], tau], 1)  # (R, S)
+    before = torch.cumsum(taus, 1) - taus
+    weights = torch.exp(-before) * -torch.expm1(-taus)
+    rest = torch.exp(-taus.sum(1))
+    ends = (sdf[:, -1] < 0).to(rest.dtype) * rest  # absorbed by the last sample
+    return weights, ends, rest
 
 
 @dataclass

@@ -85,6 +85,22 @@ class MarchSettings:
         bracket the surface (or leave more than ``band_leftover`` transmittance) fall
         back to this shell marcher with ``fallback_segment`` scouts per step and
         ``fallback_scout`` as scout threshold (few rays: fewer, larger field calls).
+    residual_rays: with guide "raster", the rays the band cannot take (close passing
+        rays, grazing hits, hits behind a close edge, failed bands) are rendered from
+        the mesh's distance sampled every ``residual_step`` β along the ray plus the
+        field's residual, interpolated between three evaluations at the
+        ``residual_spread``, 1/2 and 1 - ``residual_spread`` quantiles of the ray's
+        estimated weights (:mod:`texvocab.render.residual`); the rays it cannot resolve
+        are marched: those whose residuals (with the probe's) differ by more than
+        ``residual_tolerance`` β, or whose final weights centre outside the three. False
+        marches them all. A smaller step integrates the curved SDF more finely (more
+        mesh queries; still three field evaluations per ray); a smaller spread puts the
+        outer evaluations farther out; a smaller tolerance marches more rays.
+    band_newton: with guide "raster", band rays take two evaluations after their probe
+        (at the Newton point t* and ``band_spacing`` β / cos behind it) and the SDF
+        between is the hit face's plane plus the interpolated residual
+        (:func:`texvocab.render.residual.newton_band`, 3 evaluations per ray); False:
+        ``band_samples`` samples around t* (1 + band_samples evaluations).
     """
 
     shell_width: float = 0.04
@@ -109,6 +125,11 @@ class MarchSettings:
     miss_margin: float = 8.0
     fallback_segment: int = 8
     fallback_scout: float | None = 1e-3
+    residual_rays: bool = True
+    residual_step: float = 1.5
+    residual_spread: float = 0.05
+    residual_tolerance: float = 2.0
+    band_newton: bool = True
 
 
 GUIDES = ("raster", "shell")
@@ -248,13 +269,15 @@ def render_rays(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: t
 def render_image(field: Field, camera, vertices, faces, settings: MarchSettings | None = None,
                  background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
                  generator: torch.Generator | None = None,
-                 cancelled: Callable[[], bool] | None = None) -> RenderResult:
+                 cancelled: Callable[[], bool] | None = None, index=None) -> RenderResult:
     """Render one image of the field around the posed mesh (vertices (V, 3), faces (F, 3)).
 
     Pass a prebuilt ``shell`` (:meth:`ShellGeometry.build` of the same mesh) to reuse the
     per-pose work across images; it then overrides settings.shell_width/shell_voxel.
     ``cancelled`` is checked between ray chunks; when it returns True,
-    :class:`RenderCancelled` is raised. Differentiable w.r.t. the field's outputs.
+    :class:`RenderCancelled` is raised. ``index``: the mesh's SurfaceIndex, which the
+    surface-guided marcher uses for its passing rays (built when needed if not given).
+    Differentiable w.r.t. the field's outputs (the shell marcher's).
     """
     s = settings or MarchSettings()
     if s.guide not in GUIDES:
@@ -262,7 +285,8 @@ def render_image(field: Field, camera, vertices, faces, settings: MarchSettings 
     if s.guide == "raster":
         from texvocab.render.guided import render_image_guided  # it builds on this module
 
-        return render_image_guided(field, camera, vertices, faces, s, background, cancelled, shell)
+        return render_image_guided(field, camera, vertices, faces, s, background, cancelled, shell,
+                                   index)
     start = time.perf_counter()
     shell_seconds = 0.0
     if shell is None:

@@ -24,8 +24,8 @@ from texvocab.render.shell import ShellGeometry
 def progressive_render(field: Field, camera, vertices, faces,
                        settings: MarchSettings | None = None, levels=(8, 4, 2, 1),
                        cancelled: Callable[[], bool] = lambda: False,
-                       background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None
-                       ) -> Iterator[tuple[int, torch.Tensor, float]]:
+                       background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
+                       index=None) -> Iterator[tuple[int, torch.Tensor, float]]:
     """Yield ``(level, image (H_l, W_l, 3), seconds)`` for each downscale ``level``
     without autograd: with ``settings.guide == "raster"`` the full image's pixels
     [::level, ::level] (H_l = ceil(H / level)), rendered once each across the levels;
@@ -33,12 +33,13 @@ def progressive_render(field: Field, camera, vertices, faces,
 
     ``seconds`` is the wall time of that level (the first level includes building the
     shell geometry unless ``shell`` is given). Stops, without yielding the level in
-    progress, as soon as ``cancelled()`` returns True.
+    progress, as soon as ``cancelled()`` returns True. ``index``: the mesh's SurfaceIndex
+    for the surface-guided marcher's residual rays (built when needed if not given).
     """
     s = settings or MarchSettings()
     if s.guide == "raster":
         yield from _guided_levels(field, camera, vertices, faces, s, levels, cancelled,
-                                  background, shell)
+                                  background, shell, index)
         return
     start = time.perf_counter()
     if shell is None:
@@ -57,7 +58,7 @@ def progressive_render(field: Field, camera, vertices, faces,
 
 
 def _guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, cancelled,
-                   background, shell) -> Iterator[tuple[int, torch.Tensor, float]]:
+                   background, shell, index=None) -> Iterator[tuple[int, torch.Tensor, float]]:
     """The guided marcher's levels. The coarsest level is a preview: its rays that fall
     back to the shell marcher (silhouette fringes, grazing hits) show their probe's colour
     and are marched with the next level, so the first image needs no shell geometry
@@ -66,7 +67,7 @@ def _guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, can
 
     start = time.perf_counter()
     with torch.no_grad():
-        image = GuidedImage(field, camera, vertices, faces, s, background, shell)
+        image = GuidedImage(field, camera, vertices, faces, s, background, shell, index)
     done = torch.zeros(camera.height, camera.width, dtype=torch.bool)
     for i, level in enumerate(levels):
         if cancelled():
