@@ -97,8 +97,9 @@ def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
     ``background`` (the 3D view's): what ``shot`` and the viewer's Screenshot write."""
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
-        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    march.shell_voxel, march.shell_exact, index=ctx.index)
+        shell = None if march.guide == "raster" else ShellGeometry.build(  # guided: its own
+            ctx.vertices, model.body.faces, march.shell_width, march.shell_voxel,
+            march.shell_exact, index=ctx.index)
         out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
                            background=tuple(background), shell=shell, index=ctx.index)
     return to_uint8(out.rgb.numpy())

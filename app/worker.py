@@ -73,9 +73,10 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
                 return ShellGeometry.build(ctx.vertices, model.body.faces, m.shell_width,
                                            m.shell_voxel, m.shell_exact, index=ctx.index)
 
-            # the surface-guided marcher builds it when a ray first falls back (after the
-            # first, preview level); the shell marcher needs it at once
-            shell = shell if m.guide == "raster" else shell()
+            # the surface-guided marcher builds what it needs of it (the bounding balls
+            # for its residual rays, the grid if a ray falls back to marching) after the
+            # first, preview level; the shell marcher needs it at once
+            shell = None if m.guide == "raster" else shell()
             field = model.for_pose(ctx)
         yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
                                       levels=job.levels or levels, cancelled=cancelled,

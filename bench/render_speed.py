@@ -4,13 +4,15 @@ Renders the avatar (a trained checkpoint, or without CKPT the real model archite
 untrained: its body-SDF geometric initialisation already puts the surface on the body)
 for several poses and held-out views, and prints one Markdown table: per frame the time
 split — pose context (posed body, surface index, vocabulary query, feature maps), shell
-build, field evaluations (seconds and count), marching (ray bounds, in-shell paths,
-sample placement, compositing: the rest of the marcher) — the wall seconds per frame, the
-process CPU seconds (the machine may be shared; CPU time is the steadier number) and the
-PSNR against the capture's ground truth (inside the mask's bounding box and full frame,
-texvocab.metrics). Each marcher variant gets its rows and a mean row; the reference
-uniform marcher (64 + 64 samples per ray in the body's bounding box, no shell) is timed
-on the first frames in the same run, on the same field, for the ratio.
+build (the shell marcher's; the surface-guided marcher builds what it needs of the shell
+inside its render, counted under marching), field evaluations (seconds and count),
+marching (ray bounds, in-shell paths, sample placement, compositing: the rest of the
+marcher) — the wall seconds per frame, the process CPU seconds (the machine may be
+shared; CPU time is the steadier number) and the PSNR against the capture's ground truth
+(inside the mask's bounding box and full frame, texvocab.metrics). Each marcher variant
+gets its rows and a mean row; the reference uniform marcher (64 + 64 samples per ray in
+the body's bounding box, no shell) is timed on the first frames in the same run, on the
+same field, for the ratio.
 
     .venv/bin/python bench/render_speed.py [CKPT] [--capture DIR] [--frames 3]
         [--variant "12+4:coarse_samples=12,fine_samples=4"] [--reference 1]
@@ -164,8 +166,10 @@ def timed_render(model, item, march):
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
         t1 = time.perf_counter()
-        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    march.shell_voxel, march.shell_exact, index=ctx.index)
+        # the surface-guided marcher builds what it needs of the shell itself
+        shell = None if march.guide == "raster" else ShellGeometry.build(
+            ctx.vertices, model.body.faces, march.shell_width, march.shell_voxel,
+            march.shell_exact, index=ctx.index)
         t2 = time.perf_counter()
         out = render_image(Timed(model.for_pose(ctx), spent), cam, ctx.vertices,
                            model.body.faces, march, shell=shell, index=ctx.index)

@@ -46,8 +46,9 @@ def render_view(model, pose, trans, camera, march, scale: float = 1.0):
     t0 = time.perf_counter()
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
-        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    march.shell_voxel, march.shell_exact, index=ctx.index)
+        shell = None if march.guide == "raster" else ShellGeometry.build(  # guided: its own
+            ctx.vertices, model.body.faces, march.shell_width, march.shell_voxel,
+            march.shell_exact, index=ctx.index)
         cam = camera if scale == 1.0 else camera.scaled(scale)
         out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
                            shell=shell, index=ctx.index)

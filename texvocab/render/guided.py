@@ -201,15 +201,16 @@ class GuidedImage:
         if len(f_idx):
             self._fallback(f_idx, check)
 
-    def _shell_bounds(self):
-        """The posed mesh's shell (built on first use) and its image bounds."""
-        if self._bounds is None:
-            s = self.settings
-            if self.shell is None:
-                self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell_width),
-                                                 s.shell_voxel, s.shell_exact)
-            elif callable(self.shell):
-                self.shell = self.shell()
+    def _shell_bounds(self, grid: bool = False):
+        """The posed mesh's shell and its image bounds, built on first use: its bounding
+        balls only, unless ``grid`` (the shell marcher's occupancy grid) is asked for."""
+        s = self.settings
+        if callable(self.shell):
+            self.shell = self.shell()
+        if self.shell is None or (grid and not self.shell.has_grid):
+            self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell_width),
+                                             s.shell_voxel, s.shell_exact, self.index, grid)
+        if self._bounds is None:  # the balls, hence the bounds, do not depend on the grid
             self._bounds = self.shell.image_bounds(self.camera)
         return self.shell, self._bounds
 
@@ -244,7 +245,7 @@ class GuidedImage:
     def _fallback(self, f_idx: torch.Tensor, check) -> None:
         s = self.settings
         check()
-        shell, bounds = self._shell_bounds()
+        shell, bounds = self._shell_bounds(grid=True)
         near, far = bounds.near.view(-1)[f_idx], bounds.far.view(-1)[f_idx]
         fs = replace(s, segment=s.fallback_segment, scout_threshold=s.fallback_scout)
         for c in range(0, len(f_idx), s.chunk_rays):

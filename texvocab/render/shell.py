@@ -82,59 +82,41 @@ class ShellGeometry:
     step: float
     centers: np.ndarray
     radii: np.ndarray
-    origin: np.ndarray
-    occupied: torch.Tensor
+    origin: np.ndarray | None
+    occupied: torch.Tensor | None
+
+    @property
+    def has_grid(self) -> bool:
+        """False for a shell built with ``grid=False`` (bounding balls only)."""
+        return self.occupied is not None
 
     @classmethod
     def build(cls, vertices, faces, width: float = 0.04, voxel: float = 0.01,
-              exact: bool = True, index: SurfaceIndex | None = None) -> "ShellGeometry":
+              exact: bool = True, index: SurfaceIndex | None = None,
+              grid: bool = True) -> "ShellGeometry":
         """From posed vertices (V, 3) and faces (F, 3) (tensors or arrays), shell width δ
         and voxel size h (smaller is tighter but costs a bigger grid).
 
         ``exact``: voxels the distance transform cannot decide get the exact distance of
         their centre (``index``, a :class:`SurfaceIndex` of this mesh, is built if not
-        given); False keeps them all (faster build, looser shell)."""
+        given); False keeps them all (faster build, looser shell). ``grid=False`` builds
+        the bounding balls only (:meth:`image_bounds`, :meth:`ray_bounds`; about half
+        the time), not the occupancy grid the shell marcher places samples with."""
         v = np.asarray(torch.as_tensor(vertices).detach().cpu(), dtype=np.float64)
         f = np.asarray(torch.as_tensor(faces).cpu(), dtype=np.int64)
         h = float(voxel)
         samples, r0 = surface_samples(v, f, h / 2)
-        key = np.floor((samples - samples.min(0)) / width).astype(np.int64)
-        span = key.max(0) + 1
-        _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2],
-                               return_inverse=True)
-        count = np.bincount(inverse)
-        centers = np.stack([np.bincount(inverse, samples[:, k]) for k in range(3)], 1)
-        centers /= count[:, None]
-        spread = np.zeros(len(count))
-        np.maximum.at(spread, inverse, np.linalg.norm(samples - centers[inverse], axis=1))
-        radii = spread + r0 + width
-        step = h / 2
-        reach = width + step / 2 + h * np.sqrt(3) / 2  # centre distance that must be kept
-        slack = h * np.sqrt(3) / 2
-        origin = v.min(0) - reach - slack - r0 - 2 * h
-        shape = np.ceil((v.max(0) + reach + slack + r0 + 2 * h - origin) / h).astype(np.int64)
-        ijk = np.floor((samples - origin) / h).astype(np.int64)
-        cells = np.unique((ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2])
-        cells = np.column_stack(np.unravel_index(cells, tuple(shape)))
-        # distance from each voxel centre to the nearest voxel holding a sample, up to
-        # the farthest one used below: d(c) lies within ±(slack + r0) of it
-        near_voxel = np.sqrt(_bounded_edt2(cells, tuple(shape),
-                                           (reach + slack + r0) / h)) * h
-        occupied = near_voxel <= reach - slack
-        unsure = np.argwhere(~occupied & (near_voxel <= reach + slack + r0))
-        if exact and len(unsure):
-            index = index or SurfaceIndex(v, f)
-            dist = np.asarray(index.project(origin + (unsure + 0.5) * h,
-                                            max_distance=reach).distance)
-            keep = unsure[np.abs(dist) <= reach]
-        else:
-            keep = unsure
-        occupied[keep[:, 0], keep[:, 1], keep[:, 2]] = True
-        return cls(float(width), h, step, centers, radii, origin, torch.from_numpy(occupied))
+        centers, radii = _bounding_balls(samples, r0, width)
+        if not grid:
+            return cls(float(width), h, h / 2, centers, radii, None, None)
+        origin, occupied = _occupancy(v, f, samples, r0, width, h, exact, index)
+        return cls(float(width), h, h / 2, centers, radii, origin, torch.from_numpy(occupied))
 
     def contains(self, points: torch.Tensor) -> torch.Tensor:
         """(N,) bool: points (N, 3) whose voxel is occupied (True for every point within
         δ + step/2 of the surface; also for some points a little farther)."""
+        if self.occupied is None:
+            raise ValueError("this ShellGeometry was built without its grid (grid=False)")
         origin = torch.as_tensor(self.origin, dtype=points.dtype)
         ijk = torch.floor((points - origin) / self.voxel).long()
         shape = torch.tensor(self.occupied.shape)
@@ -188,6 +170,52 @@ class ShellGeometry:
         near, far = torch.from_numpy(near), torch.from_numpy(far)
         hit, n, f = _finish(near, far)
         return ShellBounds(hit.view(H, W), n.view(H, W), f.view(H, W))
+
+
+def _bounding_balls(samples: np.ndarray, r0: float, width: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (B, 3) and radii (B,) of balls covering the δ-shell (``width``) of a
+    surface sampled by ``samples`` (P, 3) to within r0: the samples binned into cubes of
+    side δ, each bin's ball at its mean with radius δ + r0 + its farthest sample."""
+    key = np.floor((samples - samples.min(0)) / width).astype(np.int64)
+    span = key.max(0) + 1
+    _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2],
+                           return_inverse=True)
+    count = np.bincount(inverse)
+    centers = np.stack([np.bincount(inverse, samples[:, k]) for k in range(3)], 1)
+    centers /= count[:, None]
+    spread = np.zeros(len(count))
+    np.maximum.at(spread, inverse, np.linalg.norm(samples - centers[inverse], axis=1))
+    return centers, spread + r0 + width
+
+
+def _occupancy(v: np.ndarray, f: np.ndarray, samples: np.ndarray, r0: float, width: float,
+               h: float, exact: bool, index: SurfaceIndex | None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The occupancy grid of :class:`ShellGeometry` (module doc): its corner (3,) and the
+    (X, Y, Z) bool voxels of side h."""
+    step = h / 2
+    reach = width + step / 2 + h * np.sqrt(3) / 2  # centre distance that must be kept
+    slack = h * np.sqrt(3) / 2
+    origin = v.min(0) - reach - slack - r0 - 2 * h
+    shape = np.ceil((v.max(0) + reach + slack + r0 + 2 * h - origin) / h).astype(np.int64)
+    ijk = np.floor((samples - origin) / h).astype(np.int64)
+    cells = np.unique((ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2])
+    cells = np.column_stack(np.unravel_index(cells, tuple(shape)))
+    # distance from each voxel centre to the nearest voxel holding a sample, up to the
+    # farthest one used below: d(c) lies within ±(slack + r0) of it
+    near_voxel = np.sqrt(_bounded_edt2(cells, tuple(shape), (reach + slack + r0) / h)) * h
+    occupied = near_voxel <= reach - slack
+    unsure = np.argwhere(~occupied & (near_voxel <= reach + slack + r0))
+    if exact and len(unsure):
+        index = index or SurfaceIndex(v, f)
+        dist = np.asarray(index.project(origin + (unsure + 0.5) * h,
+                                        max_distance=reach).distance)
+        keep = unsure[np.abs(dist) <= reach]
+    else:
+        keep = unsure
+    occupied[keep[:, 0], keep[:, 1], keep[:, 2]] = True
+    return origin, occupied
 
 
 def _bounded_edt2(cells: np.ndarray, shape: tuple[int, int, int], radius: float) -> np.ndarray:
