@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from texvocab.geometry.surface import SurfaceIndex
+from texvocab.render._balls_jit import surface_balls
 from texvocab.render._splat_jit import splat_balls, stamp_distance
 
 
@@ -105,10 +106,10 @@ class ShellGeometry:
         v = np.asarray(torch.as_tensor(vertices).detach().cpu(), dtype=np.float64)
         f = np.asarray(torch.as_tensor(faces).cpu(), dtype=np.int64)
         h = float(voxel)
-        samples, r0 = surface_samples(v, f, h / 2)
-        centers, radii = _bounding_balls(samples, r0, width)
+        centers, radii, r0 = surface_balls(v, f, h / 2, width)
         if not grid:
             return cls(float(width), h, h / 2, centers, radii, None, None)
+        samples, _ = surface_samples(v, f, h / 2)
         origin, occupied = _occupancy(v, f, samples, r0, width, h, exact, index)
         return cls(float(width), h, h / 2, centers, radii, origin, torch.from_numpy(occupied))
 
@@ -167,16 +168,22 @@ class ShellGeometry:
         splat_balls(np.ascontiguousarray(p[balls]), np.ascontiguousarray(rho[balls]),
                     *(np.concatenate([a, b]) for a, b in zip(boxes, full, strict=True)),
                     np.ascontiguousarray(d), W, near, far)
-        near, far = torch.from_numpy(near), torch.from_numpy(far)
-        hit, n, f = _finish(near, far)
-        return ShellBounds(hit.view(H, W), n.view(H, W), f.view(H, W))
+        # as _finish, in numpy: a few single-threaded passes (torch's OpenMP threads would
+        # each have to wake for them)
+        near = np.maximum(near, 0.0)
+        hit = far > near
+        n = np.where(hit, near, 0.0).astype(np.float32)
+        f = np.where(hit, far, 0.0).astype(np.float32)
+        return ShellBounds(torch.from_numpy(hit).view(H, W), torch.from_numpy(n).view(H, W),
+                           torch.from_numpy(f).view(H, W))
 
 
 def _bounding_balls(samples: np.ndarray, r0: float, width: float
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Centres (B, 3) and radii (B,) of balls covering the δ-shell (``width``) of a
     surface sampled by ``samples`` (P, 3) to within r0: the samples binned into cubes of
-    side δ, each bin's ball at its mean with radius δ + r0 + its farthest sample."""
+    side δ, each bin's ball at its mean with radius δ + r0 + its farthest sample. (The
+    reference for the compiled :func:`surface_balls`, which the build uses.)"""
     key = np.floor((samples - samples.min(0)) / width).astype(np.int64)
     span = key.max(0) + 1
     _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2],
