@@ -111,13 +111,18 @@ def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
     t = torch.cat([t.reshape(R, -1), t_c.gather(1, end[:, None])], 1)
     d = torch.cat([d.reshape(R, -1), d_c.gather(1, end[:, None])], 1)
     keep = torch.cat([keep.reshape(R, -1), torch.ones(R, 1, dtype=torch.bool)], 1)
-    order = torch.where(keep, t, torch.inf).argsort(dim=1, stable=True)
+    # t is sorted along each row already: pack the kept columns to the front
     count = keep.sum(1)
     N = int(count.max())
-    order = order[:, :N]
+    rows, cols = torch.nonzero(keep, as_tuple=True)
+    slot = (torch.cumsum(keep, 1) - 1)[rows, cols]
+    packed_t, packed_d = torch.empty(R, N, dtype=t.dtype), torch.empty(R, N, dtype=d.dtype)
+    packed_t[rows, slot], packed_d[rows, slot] = t[rows, cols], d[rows, cols]
     inside = torch.arange(N) < count[:, None]
-    order = torch.where(inside, order, order.gather(1, (count - 1)[:, None]))
-    return t.gather(1, order), d.gather(1, order), inside, count
+    last = (count - 1)[:, None]
+    packed_t = torch.where(inside, packed_t, packed_t.gather(1, last))
+    packed_d = torch.where(inside, packed_d, packed_d.gather(1, last))
+    return packed_t, packed_d, inside, count
 
 
 def _quantile_columns(weights: torch.Tensor, qs: tuple[float, ...]) -> torch.Tensor:
