@@ -3,7 +3,9 @@ bench:SECONDS:RES``). No ImGui Test Engine, so nothing but the viewer draws.
 
 Phases, in order:
 
-- ``idle``: nothing changes, the viewer idles as it does for a user. Measured: the CPU
+- ``idle``: nothing changes, the viewer idles as it does for a user (from 3.5 s after the
+  start-up render's last level: hello_imgui keeps a woken UI at full speed for
+  ``time_active_after_last_event``, 3 s, before it idles). Measured: the CPU
   the process spends outside the neural render thread (UI, GL under llvmpipe, GLFW) per
   second of wall time, i.e. the share of one core the idle UI takes.
 - ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all)
@@ -55,6 +57,7 @@ class BenchDriver(Driver):
         self._last = None
         self._nudge = 0
         self._render = None
+        self._delivered, self._last_delivery = 0, self.t0  # levels seen in warm-up, when
         previous = rp.callbacks.pre_new_frame
         rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
 
@@ -82,7 +85,13 @@ class BenchDriver(Driver):
         self.count += 1
         if self.phase == "warmup":
             rp.fps_idling.enable_idling = False
-            if self.count > 30 and (v.neural is None or not v.neural.busy):
+            delivered = 0 if v.neural is None else len(v.neural.worker.delivered)
+            if delivered != self._delivered:
+                self._delivered, self._last_delivery = delivered, now
+            # a delivered level wakes the UI (request_refresh), which hello_imgui then keeps
+            # at full speed for time_active_after_last_event (3 s): idle starts after that
+            settled = now - self._last_delivery > rp.fps_idling.time_active_after_last_event + 0.5
+            if self.count > 30 and (v.neural is None or not v.neural.busy) and settled:
                 self.phase, self._mark = "idle", self._clock()
                 self._frames_at_mark = self.count
             return

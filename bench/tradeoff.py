@@ -45,11 +45,25 @@ SWEEP: list[tuple[str, dict]] = (
     + [(f"shell={v}", {"shell_width": v}) for v in (0.02, 0.025, 0.03)]
     + [("shell=0.025 8+4", {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4}),
        ("shell=0.025 13+8", {"shell_width": 0.025, "coarse_samples": 13})]
+    # the surface-guided marcher's own knobs (MarchSettings; with the defaults they
+    # decide what a frame costs, the knobs above only act on the rays it still marches)
+    + [(f"residual_step={v}", {"residual_step": v}) for v in (0.75, 3.0)]
+    + [(f"residual_spread={v}", {"residual_spread": v}) for v in (0.02, 0.15)]
+    + [(f"residual_tolerance={v}", {"residual_tolerance": v}) for v in (0.5, 8.0)]
+    + [("residual_rays=false", {"residual_rays": False}),
+       ("band_newton=false", {"band_newton": False}),
+       ("residual_rays=false band_newton=false", {"residual_rays": False,
+                                                  "band_newton": False})]
+    + [(f"band_spacing={v}", {"band_spacing": v}) for v in (1.0, 3.0)]
+    + [(f"miss_margin={v}", {"miss_margin": v}) for v in (6.0, 10.0)]
 )
+GUIDED_KNOBS = {"residual_rays", "residual_step", "residual_spread", "residual_tolerance",
+                "band_newton", "band_spacing", "band_samples", "miss_margin", "min_cos"}
 
 
 def march_of(knobs: dict, base: MarchSettings) -> MarchSettings:
-    keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width", "guide"}
+    keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width", "guide"} \
+        | GUIDED_KNOBS
     m = replace(base, **{k: v for k, v in knobs.items() if k in keys})
     if m.guide == "shell" and base.guide != "shell":  # the shell marcher's own shell grid
         m = replace(m, shell_voxel=MarchSettings.shell_voxel,
