@@ -135,6 +135,7 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
     assert_finite(guided_rgb=guided.rgb, guided_alpha=guided.alpha, guided_depth=guided.depth)
     assert (guided.alpha >= 0).all() and (guided.alpha <= 1 + 1e-6).all()
     assert (guided.rgb >= 0).all() and (guided.rgb <= 1 + 1e-6).all()
+    assert guided.stats.paths["residual"] > 0  # the residual rays ran at this extreme too
 
 
 # --- rotations through the whole path -------------------------------------------------
