@@ -63,3 +63,21 @@ def test_out_of_range_settings_name_the_setting_and_the_range(item, message):
     with pytest.raises(TexvocabError, match=message.replace("(", r"\(").replace(")", r"\)")
                        .replace("[", r"\[")):
         Settings().with_overrides([item])
+
+
+def test_quality_takes_the_guided_marchers_exact_paths_and_the_knobs_reach_the_marcher():
+    """The presets' sample knobs act only on marched rays; with the guided marcher
+    `quality` also marches its hard rays and takes the 4-sample band (README,
+    session 11), and `--set` reaches both on a trained checkpoint."""
+    assert (march_settings(_with("quality")).residual_rays,
+            march_settings(_with("quality")).band_newton) == (False, False)
+    for name in ("fast", "balanced"):
+        m = march_settings(_with(name))
+        assert m.residual_rays and m.band_newton
+    s = render_overrides(Settings(), "fast", ["residual_rays=false", "band_newton=0"])
+    assert (march_settings(s).residual_rays, march_settings(s).band_newton) == (False, False)
+    old = Settings().to_dict()  # a checkpoint from before the knobs: today's defaults
+    del old["residual_rays"], old["band_newton"]
+    assert Settings.from_dict(old).residual_rays and Settings.from_dict(old).band_newton
+    with pytest.raises(TexvocabError, match="residual_rays=maybe"):
+        Settings().with_overrides(["residual_rays=maybe"])

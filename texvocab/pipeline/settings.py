@@ -52,6 +52,10 @@ class Settings:
     shell_width: float | None = None  # marcher δ (m); None: the field's shell_width
     guide: str = "raster"  # raster: surface-guided marcher (mesh raster + SDF band, README
     # "Rendering") | shell: every ray marched front to back through the shell
+    residual_rays: bool = True  # guide raster: the rays the band cannot take from the mesh
+    # distance + the field's residual at 3 evaluations (false: marched; MarchSettings)
+    band_newton: bool = True  # guide raster: band rays from the probe, the Newton point and
+    # one point behind it (false: band_samples samples; MarchSettings)
     # training
     iterations: int = 2000
     rays_per_batch: int = 1024
@@ -245,13 +249,16 @@ def _parse(raw: str, current, key: str):
 # Render knobs: a preset or ``--set`` may change these on a trained checkpoint (the rest
 # is baked into the weights). See bench/tradeoff.py for what each costs and buys.
 RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps", "shell_width",
-                "guide")
+                "guide", "residual_rays", "band_newton")
 
 # Chosen from bench/tradeoff.py on the default synthetic capture (README, "Presets").
 PRESETS: dict[str, dict] = {
     "fast": {"shell_width": 0.025, "coarse_samples": 6, "fine_samples": 2, "early_stop_eps": 1e-2},
     "balanced": {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4},
-    "quality": {"coarse_samples": 36, "fine_samples": 16, "early_stop_eps": 1e-4},
+    # quality also marches the guided marcher's hard rays and takes the 4-sample band:
+    # 1.7x the default's time, 1 dB nearer the 64+32 reference (README, session 11)
+    "quality": {"coarse_samples": 36, "fine_samples": 16, "early_stop_eps": 1e-4,
+                "residual_rays": False, "band_newton": False},
 }
 
 
@@ -281,7 +288,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     width = s.field.shell_width if training or s.shell_width is None else s.shell_width
     m = MarchSettings(shell_width=width, coarse_samples=s.coarse_samples,
                       fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps,
-                      guide=s.guide)
+                      guide=s.guide, residual_rays=s.residual_rays, band_newton=s.band_newton)
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
         m.coarse_samples = s.train_coarse_samples or s.coarse_samples
