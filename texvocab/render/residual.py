@@ -147,8 +147,8 @@ def _piecewise(t: torch.Tensor, knots: torch.Tensor, values: torch.Tensor) -> to
 
 
 def _column_weights(t: torch.Tensor, s: torch.Tensor, beta: float) -> torch.Tensor:
-    """The linear-SDF quadrature's weights per column (R, M): the part in front of the
-    first sample to column 0, each interval to its far end, what the last absorbs to it."""
+    """The linear-SDF quadrature's weights per column (R, M), without the part in front
+    of the first sample: each interval's to its far end, what the last absorbs to it."""
     w, ends, _ = linear_sdf_weights(t, s, beta, front=False)
     w[:, -1] += ends
     return w
@@ -164,7 +164,7 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     ``field.sdf_rgb`` is evaluated at 3 points per ray; ``index`` is the posed mesh's
     :class:`~texvocab.geometry.surface.SurfaceIndex`. Knobs from ``settings``
     (:class:`~texvocab.render.marcher.MarchSettings`): residual_step, residual_spread,
-    shell_width (distances beyond it read as it), chunk_points.
+    residual_tolerance, shell_width (distances beyond it read as it), chunk_points.
 
     Returns opacity (R,), colour (R, 3) (not over a background), depth (R,), ok (R,)
     (rays resolved; the others must be marched) and the number of field evaluations.
