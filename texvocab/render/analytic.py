@@ -31,7 +31,21 @@ def smooth_colour(points: torch.Tensor, albedo: torch.Tensor, freq: float) -> to
     return (albedo * (0.6 + 0.4 * wave)).clamp(0, 1)
 
 
-class SphereField:
+class _AnalyticField:
+    """The marchers' interface of an analytic field from its ``sdf(points)``, ``beta``,
+    ``albedo`` and ``freq``: ``field(points, dirs) -> (density, rgb)`` and
+    ``field.sdf_rgb(points, dirs) -> (sdf, rgb)``."""
+
+    def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
+        return volsdf_density(self.sdf(points), self.beta), \
+            smooth_colour(points, self.albedo, self.freq)
+
+    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
+        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
+        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)
+
+
+class SphereField(_AnalyticField):
     """Sphere of ``radius`` at ``center``; ``beta`` and ``albedo`` are tensors that may
     require grad. Call: (points (N, 3), dirs (N, 3)) -> (density (N,), rgb (N, 3))."""
 
@@ -47,16 +61,8 @@ class SphereField:
         """(N,) signed distance of points (N, 3)."""
         return (points - self.center).norm(dim=1) - self.radius
 
-    def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
-        return volsdf_density(self.sdf(points), self.beta), \
-            smooth_colour(points, self.albedo, self.freq)
 
-    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
-        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
-        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)
-
-
-class MeshSDFField:
+class MeshSDFField(_AnalyticField):
     """VolSDF density of a closed posed mesh, the body's own shape.
 
     The exact signed distance (:class:`~texvocab.geometry.surface.SurfaceIndex`) is sampled once
@@ -106,16 +112,8 @@ class MeshSDFField:
                             padding_mode="border", align_corners=True)
         return out.view(-1).to(points.dtype)
 
-    def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
-        return volsdf_density(self.sdf(points), self.beta), \
-            smooth_colour(points, self.albedo, self.freq)
 
-    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
-        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
-        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)
-
-
-class MeshResidualField:
+class MeshResidualField(_AnalyticField):
     """The avatar field's structure without a network: the posed mesh's exact signed
     distance (``band`` beyond ``band``, where the density is nil) plus a residual
     ``amplitude`` sin(``wavenumber`` x·(1, 0.7, 0.4) + 1) that moves the surface by up
@@ -150,11 +148,3 @@ class MeshResidualField:
         d = torch.from_numpy(np.where(proj.face >= 0, proj.distance, self.band))
         return torch.where(d < self.band, d.to(points.dtype) + self.residual(points),
                            torch.full_like(points[:, 0], self.band))
-
-    def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
-        return volsdf_density(self.sdf(points), self.beta), \
-            smooth_colour(points, self.albedo, self.freq)
-
-    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
-        """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
-        return self.sdf(points), smooth_colour(points, self.albedo, self.freq)

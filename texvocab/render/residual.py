@@ -57,9 +57,21 @@ def mesh_distance(index, points: torch.Tensor, cap: float) -> torch.Tensor:
     return torch.from_numpy(np.where(proj.face >= 0, proj.distance, cap)).to(points.dtype)
 
 
-def _samples(index, origin, dirs, near, far, step: float, cap: float, r0: torch.Tensor):
-    """d every ``step`` over [near, far] (R,): t, ŝ = d + r0 (cap beyond the shell), d
-    (R, M) and ``inside`` (R, M) (columns past far repeat the last one)."""
+def _estimate(d: torch.Tensor, r0: torch.Tensor, cap: float) -> torch.Tensor:
+    """ŝ = d + r0, the SDF estimated from mesh distances d (R, M) and the probe's
+    residual r0 (R, 1); ``cap`` beyond the shell."""
+    return torch.where(d < cap, d + r0, cap)
+
+
+def _nothing(dirs: torch.Tensor):
+    """The (opacity, colour, depth, ok) of no rays."""
+    z = dirs.new_zeros(0)
+    return z, dirs.new_zeros(0, 3), z, torch.zeros(0, dtype=torch.bool)
+
+
+def _samples(index, origin, dirs, near, far, step: float, cap: float):
+    """d every ``step`` over [near, far] (R,): t, d (R, M) and ``inside`` (R, M) (columns
+    past far repeat the last one)."""
     last = torch.ceil((far - near).clamp(min=0) / step).long().clamp(min=1)
     M = int(last.max()) + 1
     col = torch.arange(M)
@@ -67,8 +79,7 @@ def _samples(index, origin, dirs, near, far, step: float, cap: float, r0: torch.
     inside = col <= last[:, None]
     d = torch.full(t.shape, cap, dtype=dirs.dtype)
     d[inside] = mesh_distance(index, (origin + t[..., None] * dirs[:, None])[inside], cap)
-    d = torch.where(inside, d, d.gather(1, last[:, None]))
-    return t, torch.where(d < cap, d + r0, cap), d, inside
+    return t, torch.where(inside, d, d.gather(1, last[:, None])), inside
 
 
 def _part_that_matters(t: torch.Tensor, s: torch.Tensor, inside: torch.Tensor, beta: float
@@ -96,8 +107,8 @@ def _part_that_matters(t: torch.Tensor, s: torch.Tensor, inside: torch.Tensor, b
 
 def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
     """The coarse samples t_c, d_c (R, M) of the part first..end (R,), with _COARSE - 1
-    more in each low interval (R, M - 1): t, d (R, N) sorted, ``inside`` (R, N) (the
-    rest repeat the last) and the count per ray (R,)."""
+    more in each low interval (R, M - 1): t, d (R, N) sorted (a ray with fewer than N
+    repeats its last)."""
     R, M = t_c.shape
     k = torch.arange(_COARSE, dtype=t_c.dtype) / _COARSE
     col = torch.arange(M - 1)
@@ -122,7 +133,7 @@ def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
     last = (count - 1)[:, None]
     packed_t = torch.where(inside, packed_t, packed_t.gather(1, last))
     packed_d = torch.where(inside, packed_d, packed_d.gather(1, last))
-    return packed_t, packed_d, inside, count
+    return packed_t, packed_d
 
 
 def _quantile_columns(weights: torch.Tensor, qs: tuple[float, ...]) -> torch.Tensor:
@@ -171,8 +182,7 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     """
     R = len(dirs)
     if R == 0:
-        z = dirs.new_zeros(0)
-        return z, dirs.new_zeros(0, 3), z, torch.zeros(0, dtype=torch.bool), 0
+        return (*_nothing(dirs), 0)
     cap, h = float(settings.shell_width), settings.residual_step * beta
     # the residual at the probe nearest the surface (a hit's own surface before an edge
     # it passes) stands for the ray's until the field is evaluated
@@ -181,10 +191,10 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
-    t, s_hat, d, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap, r0)
-    low, first, end, found = _part_that_matters(t, s_hat, inside, beta)
-    t, d, inside, count = _refine(index, origin, dirs, t, d, low, first, end, cap)
-    s_hat = torch.where(d < cap, d + r0, cap)
+    t, d, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap)
+    low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, beta)
+    t, d = _refine(index, origin, dirs, t, d, low, first, end, cap)
+    s_hat = _estimate(d, r0, cap)
     spread = settings.residual_spread
     cols = _quantile_columns(_column_weights(t, s_hat, beta), (spread, 0.5, 1 - spread))
     knots = t.gather(1, cols)
@@ -230,8 +240,7 @@ def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     """
     R = len(dirs)
     if R == 0:
-        z = dirs.new_zeros(0)
-        return z, dirs.new_zeros(0, 3), z, torch.zeros(0, dtype=torch.bool)
+        return _nothing(dirs)
     cap = float(settings.shell_width)
     step = sdf0 / cos
     t_star = t_hit + step.clamp(-cap, cap)
