@@ -12,6 +12,10 @@ from texvocab.errors import TexvocabError
 #: at 0, 1.07-1.08 at 10; but other busy processes then also win over the render.
 NEURAL_NICE = 10
 
+#: where the neural render runs: a process of its own (app/render_process.py; the
+#: default) or a thread of the viewer's (app/worker.py), which shares the interpreter
+NEURAL_WORKERS = ("process", "thread")
+
 #: smallest window the docked panels fit in; smallest offscreen image
 WINDOW_MIN = (320, 240)
 IMAGE_MIN = (16, 16)
@@ -51,3 +55,5 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--neural-resolution", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--neural-threads", type=int, default=1, help=argparse.SUPPRESS)
     p.add_argument("--neural-nice", type=int, default=NEURAL_NICE, help=argparse.SUPPRESS)
+    p.add_argument("--neural-worker", choices=NEURAL_WORKERS, default=NEURAL_WORKERS[0],
+                   help=argparse.SUPPRESS)

@@ -12,8 +12,11 @@ Phases, in order:
   with the camera of ``texvocab shot --camera 0,0,3.2``, and the progressive render runs
   to full resolution. Measured per render: when each level reached the screen after the
   pose change, and the UI's CPU share meanwhile.
+- ``after``: 1.5 s after the last render: how many frames the window drew (a delivered
+  level wakes it for one frame, app/wake.py).
 - ``dragging``: the left shoulder moves every frame as under a dragged slider, with the
-  window at full speed (input keeps it awake): UI frame times and CPU per frame.
+  window at full speed (input keeps it awake): UI frame times and CPU per frame, and
+  the neural images shown meanwhile (each pose's preview is finished, app/worker.py).
 """
 from __future__ import annotations
 
@@ -28,19 +31,8 @@ from app.drivers import Driver
 
 RENDER_POSES = ("walk", "squat")
 RENDERS = 4
+AFTER = 1.5  # seconds watched after the last render ("after" phase)
 SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default --camera
-
-
-def thread_cpu_seconds(native_id: int | None) -> float:
-    """CPU seconds (user + system) of one thread of this process (Linux /proc)."""
-    if native_id is None:
-        return 0.0
-    try:
-        with open(f"/proc/self/task/{native_id}/stat") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 class BenchDriver(Driver):
@@ -52,6 +44,8 @@ class BenchDriver(Driver):
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
         self.drag_ms: list[float] = []
         self.drag_cpu_ms: list[float] = []
+        self.drag_levels: list[int] = []  # the level of each new image shown while dragging
+        self._drag_shown = None
         self.renders: list[dict] = []
         self._mark = None  # (wall, process CPU, worker CPU) at a phase's start
         self._last = None
@@ -62,18 +56,19 @@ class BenchDriver(Driver):
         rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
 
     # -- measurement helpers ---------------------------------------------------------------
-    def _worker_id(self):
-        nv = self.viewer.neural
-        return None if nv is None else nv.worker.native_id
-
     def _clock(self) -> tuple[float, float, float]:
-        return (time.perf_counter(), time.process_time(), thread_cpu_seconds(self._worker_id()))
+        """(wall, this process's CPU outside the render thread, the render's CPU)."""
+        nv = self.viewer.neural
+        render = 0.0 if nv is None else nv.worker.cpu_seconds()
+        inside = nv is not None and nv.worker.in_process
+        return (time.perf_counter(), time.process_time() - (render if inside else 0.0), render)
 
     def _ui_share(self, mark) -> dict:
-        """CPU outside the render thread per wall second since ``mark`` (cores)."""
+        """CPU outside the render (thread or process) per wall second since ``mark``
+        (cores)."""
         now = self._clock()
         wall = now[0] - mark[0]
-        ui = (now[1] - mark[1]) - (now[2] - mark[2])
+        ui = now[1] - mark[1]
         return {"seconds": wall, "ui_cpu_share": ui / max(wall, 1e-9),
                 "render_cpu_share": (now[2] - mark[2]) / max(wall, 1e-9)}
 
@@ -108,7 +103,14 @@ class BenchDriver(Driver):
         if self.phase == "render":
             self._render_tick(now)
             return
+        if self.phase == "after":
+            self._after_tick(now)
+            return
         rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
+        shown = v.neural.frame
+        if shown is not None and shown is not self._drag_shown:
+            self._drag_shown = shown
+            self.drag_levels.append(int(shown.level))
         dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
         if dt is not None and v.frame_cpu_ms:
             self.drag_ms.append(dt)
@@ -127,7 +129,8 @@ class BenchDriver(Driver):
         yaw, pitch, dist = SHOT_CAMERA
         v.camera = OrbitCamera(target=np.asarray(DEFAULT_TARGET) + v.state.trans, yaw=yaw,
                                pitch=pitch, distance=dist)
-        self._render = {"pose": pose, "start": now, "levels": [], "seen": len(v.neural.history)}
+        self._render = {"pose": pose, "start": now, "levels": [], "seen": len(v.neural.history),
+                        "first_frame": self.count}
         self._mark = self._clock()
 
     def _render_tick(self, now: float) -> None:
@@ -146,12 +149,22 @@ class BenchDriver(Driver):
         done = r["levels"] and r["levels"][-1]["level"] == 1 and not nv.busy
         if done or now - r["start"] > 600:
             r.update(self._ui_share(self._mark))
+            r["frames"] = self.count - r.pop("first_frame")
             r.pop("seen")
             r.pop("start")
             self.renders.append(r)
             self._render = None
             if len(self.renders) >= RENDERS:
-                self.phase, self.t0 = "dragging", now
+                self.phase, self.t0, self._frames_at_mark = "after", now, self.count
+
+    def _after_tick(self, now: float) -> None:
+        """Frames drawn in the AFTER seconds after the last render finished: a level's wake
+        draws one frame, it does not keep the window at full speed."""
+        if now - self.t0 >= AFTER:
+            self.report["after_render"] = {"seconds": now - self.t0,
+                                           "frames": self.count - self._frames_at_mark}
+            self.phase, self.t0 = "dragging", now
+            self._drag_shown = self.viewer.neural.frame
 
     def _done(self, rp, error: str | None = None) -> None:
         v = self.viewer
@@ -159,10 +172,15 @@ class BenchDriver(Driver):
         if error:
             self.report["error"] = error
         self.report["renders"] = self.renders
-        self.report["dragging"] = {"frame_ms": self.drag_ms, "cpu_ms": self.drag_cpu_ms}
+        self.report["dragging"] = {"frame_ms": self.drag_ms, "cpu_ms": self.drag_cpu_ms,
+                                   "levels_shown": self.drag_levels,
+                                   "seconds": time.perf_counter() - self.t0}
         self.report["window"] = list(v.size)
         if v.neural is not None:
             self.report["resolution"] = self.resolution
             self.report["neural_threads"] = v.neural_threads
+            self.report["neural_worker"] = v.neural_worker
+            self.report["window_pid"] = os.getpid()
+            self.report["render_pid"] = getattr(v.neural.worker, "pid", os.getpid())
             self.report["errors"] = list(v.neural.worker.errors)
         rp.app_shall_exit = True

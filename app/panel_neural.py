@@ -1,6 +1,7 @@
-"""Neural render panel: the trained avatar rendered by the CPU ray marcher in a worker
-thread (:mod:`app.worker`), from the 3D view's camera, coarse to fine (1/8 .. 1), with
-the level shown and how long it took. Without a checkpoint it says why it is empty.
+"""Neural render panel: the trained avatar rendered by the CPU ray marcher in a render
+process (:mod:`app.render_process`; or a thread, :mod:`app.worker`), from the 3D view's
+camera, coarse to fine (1/8 .. 1), with the level shown and how long it took.
+Without a checkpoint it says why it is empty.
 
 Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render now``,
 ``**/preset``.
@@ -12,6 +13,7 @@ from collections import deque
 import numpy as np
 from imgui_bundle import imgui
 
+from app.render_process import ProcessWorker
 from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 from texvocab.pipeline import RENDER_PRESETS as PRESETS
 from texvocab.pipeline import march_settings, render_overrides
@@ -31,10 +33,14 @@ class NeuralView:
     and when it is done the then-newest pose follows."""
 
     def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0, settings=None,
-                 on_frame=None):
+                 on_frame=None, worker: str = "process"):
         self.ctx = ctx
-        self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice,
-                                        on_frame=on_frame)
+        if worker == "process":  # the render holds an interpreter of its own
+            self.worker = ProcessWorker(model_renderer, (model, march), threads=threads,
+                                        nice=nice, on_frame=on_frame)
+        else:
+            self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads,
+                                            nice=nice, on_frame=on_frame)
         self.settings = settings  # the checkpoint's Settings (for the presets)
         self.preset = "checkpoint"  # or a texvocab.pipeline.settings.PRESETS name
         self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
@@ -90,9 +96,10 @@ class NeuralView:
             for old in [v for v in self.labels if v < self.version - 64]:
                 del self.labels[old], self.keys[old]
             levels = (self.playback_level,) if playing else None
+            # playback renders one level and is never cancelled by the timeline anyway
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
                                          camera.to_texvocab_camera(w, h), self.march, levels,
-                                         tuple(background)))
+                                         tuple(background), finish_preview=not playing))
         frame = self.worker.poll()
         if frame is not None:
             self._upload(frame)

@@ -21,6 +21,7 @@ from app.panel_pose import load_sequence, tick_sequence
 from app.panel_vocab import ThumbnailCache
 from app.scene import SceneOptions, SceneRenderer
 from app.state import ViewerState, load_viewer_data
+from app.wake import ui_waker
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import follow_camera, march_settings
 
@@ -31,7 +32,7 @@ class Viewer:
     the neural render worker."""
 
     def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1,
-                 neural_nice: int = NEURAL_NICE):
+                 neural_nice: int = NEURAL_NICE, neural_worker: str = "process"):
         self.data, self.size = data, size
         self.state = ViewerState(data)
         self.camera = OrbitCamera()
@@ -42,6 +43,7 @@ class Viewer:
         self.reset_camera()
         self.options = SceneOptions()
         self.neural_threads, self.neural_nice = neural_threads, neural_nice
+        self.neural_worker = neural_worker  # "process" or "thread" (app.arguments)
         self.neural_resolution: int | None = None  # long side of the neural render (default 256)
         self.ctx = self.scene = self.thumbs = self.neural = None
         self.preset = ""
@@ -71,8 +73,8 @@ class Viewer:
         if self.data.model is not None:
             self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
                                      self.neural_threads, self.neural_nice,
-                                     settings=self.data.settings,
-                                     on_frame=hello_imgui.request_refresh)
+                                     settings=self.data.settings, on_frame=ui_waker(),
+                                     worker=self.neural_worker)
             if self.neural_resolution:
                 self.neural.resolution = int(self.neural_resolution)
 

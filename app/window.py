@@ -105,16 +105,19 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
                script: str | None = None, report: str | None = None,
                screenshot: str | None = None, neural_resolution: int | None = None,
                neural_threads: int = 1, poses: str | None = None,
-               neural_nice: int = NEURAL_NICE, capture: str | None = None) -> int:
+               neural_nice: int = NEURAL_NICE, capture: str | None = None,
+               neural_worker: str = "process") -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
     0). ``script``: a driver from app/drivers.py (tests, benchmarks) writing a JSON
-    ``report`` and the last frame to ``screenshot``."""
+    ``report`` and the last frame to ``screenshot``. ``neural_worker``: "process" or
+    "thread" (app.arguments.NEURAL_WORKERS)."""
     require_display()
     _choose_gl_platform()
     data = load_viewer_data(source, smpl, capture)
     while True:
-        viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice)
+        viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice,
+                        neural_worker)
         viewer.smpl = smpl
         if data.vocab is not None and data.textures is not None:
             print("preparing the vocabulary texture ...", flush=True)
@@ -145,7 +148,8 @@ def run_from_args(args: argparse.Namespace) -> int:
     """Run the viewer from :func:`app.arguments.add_view_arguments`' namespace."""
     return run_viewer(args.source, args.smpl, parse_size(args.size, WINDOW_MIN), args.script,
                       args.report, args.screenshot, args.neural_resolution,
-                      args.neural_threads, args.poses, args.neural_nice, args.capture)
+                      args.neural_threads, args.poses, args.neural_nice, args.capture,
+                      args.neural_worker)
 
 
 def main(argv: list[str] | None = None) -> int:

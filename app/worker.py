@@ -4,9 +4,11 @@ The UI thread :meth:`ProgressiveWorker.submit`s the current pose and camera with
 viewer's version number whenever either changes; the worker renders that job coarse to
 fine (1/8, 1/4, 1/2, 1 of the requested size, :func:`texvocab.render.progressive_render`)
 and hands each finished level back through :meth:`ProgressiveWorker.poll`. A newer
-submission cancels the job in progress: the version is checked between levels and
-between ray chunks, and a level is delivered only if its version is still the newest,
-so stale images never reach the screen.
+submission cancels the job in progress once its first level (the preview) is shown: the
+version is checked between levels and between ray chunks, and a finer level is
+delivered only if its version is still the newest. The preview of a superseded job is
+still shown (the panel labels it stale), so a dragged slider shows poses as it goes
+instead of none until it stops (``RenderJob.finish_preview``).
 
 Torch in the worker runs with few intra-op threads (``threads``, default 1) so the UI
 thread keeps a core for drawing on small machines.
@@ -31,6 +33,22 @@ from texvocab.pipeline import ShellGeometry, progressive_render
 LevelRenderer = Callable[["RenderJob", Callable[[], bool]], Iterator[tuple[int, object, float]]]
 
 
+def describe(exc: BaseException) -> str:
+    """"Type: message (file:line)" of the innermost frame, for the panel."""
+    where = traceback.extract_tb(exc.__traceback__)[-1]
+    return f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
+
+
+def cpu_seconds(stat: str) -> float:
+    """CPU seconds (user + system) from a Linux ``/proc/.../stat`` file; 0 if unreadable."""
+    try:
+        with open(stat) as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 @dataclass(frozen=True)
 class RenderJob:
     """One request: the viewer ``version`` it belongs to, pose (24, 3) axis-angle, trans
@@ -43,6 +61,10 @@ class RenderJob:
     march: object = None  # MarchSettings for this job (None: the renderer's own)
     levels: tuple[int, ...] | None = None  # downscale factors to render (None: the renderer's)
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RGB in [0, 1] behind the body
+    #: a newer job does not cancel this one's first level, which is finished and shown:
+    #: while a slider is dragged, each pose would otherwise be cancelled before anything
+    #: of it reached the screen
+    finish_preview: bool = True
 
 
 @dataclass(frozen=True)
@@ -95,6 +117,8 @@ class ProgressiveWorker:
     ``on_frame``: called (from the worker thread) after each delivered level, e.g. to wake
     an idling UI so it shows the level at once (hello_imgui.request_refresh).
     """
+
+    in_process = True  # its CPU time is part of the viewer process's
 
     def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0,
                  on_frame: Callable[[], None] | None = None):
@@ -152,6 +176,12 @@ class ProgressiveWorker:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    def cpu_seconds(self) -> float:
+        """CPU seconds the render thread has used (Linux /proc; 0 elsewhere)."""
+        if self.native_id is None:
+            return 0.0
+        return cpu_seconds(f"/proc/self/task/{self.native_id}/stat")
+
     def stop(self, timeout: float = 10.0) -> bool:
         """Cancel any work and join the thread; True if it ended within ``timeout``."""
         with self._wake:
@@ -186,24 +216,29 @@ class ProgressiveWorker:
 
     def _render_job(self, job: RenderJob) -> None:
         start = time.perf_counter()
+        shown = not job.finish_preview  # until its first level is shown, a job is not cancelled
+
+        def cancelled() -> bool:
+            return self._stop or (shown and self._stale(job))
         try:
-            for level, rgb, seconds in self._render(job, lambda: self._stale(job)):
+            for level, rgb, seconds in self._render(job, cancelled):
                 image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32))
                 frame = RenderFrame(job.version, int(level), image, float(seconds),
                                     time.perf_counter() - start)
                 with self._lock:
-                    if self._stale(job):
+                    if cancelled():
                         return
                     self._frame, self._fresh = frame, True
                     self.delivered.append((job.version, int(level)))
+                shown = True
                 if self._on_frame is not None:
                     self._on_frame()
+                if self._stale(job):  # a newer job waits: the preview was its due
+                    return
         except Exception as exc:  # shown in the panel; the worker keeps serving
-            where = traceback.extract_tb(exc.__traceback__)[-1]
             self.last_traceback = traceback.format_exc()
             with self._lock:
-                self.errors.append(f"{type(exc).__name__}: {exc} "
-                                   f"({Path(where.filename).name}:{where.lineno})")
+                self.errors.append(describe(exc))
         finally:
             with self._lock:
                 if not self._stale(job) and self._job is None:

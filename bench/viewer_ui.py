@@ -8,10 +8,13 @@ driver in app/bench_driver.py), then ``texvocab shot CHECKPOINT --pose P --camer
 --size WxH`` for each pose the window rendered, one after the other (nothing else
 running). Prints three tables and a last line
 
-    summary: idle_ui_cpu_share=… window_full_s=… shot_s=… window_over_shot=… first_level_ms=…
+    summary: worker=… idle_ui_cpu_share=… window_full_s=… shot_s=… window_over_shot=…
+             first_level_ms=… dragging_frame_ms=…
 
-(medians over the renders; issue targets: idle share <= 0.10 of a core, window / shot
-<= 1.5, first level <= 50 ms).
+(medians over the renders, for the first worker run; issue targets: idle share <= 0.10
+of a core, window / shot <= 1.5, first level <= 50 ms, full level <= 0.5 s, UI frames
+while rendering <= 33 ms). ``--worker both`` (the default) runs the window with its
+render process and again with the render thread, one after the other.
 
     .venv/bin/python bench/viewer_ui.py RUN/checkpoint.pt [--seconds 10] [--res 256]
 
@@ -36,7 +39,7 @@ TEXVOCAB = Path(sys.executable).parent / "texvocab"
 
 
 def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: int | None,
-               nice: int | None) -> dict:
+               nice: int | None, worker: str) -> dict:
     xvfb = shutil.which("xvfb-run")
     if xvfb is None:
         sys.exit("error: xvfb-run is missing (apt-get install xvfb xauth)")
@@ -44,7 +47,7 @@ def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: in
         report = Path(tmp) / "bench.json"
         cmd = [xvfb, "-a", "-s", "-screen 0 1920x1200x24", sys.executable, "-m", "app.window",
                checkpoint, "--size", size, "--script", f"bench:{seconds}:{res}",
-               "--report", str(report)]
+               "--report", str(report), "--neural-worker", worker]
         if threads:
             cmd += ["--neural-threads", str(threads)]
         if nice is not None:
@@ -106,10 +109,19 @@ def run_shot(checkpoint: str, pose: str, size: tuple[int, int]) -> float:
     return float(found.group(1))
 
 
-def render_table(renders: list[dict], shot_s: dict[str, float]) -> tuple[str, list[float]]:
-    lines = ["| render | pose | size (h, w) | 1/8 on screen ms | 1/4 ms | 1/2 ms | full s | "
-             "shot s | window / shot | UI CPU share | render CPU share |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+def render_table(runs: dict[str, list[dict]], shot_s: dict[str, float]) -> tuple[str, dict]:
+    """One row per render of each worker; the window / shot ratios per worker."""
+    lines = ["| worker | render | pose | size (h, w) | 1/8 on screen ms | 1/4 ms | 1/2 ms | "
+             "full s | shot s | window / shot | UI CPU share | render CPU share |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    ratios = {}
+    for worker, renders in runs.items():
+        ratios[worker] = _render_rows(worker, renders, shot_s, lines)
+    return "\n".join(lines), ratios
+
+
+def _render_rows(worker: str, renders: list[dict], shot_s: dict[str, float],
+                 lines: list[str]) -> list[float]:
     ratios = []
     for i, r in enumerate(renders):
         at = {lv["level"]: lv["on_screen_s"] for lv in r["levels"]}
@@ -118,10 +130,10 @@ def render_table(renders: list[dict], shot_s: dict[str, float]) -> tuple[str, li
         ratio = full / shot_s[r["pose"]]
         ratios.append(ratio)
         cells = [f"{1000 * at[lv]:.0f}" if lv in at else "-" for lv in (8, 4, 2)]
-        lines.append(f"| {i + 1} | {r['pose']} | {size} | {' | '.join(cells)} | {full:.2f} | "
+        lines.append(f"| {worker} | {i + 1} | {r['pose']} | {size} | {' | '.join(cells)} | {full:.2f} | "
                      f"{shot_s[r['pose']]:.2f} | {ratio:.2f} | {r['ui_cpu_share']:.2f} | "
                      f"{r['render_cpu_share']:.2f} |")
-    return "\n".join(lines), ratios
+    return ratios
 
 
 def main() -> int:
@@ -135,7 +147,11 @@ def main() -> int:
                    help="torch threads of the render worker (default: the viewer's)")
     p.add_argument("--nice", type=int, default=None,
                    help="niceness of the neural render thread (default: the viewer's)")
-    p.add_argument("--json", default=None, help="also write the raw report here")
+    p.add_argument("--worker", choices=("both", "process", "thread"), default="both",
+                   help="where the viewer renders: its render process (the default), a thread "
+                        "of the UI's interpreter (the previous default), or both, one after "
+                        "the other (default both; the summary line is the process's)")
+    p.add_argument("--json", default=None, help="also write the raw reports here")
     p.add_argument("--no-baseline", action="store_true",
                    help="skip the empty-window row (what GL and X cost with nothing drawn)")
     p.add_argument("--empty-window-child", default=None, help=argparse.SUPPRESS)
@@ -144,26 +160,38 @@ def main() -> int:
         empty_window_child(args.size, args.seconds, args.empty_window_child)
         return 0
     empty = None if args.no_baseline else run_empty(args.size, args.seconds)
-    rep = run_window(args.checkpoint, args.seconds, args.res, args.size, args.threads, args.nice)
-    if not rep.get("ok"):
-        sys.exit(f"error: {rep.get('error', 'the bench did not finish')}")
-    renders = rep["renders"]
-    sizes = {r["pose"]: tuple(r["levels"][-1]["size"]) for r in renders if r["levels"]}
+    workers = ("process", "thread") if args.worker == "both" else (args.worker,)
+    reps = {}
+    for worker in workers:
+        rep = run_window(args.checkpoint, args.seconds, args.res, args.size, args.threads,
+                         args.nice, worker)
+        if not rep.get("ok"):
+            sys.exit(f"error: {worker} worker: {rep.get('error', 'the bench did not finish')}")
+        reps[worker] = rep
+    runs = {w: rep["renders"] for w, rep in reps.items()}
+    sizes = {r["pose"]: tuple(r["levels"][-1]["size"])
+             for renders in runs.values() for r in renders if r["levels"]}
     shot_s = {pose: run_shot(args.checkpoint, pose, (hw[1], hw[0])) for pose, hw in sizes.items()}
-    idle = rep["idle"]
+    first_rep = reps[workers[0]]
     print(f"viewer {args.size} under Xvfb, neural render long side {args.res} px, render "
-          f"threads {rep.get('neural_threads')}, {args.seconds:g} s idle\n")
-    print("| phase | seconds | frames | UI CPU share (cores) |\n|---|---|---|---|")
-    print(f"| idle | {idle['seconds']:.1f} | {idle['frames']} | {idle['ui_cpu_share']:.3f} |")
-    table, ratios = render_table(renders, shot_s)
+          f"threads {first_rep.get('neural_threads')}, {args.seconds:g} s idle\n")
+    print("| worker | phase | seconds | frames | UI CPU share (cores) |\n|---|---|---|---|---|")
+    for worker, rep in reps.items():
+        idle = rep["idle"]
+        print(f"| {worker} | idle | {idle['seconds']:.1f} | {idle['frames']} | "
+              f"{idle['ui_cpu_share']:.3f} |")
+        after = rep.get("after_render")
+        if after:
+            print(f"| {worker} | after the last render | {after['seconds']:.1f} | "
+                  f"{after['frames']} | - |")
+    table, ratios = render_table(runs, shot_s)
     print("\nneural render in the window (time after the pose change at which each level "
           "was on screen) against texvocab shot, same pose, camera and size:\n")
     print(table)
-    drag = np.asarray(rep["dragging"]["frame_ms"])
-    cpu = np.asarray(rep["dragging"]["cpu_ms"])
     print("\n| window at full speed | frames | median ms | p95 ms | UI-thread CPU ms (median) |")
     print("|---|---|---|---|---|")
-    rows = [("dragging a slider", drag, cpu)]
+    rows = [(f"dragging a slider ({w} worker)", np.asarray(rep["dragging"]["frame_ms"]),
+             np.asarray(rep["dragging"]["cpu_ms"])) for w, rep in reps.items()]
     if empty is not None:
         rows.insert(0, ("empty hello_imgui window (baseline)", np.asarray(empty["wall"]),
                         np.asarray(empty["cpu"])))
@@ -171,13 +199,24 @@ def main() -> int:
         if len(ms):
             print(f"| {name} | {len(ms)} | {np.median(ms):.1f} | {np.percentile(ms, 95):.1f} | "
                   f"{np.median(c):.1f} |")
+    print("\n| worker | dragging s | neural images shown while dragging | per second | levels |")
+    print("|---|---|---|---|---|")
+    for w, rep in reps.items():
+        d = rep["dragging"]
+        shown = d.get("levels_shown", [])
+        secs = d.get("seconds", float("nan"))
+        print(f"| {w} | {secs:.1f} | {len(shown)} | {len(shown) / secs:.1f} | "
+              f"{sorted(set(shown))} |")
     if args.json:
-        Path(args.json).write_text(json.dumps(rep, indent=1))
-    full = [r["levels"][-1]["on_screen_s"] for r in renders if r["levels"]]
-    first = [r["levels"][0]["on_screen_s"] * 1000 for r in renders if r["levels"]]
-    print(f"\nsummary: idle_ui_cpu_share={idle['ui_cpu_share']:.3f} "
+        Path(args.json).write_text(json.dumps(reps, indent=1))
+    w = workers[0]
+    full = [r["levels"][-1]["on_screen_s"] for r in runs[w] if r["levels"]]
+    first = [r["levels"][0]["on_screen_s"] * 1000 for r in runs[w] if r["levels"]]
+    drag = np.asarray(reps[w]["dragging"]["frame_ms"])
+    print(f"\nsummary: worker={w} idle_ui_cpu_share={first_rep['idle']['ui_cpu_share']:.3f} "
           f"window_full_s={np.median(full):.2f} shot_s={np.median(list(shot_s.values())):.2f} "
-          f"window_over_shot={np.median(ratios):.2f} first_level_ms={np.median(first):.0f}")
+          f"window_over_shot={np.median(ratios[w]):.2f} first_level_ms={np.median(first):.0f} "
+          f"dragging_frame_ms={np.median(drag) if len(drag) else float('nan'):.1f}")
     return 0
 
 

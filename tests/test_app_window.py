@@ -105,6 +105,26 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert w * 0.25 < xs.mean() < w * 0.75 and h * 0.25 < ys.mean() < h * 0.75
 
 
+@pytest.mark.parametrize("worker", ["process", "thread"])
+def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
+        tiny_checkpoint, tmp_path, worker):
+    """bench/viewer_ui.py's driver, short: four renders to full resolution in the render
+    process (or thread), the CPU of each side measured, and after the last level the window
+    idles again (a level's wake draws a frame, app/wake.py)."""
+    proc, rep, _ = run_window(tiny_checkpoint, "bench:1:64", tmp_path, "--neural-worker",
+                              worker)
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
+    assert rep["neural_worker"] == worker and rep["errors"] == []
+    assert (rep["render_pid"] != rep["window_pid"]) == (worker == "process")
+    assert len(rep["renders"]) == 4
+    for r in rep["renders"]:
+        assert [lv["level"] for lv in r["levels"]][-1] == 1
+        assert r["render_cpu_share"] > 0 and r["ui_cpu_share"] > 0
+    # the levels' wakes leave the window idling
+    assert rep["after_render"]["seconds"] >= 1.5 and rep["after_render"]["frames"] <= 6
+    assert rep["idle"]["frames"] <= 4  # 1 s idle at 1 frame per second
+
+
 @pytest.mark.parametrize("cmd", [[PYTHON, "-m", "app.window"],
                                  [str(Path(PYTHON).parent / "texvocab"), "view"]])
 def test_viewer_without_display_says_what_to_do(cmd):
@@ -114,3 +134,19 @@ def test_viewer_without_display_says_what_to_do(cmd):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: no display"), proc.stderr
     assert "texvocab shot" in lines[0] and "xvfb-run" in lines[0]
+
+
+def test_render_worker_bench_runs_both_workers(tiny_checkpoint):
+    """bench/render_worker.py, short: both workers render with and without the UI-like
+    load, and the summary line gives each one's slowdown."""
+    proc = subprocess.run([PYTHON, "bench/render_worker.py", str(tiny_checkpoint), "--rounds",
+                           "1", "--res", "32"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = [line for line in proc.stdout.splitlines() if line.startswith("| thread")
+            or line.startswith("| process")]
+    assert len(rows) == 4 and all(" | 2 | " in row for row in rows), proc.stdout
+    last = proc.stdout.strip().splitlines()[-1]
+    values = dict(kv.split("=") for kv in last.removeprefix("summary: ").split())
+    assert set(values) == {"thread_slowdown", "process_slowdown"}
+    assert all(float(v) > 0 for v in values.values())

@@ -153,6 +153,43 @@ def test_levels_of_an_uncooperative_renderer_are_dropped_once_stale():
     assert np.allclose(worker.latest.image, 0.2)
 
 
+@pytest.mark.parametrize("finish_preview", [True, False])
+def test_a_newer_job_lets_the_preview_in_progress_finish(finish_preview):
+    """While a slider is dragged every UI frame submits a pose: each job's first level is
+    finished and shown (labelled stale by the panel) before the newest job starts, so
+    the drag shows poses as it goes. With ``finish_preview=False`` the newer job cancels
+    the preview as it cancels finer levels."""
+    started, release = threading.Event(), threading.Event()
+    calls, seen_cancelled = [], []
+
+    def render(j, cancelled):
+        calls.append(j.version)
+        if j.version == 1:
+            started.set()
+            release.wait(10)
+            seen_cancelled.append(cancelled())
+        for level in (8, 4, 2, 1):
+            if cancelled():
+                return
+            yield level, np.full((64 // level, 64 // level, 3), j.version / 10, np.float32), 0.01
+
+    worker = ProgressiveWorker(render, threads=None)
+    first = RenderJob(1, np.zeros((24, 3)), np.zeros(3), sphere_camera(),
+                      finish_preview=finish_preview)
+    worker.submit(first)
+    assert started.wait(10)
+    worker.submit(job(2))
+    worker.submit(job(3))
+    release.set()
+    time.sleep(0.05)
+    wait_idle(worker)
+    assert worker.stop()
+    assert calls == [1, 3]  # version 2 was superseded before it started
+    assert seen_cancelled == [not finish_preview]
+    preview = [(1, 8)] if finish_preview else []
+    assert list(worker.delivered) == [*preview, (3, 8), (3, 4), (3, 2), (3, 1)]
+
+
 def test_stop_joins_promptly_during_a_long_render():
     started = threading.Event()
 
