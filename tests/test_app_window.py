@@ -150,3 +150,17 @@ def test_render_worker_bench_runs_both_workers(tiny_checkpoint):
     values = dict(kv.split("=") for kv in last.removeprefix("summary: ").split())
     assert set(values) == {"thread_slowdown", "process_slowdown"}
     assert all(float(v) > 0 for v in values.values())
+
+
+def test_the_ui_waker_is_glfws_empty_event_of_the_loaded_library():
+    """app/wake.py posts an empty event through the very libglfw imgui_bundle loaded (one
+    copy in the process), not hello_imgui.request_refresh."""
+    from imgui_bundle import hello_imgui
+
+    from app.wake import ui_waker
+
+    wake = ui_waker()
+    assert wake is not hello_imgui.request_refresh and wake.__name__ == "glfwPostEmptyEvent"
+    maps = Path("/proc/self/maps").read_text()
+    glfw = {line.split()[-1] for line in maps.splitlines() if "libglfw" in line}
+    assert len(glfw) == 1, glfw
