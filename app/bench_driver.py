@@ -11,7 +11,8 @@ Phases, in order:
 - ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all)
   with the camera of ``texvocab shot --camera 0,0,3.2``, and the progressive render runs
   to full resolution. Measured per render: when each level reached the screen after the
-  pose change, and the UI's CPU share meanwhile.
+  pose change (after the buffer swap of the first frame that drew it), how long the
+  frame that changed the pose took, and the UI's CPU share meanwhile.
 - ``after``: 1.5 s after the last render: how many frames the window drew (a delivered
   level wakes it for one frame, app/wake.py).
 - ``dragging``: the left shoulder moves every frame as under a dragged slider, with the
@@ -54,6 +55,8 @@ class BenchDriver(Driver):
         self._delivered, self._last_delivery = 0, self.t0  # levels seen in warm-up, when
         previous = rp.callbacks.pre_new_frame
         rp.callbacks.pre_new_frame = lambda: (previous(), self._tick())
+        swapped = rp.callbacks.after_swap or (lambda: None)
+        rp.callbacks.after_swap = lambda: (swapped(), self._swapped())
 
     # -- measurement helpers ---------------------------------------------------------------
     def _clock(self) -> tuple[float, float, float]:
@@ -133,12 +136,14 @@ class BenchDriver(Driver):
                         "first_frame": self.count}
         self._mark = self._clock()
 
-    def _render_tick(self, now: float) -> None:
-        nv = self.viewer.neural
-        r = self._render
-        if r is None:
-            self._start_render(now)
+    def _swapped(self) -> None:
+        """After a frame is on screen: the levels it showed for the first time (uploaded in
+        this frame, before or while the panels drew) are on screen now."""
+        nv, r = self.viewer.neural, self._render
+        if self.phase != "render" or r is None:
             return
+        now = time.perf_counter()
+        r.setdefault("pose_frame_s", now - r["start"])  # the frame that changed the pose
         history = list(nv.history)
         for version, level, ms, elapsed, shape in history[r["seen"]:]:
             if version == nv.version:
@@ -146,6 +151,13 @@ class BenchDriver(Driver):
                                     "worker_elapsed_s": elapsed, "level_ms": ms,
                                     "size": [int(x) for x in shape]})
         r["seen"] = len(history)
+
+    def _render_tick(self, now: float) -> None:
+        nv = self.viewer.neural
+        r = self._render
+        if r is None:
+            self._start_render(now)
+            return
         done = r["levels"] and r["levels"][-1]["level"] == 1 and not nv.busy
         if done or now - r["start"] > 600:
             r.update(self._ui_share(self._mark))
