@@ -45,6 +45,7 @@ class BenchDriver(Driver):
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
         self.drag_ms: list[float] = []
         self.drag_cpu_ms: list[float] = []
+        self.drag_panels: list[dict] = []  # UI-thread CPU ms per panel, per dragging frame
         self.drag_levels: list[int] = []  # the level of each new image shown while dragging
         self._drag_shown = None
         self.renders: list[dict] = []
@@ -118,6 +119,7 @@ class BenchDriver(Driver):
         if dt is not None and v.frame_cpu_ms:
             self.drag_ms.append(dt)
             self.drag_cpu_ms.append(v.frame_cpu_ms[-1])
+            self.drag_panels.append(dict(v.panel_cpu_ms))
         self._nudge += 1
         z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
         v.state.set_joint(16, (0.0, 0.0, z))
@@ -186,6 +188,7 @@ class BenchDriver(Driver):
         self.report["renders"] = self.renders
         self.report["dragging"] = {"frame_ms": self.drag_ms, "cpu_ms": self.drag_cpu_ms,
                                    "levels_shown": self.drag_levels,
+                                   "panel_cpu_ms": self.drag_panels,
                                    "seconds": time.perf_counter() - self.t0}
         self.report["window"] = list(v.size)
         if v.neural is not None:

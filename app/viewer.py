@@ -53,6 +53,7 @@ class Viewer:
         self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
         self.frame_ms: deque[float] = deque(maxlen=600)  # wall time between frames
         self.frame_cpu_ms: deque[float] = deque(maxlen=600)  # of it, this thread's CPU time
+        self.panel_cpu_ms: dict[str, float] = {}  # per panel: UI-thread CPU of its last draw
         self.idling_log: deque[tuple] = deque(maxlen=2000)  # (busy, playing, idling) per frame
         self._last_frame = None
         self._scene_key = None
@@ -86,6 +87,12 @@ class Viewer:
         if self.scene is not None:
             self.scene.release()
 
+    def draw_panel(self, name: str, draw) -> None:
+        """Draw one docked panel (``draw(viewer)``), timing its UI-thread CPU."""
+        cpu = time.thread_time()
+        draw(self)
+        self.panel_cpu_ms[name] = (time.thread_time() - cpu) * 1000
+
     def pre_new_frame(self) -> None:
         now, cpu = time.perf_counter(), time.thread_time()
         if self._last_frame is not None:
@@ -101,6 +108,7 @@ class Viewer:
         idling = hello_imgui.get_runner_params().fps_idling
         idling.enable_idling = not playing  # a render in progress wakes the UI per level
         self.idling_log.append((busy, playing, bool(idling.enable_idling)))
+        self.panel_cpu_ms["before the panels"] = (time.thread_time() - cpu) * 1000
 
     def submit_neural(self, force: bool = False) -> None:
         """Hand a changed pose or camera to the neural render worker (and show a finished

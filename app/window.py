@@ -90,7 +90,8 @@ def _runner_params(viewer: Viewer, title: str):
                              ("3D view", "MainDockSpace", draw_view_panel),
                              ("Neural render", neural_space, draw_neural_panel),
                              ("Vocabulary", "VocabSpace", draw_vocab_panel)):
-        win = hello_imgui.DockableWindow(label, space, (lambda f=fn: f(viewer)))
+        win = hello_imgui.DockableWindow(label, space,
+                                         (lambda f=fn, name=label: viewer.draw_panel(name, f)))
         win.can_be_closed = False
         windows.append(win)
     rp.docking_params.dockable_windows = windows

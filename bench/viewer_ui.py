@@ -136,6 +136,23 @@ def _render_rows(worker: str, renders: list[dict], shot_s: dict[str, float],
     return ratios
 
 
+def panel_table(reps: dict) -> str:
+    """Per worker: the median UI-thread CPU of each panel per dragging frame (and the
+    work before the panels: input, the render's submission and upload)."""
+    names = sorted({n for rep in reps.values() for d in rep["dragging"].get("panel_cpu_ms", [])
+                    for n in d})
+    lines = ["| worker | " + " | ".join(names) + " | all UI-thread CPU |",
+             "|---|" + "---|" * (len(names) + 1)]
+    for w, rep in reps.items():
+        frames = rep["dragging"].get("panel_cpu_ms", [])
+        cells = [f"{np.median([d.get(n, 0.0) for d in frames]):.1f}" if frames else "-"
+                 for n in names]
+        cpu = rep["dragging"]["cpu_ms"]
+        lines.append(f"| {w} | " + " | ".join(cells) +
+                     f" | {np.median(cpu) if cpu else float('nan'):.1f} |")
+    return "\n".join(lines)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("checkpoint", help="checkpoint.pt (its capture must exist)")
@@ -207,6 +224,8 @@ def main() -> int:
         secs = d.get("seconds", float("nan"))
         print(f"| {w} | {secs:.1f} | {len(shown)} | {len(shown) / secs:.1f} | "
               f"{sorted(set(shown))} |")
+    print("\nwhere a dragging frame's UI-thread CPU goes (median ms per frame):\n")
+    print(panel_table(reps))
     if args.json:
         Path(args.json).write_text(json.dumps(reps, indent=1))
     w = workers[0]

@@ -185,3 +185,18 @@ def test_numpy_posing_equals_the_body_model(body, toy_arrays):
         tol = 1e-9 if model is toy else 1e-5  # the default body's model is float32
         np.testing.assert_allclose(verts, ref.vertices[0].double().numpy(), atol=tol)
         np.testing.assert_allclose(joints, ref.joints[0].double().numpy(), atol=tol)
+
+
+def test_compiled_blend_equals_the_numpy_reference(body):
+    """VocabTexture.blend (compiled, one pass) against blend_reference (numpy, part by
+    part) on random poses, both weightings."""
+    rng = np.random.default_rng(3)
+    for weighting in ("paper", "inverse"):
+        data = make_data(body, weighting=weighting)
+        vt = VocabTexture(body, data.vocab, data.textures)
+        for _ in range(3):
+            pose = rng.normal(0, 0.4, (24, 3))
+            got, want = vt.blend(pose), vt.blend_reference(pose)
+            assert got.shape == want.shape == (TEX, TEX, 3) and got.dtype == np.float32
+            np.testing.assert_allclose(got, want, atol=2e-6)
+            assert want.std() > 0.01  # a real texture, not zeros

@@ -15,6 +15,7 @@ import torch
 
 from texvocab.body.parts import part_attention
 from texvocab.geometry.uv import texel_map
+from texvocab.method._blend_jit import blend_texels
 
 
 def part_coefficients(vocab, pose) -> tuple[np.ndarray, np.ndarray]:
@@ -70,10 +71,22 @@ class VocabTexture:
         for p in range(self.attention.shape[1]):
             idx = np.nonzero(self.attention[:, p] > 0)[0]
             self._part_texels.append((idx, self.attention[idx, p, None].astype(np.float32)))
+        # the same lists back to back for the compiled blend (part p: ptr[p]..ptr[p + 1])
+        self._ptr = np.cumsum([0] + [len(i) for i, _ in self._part_texels]).astype(np.int64)
+        self._idx = np.concatenate([i for i, _ in self._part_texels]).astype(np.int64)
+        self._omega = np.concatenate([o[:, 0] for _, o in self._part_texels])
 
     def blend(self, pose) -> np.ndarray:
         """(S, S, 3) float32 blended texture for a pose (24, 3); uncovered texels copy
         the nearest covered texel (as the texture maps themselves do)."""
+        frames, coef = part_coefficients(self.vocab, pose)
+        colour = np.zeros((self._flat.shape[1], 3), np.float32)
+        blend_texels(self._flat, frames.astype(np.int64), coef.astype(np.float32), self._ptr,
+                     self._idx, self._omega, colour)
+        return self.tmap.to_image(colour, fill=True)
+
+    def blend_reference(self, pose) -> np.ndarray:
+        """:meth:`blend` in numpy, part by part and frame by frame (the test reference)."""
         frames, coef = part_coefficients(self.vocab, pose)
         colour = np.zeros((self._flat.shape[1], 3), np.float32)
         for (idx, omega), row in zip(self._part_texels, coef, strict=True):
