@@ -243,6 +243,3 @@ def draw_pose_panel(viewer) -> None:
                 imgui.text_disabled(JOINT_NAMES[j].replace("_", " "))
                 _joint_sliders(viewer, j)
         imgui.pop_id()
-    # a pose changed here (or by a script before the panels) starts its neural render now,
-    # while the 3D view and the vocabulary panel redraw, not after them
-    viewer.submit_neural()
