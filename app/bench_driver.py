@@ -85,6 +85,8 @@ class BenchDriver(Driver):
         if self.phase == "warmup":
             rp.fps_idling.enable_idling = False
             delivered = 0 if v.neural is None else len(v.neural.worker.delivered)
+            if v.neural is not None and v.neural.history and "startup_s" not in self.report:
+                self.report["startup_s"] = now - self.t0  # the window's first level shown
             if delivered != self._delivered:
                 self._delivered, self._last_delivery = delivered, now
             # a delivered level wakes the UI (request_refresh), which hello_imgui then keeps

@@ -33,14 +33,10 @@ class NeuralView:
     and when it is done the then-newest pose follows."""
 
     def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0, settings=None,
-                 on_frame=None, worker: str = "process"):
+                 on_frame=None, worker="process"):
         self.ctx = ctx
-        if worker == "process":  # the render holds an interpreter of its own
-            self.worker = ProcessWorker(model_renderer, (model, march), threads=threads,
-                                        nice=nice, on_frame=on_frame)
-        else:
-            self.worker = ProgressiveWorker(model_renderer(model, march), threads=threads,
-                                            nice=nice, on_frame=on_frame)
+        self.worker = worker if not isinstance(worker, str) else \
+            start_worker(worker, model, march, threads, nice, on_frame)
         self.settings = settings  # the checkpoint's Settings (for the presets)
         self.preset = "checkpoint"  # or a texvocab.pipeline.settings.PRESETS name
         self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
@@ -149,6 +145,17 @@ class NeuralView:
         if self.texture is not None:
             self.texture.release()
             self.texture = None
+
+
+def start_worker(kind: str, model, march, threads: int = 1, nice: int = 0, on_frame=None):
+    """The neural render's worker: "process" (a process of its own: the UI's Python does
+    not slow the render; about 3.5-4 s from start to its first level, torch imported and
+    the model unpickled there) or "thread" (in the viewer's interpreter)."""
+    if kind == "process":
+        return ProcessWorker(model_renderer, (model, march), threads=threads, nice=nice,
+                             on_frame=on_frame)
+    return ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice,
+                             on_frame=on_frame)
 
 
 def _fit(long_side: int, aspect: float) -> tuple[int, int]:

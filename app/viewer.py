@@ -16,7 +16,7 @@ from app.arguments import NEURAL_NICE
 from app.camera import CaptureViewCamera, OrbitCamera
 from app.colors import heat_color
 from app.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
-from app.panel_neural import NeuralView, camera_key
+from app.panel_neural import NeuralView, camera_key, start_worker
 from app.panel_pose import load_sequence, tick_sequence
 from app.panel_vocab import ThumbnailCache
 from app.scene import SceneOptions, SceneRenderer
@@ -44,6 +44,7 @@ class Viewer:
         self.options = SceneOptions()
         self.neural_threads, self.neural_nice = neural_threads, neural_nice
         self.neural_worker = neural_worker  # "process" or "thread" (app.arguments)
+        self._worker = None  # started by start_neural_worker, handed to the panel
         self.neural_resolution: int | None = None  # long side of the neural render (default 256)
         self.ctx = self.scene = self.thumbs = self.neural = None
         self.preset = ""
@@ -72,12 +73,21 @@ class Viewer:
         self.scene = SceneRenderer(self.ctx, self.data)
         self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
         if self.data.model is not None:
+            self.start_neural_worker()
             self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
                                      self.neural_threads, self.neural_nice,
-                                     settings=self.data.settings, on_frame=ui_waker(),
-                                     worker=self.neural_worker)
+                                     settings=self.data.settings, worker=self._worker)
             if self.neural_resolution:
                 self.neural.resolution = int(self.neural_resolution)
+
+    def start_neural_worker(self) -> None:
+        """Start the neural render's worker (once; nothing without a model). The window
+        calls this before it opens, so a render process starts up (torch, the model)
+        while the window does."""
+        if self._worker is None and self.data.model is not None:
+            self._worker = start_worker(self.neural_worker, self.data.model,
+                                        march_settings(self.data.settings), self.neural_threads,
+                                        self.neural_nice, ui_waker())
 
     def before_exit(self) -> None:
         if self.neural is not None:

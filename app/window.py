@@ -120,6 +120,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
         viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice,
                         neural_worker)
         viewer.smpl = smpl
+        viewer.start_neural_worker()  # a render process starts up meanwhile
         if data.vocab is not None and data.textures is not None:
             print("preparing the vocabulary texture ...", flush=True)
             viewer.state.blended_texture()  # its one-off setup (~2 s) before the window opens

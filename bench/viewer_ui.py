@@ -197,6 +197,9 @@ def main() -> int:
         idle = rep["idle"]
         print(f"| {worker} | idle | {idle['seconds']:.1f} | {idle['frames']} | "
               f"{idle['ui_cpu_share']:.3f} |")
+        if "startup_s" in rep:
+            print(f"| {worker} | first level after the window started | {rep['startup_s']:.1f} | "
+                  "- | - |")
         after = rep.get("after_render")
         if after:
             print(f"| {worker} | after the last render | {after['seconds']:.1f} | "
