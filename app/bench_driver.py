@@ -4,8 +4,8 @@ bench:SECONDS:RES``). No ImGui Test Engine, so nothing but the viewer draws.
 Phases, in order:
 
 - ``idle``: nothing changes, the viewer idles as it does for a user (from 3.5 s after the
-  start-up render's last level: hello_imgui keeps a woken UI at full speed for
-  ``time_active_after_last_event``, 3 s, before it idles). Measured: the CPU
+  start-up render's last level, ``time_active_after_last_event`` + 0.5 s: the start-up
+  itself is input-free, but the margin keeps any full-speed tail out of the phase). Measured: the CPU
   the process spends outside the neural render thread (UI, GL under llvmpipe, GLFW) per
   second of wall time, i.e. the share of one core the idle UI takes.
 - ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all)
@@ -89,8 +89,7 @@ class BenchDriver(Driver):
                 self.report["startup_s"] = now - self.t0  # the window's first level shown
             if delivered != self._delivered:
                 self._delivered, self._last_delivery = delivered, now
-            # a delivered level wakes the UI (request_refresh), which hello_imgui then keeps
-            # at full speed for time_active_after_last_event (3 s): idle starts after that
+            # idle starts well after the last delivered level woke the UI
             settled = now - self._last_delivery > rp.fps_idling.time_active_after_last_event + 0.5
             if self.count > 30 and (v.neural is None or not v.neural.busy) and settled:
                 self.phase, self._mark = "idle", self._clock()
