@@ -3,11 +3,11 @@ bench:SECONDS:RES``). No ImGui Test Engine, so nothing but the viewer draws.
 
 Phases, in order:
 
-- ``idle``: nothing changes, the viewer idles as it does for a user (from 3.5 s after the
-  start-up render's last level, ``time_active_after_last_event`` + 0.5 s: the start-up
-  itself is input-free, but the margin keeps any full-speed tail out of the phase). Measured: the CPU
-  the process spends outside the neural render thread (UI, GL under llvmpipe, GLFW) per
-  second of wall time, i.e. the share of one core the idle UI takes.
+- ``idle``: nothing changes, the viewer idles as it does for a user (from
+  ``time_active_after_last_event`` + 0.5 s, 3.5 s, after the start-up render's last
+  level: a margin that keeps any full-speed tail out of the phase). Measured: the CPU
+  the process spends outside the neural render (UI, GL under llvmpipe, GLFW) per second
+  of wall time, i.e. the share of one core the idle UI takes.
 - ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all)
   with the camera of ``texvocab shot --camera 0,0,3.2``, and the progressive render runs
   to full resolution. Measured per render: when each level reached the screen after the
