@@ -34,11 +34,10 @@ import pickle
 import threading
 import time
 import traceback
-from collections import deque
 
 import numpy as np
 
-from app.worker import RenderFrame, RenderJob, cpu_seconds, describe
+from app.worker import DeliveredLevels, RenderFrame, RenderJob, cpu_seconds, describe
 
 #: spawn, not fork: a forked child would inherit the window's GL context and torch's
 #: thread pools in whatever state they are in
@@ -104,7 +103,7 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results,
         results.send(("done", job.version))
 
 
-class ProcessWorker:
+class ProcessWorker(DeliveredLevels):
     """A render process with the interface of :class:`app.worker.ProgressiveWorker`
     (submit, poll, latest, busy, alive, stop, delivered, errors, last_traceback,
     cpu_seconds).
@@ -119,15 +118,8 @@ class ProcessWorker:
 
     def __init__(self, factory, args: tuple = (), threads: int | None = 1, nice: int = 0,
                  on_frame=None):
+        super().__init__()
         self._on_frame = on_frame
-        self._lock = threading.Lock()
-        self._version = -1
-        self._frame: RenderFrame | None = None
-        self._fresh = False
-        self._busy = False
-        self.delivered: deque[tuple[int, int]] = deque(maxlen=256)  # (version, level), in order
-        self.errors: deque[str] = deque(maxlen=16)
-        self.last_traceback = ""
         self._newest = _SPAWN.RawValue("q", -1)
         child_jobs, self._jobs = _SPAWN.Pipe(duplex=False)
         self._results, child_results = _SPAWN.Pipe(duplex=False)
@@ -156,25 +148,6 @@ class ProcessWorker:
             self._jobs.send(job)
         except (BrokenPipeError, OSError) as exc:
             self._ended(f"the render process is gone ({type(exc).__name__})")
-
-    def poll(self) -> RenderFrame | None:
-        """The newest delivered level if not returned before, else None."""
-        with self._lock:
-            if not self._fresh:
-                return None
-            self._fresh = False
-            return self._frame
-
-    @property
-    def latest(self) -> RenderFrame | None:
-        with self._lock:
-            return self._frame
-
-    @property
-    def busy(self) -> bool:
-        """True from a submission until its finest level is delivered (or it fails)."""
-        with self._lock:
-            return self._busy
 
     @property
     def alive(self) -> bool:

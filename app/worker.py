@@ -107,51 +107,21 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     return render
 
 
-class ProgressiveWorker:
-    """Background thread rendering the newest :class:`RenderJob` level by level.
+class DeliveredLevels:
+    """What the UI reads of a render worker, thread or process: the newest delivered
+    level (:meth:`poll`, :attr:`latest`), whether the newest job is still running
+    (:attr:`busy`), the delivered (version, level) pairs and the errors. The worker
+    writes ``_frame``, ``_fresh``, ``_busy`` under ``_lock``."""
 
-    ``render`` yields ``(level, rgb, seconds)`` and must stop soon after its
-    ``cancelled()`` argument returns True (progressive_render does, between levels and
-    ray chunks). ``threads``: torch intra-op threads for the worker (None: unchanged).
-    ``nice``: raise the thread's niceness by this much (Linux) so drawing comes first.
-    ``on_frame``: called (from the worker thread) after each delivered level, e.g. to wake
-    an idling UI so it shows the level at once (hello_imgui.request_refresh).
-    """
-
-    in_process = True  # its CPU time is part of the viewer process's
-
-    def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0,
-                 on_frame: Callable[[], None] | None = None):
-        self._render = render
-        self._on_frame = on_frame
-        self._threads = threads
-        self._nice = nice
+    def __init__(self):
         self._lock = threading.Lock()
-        self._wake = threading.Condition(self._lock)
-        self._job: RenderJob | None = None
         self._version = -1
         self._frame: RenderFrame | None = None
         self._fresh = False
         self._busy = False
-        self._stop = False
         self.delivered: deque[tuple[int, int]] = deque(maxlen=256)  # (version, level), in order
         self.errors: deque[str] = deque(maxlen=16)  # "Type: message (file:line)"
         self.last_traceback = ""
-        self.native_id: int | None = None
-        self._thread = threading.Thread(target=self._run, name="texvocab-neural", daemon=True)
-        self._thread.start()
-
-    # --- UI thread --------------------------------------------------------------------
-    def submit(self, job: RenderJob) -> None:
-        """Make ``job`` the newest request, cancelling older work; a version already
-        submitted is ignored (the caller bumps the version on every change)."""
-        with self._wake:
-            if job.version == self._version:
-                return
-            self._version = job.version
-            self._job = job
-            self._busy = True
-            self._wake.notify()
 
     def poll(self) -> RenderFrame | None:
         """The newest delivered level if not returned before, else None."""
@@ -171,6 +141,46 @@ class ProgressiveWorker:
         """True from a submission until its finest level is delivered (or it fails)."""
         with self._lock:
             return self._busy
+
+
+class ProgressiveWorker(DeliveredLevels):
+    """Background thread rendering the newest :class:`RenderJob` level by level.
+
+    ``render`` yields ``(level, rgb, seconds)`` and must stop soon after its
+    ``cancelled()`` argument returns True (progressive_render does, between levels and
+    ray chunks). ``threads``: torch intra-op threads for the worker (None: unchanged).
+    ``nice``: raise the thread's niceness by this much (Linux) so drawing comes first.
+    ``on_frame``: called (from the worker thread) after each delivered level, e.g. to wake
+    an idling UI so it shows the level at once (hello_imgui.request_refresh).
+    """
+
+    in_process = True  # its CPU time is part of the viewer process's
+
+    def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0,
+                 on_frame: Callable[[], None] | None = None):
+        super().__init__()
+        self._render = render
+        self._on_frame = on_frame
+        self._threads = threads
+        self._nice = nice
+        self._wake = threading.Condition(self._lock)
+        self._job: RenderJob | None = None
+        self._stop = False
+        self.native_id: int | None = None
+        self._thread = threading.Thread(target=self._run, name="texvocab-neural", daemon=True)
+        self._thread.start()
+
+    # --- UI thread --------------------------------------------------------------------
+    def submit(self, job: RenderJob) -> None:
+        """Make ``job`` the newest request, cancelling older work; a version already
+        submitted is ignored (the caller bumps the version on every change)."""
+        with self._wake:
+            if job.version == self._version:
+                return
+            self._version = job.version
+            self._job = job
+            self._busy = True
+            self._wake.notify()
 
     @property
     def alive(self) -> bool:
