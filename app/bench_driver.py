@@ -29,6 +29,7 @@ from imgui_bundle import hello_imgui
 
 from app.camera import DEFAULT_TARGET, OrbitCamera
 from app.drivers import Driver
+from texvocab.blas import blas_threads
 
 RENDER_POSES = ("walk", "squat")
 RENDERS = 4
@@ -45,12 +46,14 @@ class BenchDriver(Driver):
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
         self.drag_ms: list[float] = []
         self.drag_cpu_ms: list[float] = []
+        self.drag_process_ms: list[float] = []  # the window process: UI thread + GL threads
         self.drag_panels: list[dict] = []  # UI-thread CPU ms per panel, per dragging frame
         self.drag_levels: list[int] = []  # the level of each new image shown while dragging
         self._drag_shown = None
         self.renders: list[dict] = []
         self._mark = None  # (wall, process CPU, worker CPU) at a phase's start
         self._last = None
+        self._last_process = None
         self._nudge = 0
         self._render = None
         self._delivered, self._last_delivery = 0, self.t0  # levels seen in warm-up, when
@@ -117,9 +120,13 @@ class BenchDriver(Driver):
             self._drag_shown = shown
             self.drag_levels.append(int(shown.level))
         dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
+        process = self._clock()[1]  # the window process's CPU outside a render thread
+        dp, self._last_process = (None if self._last_process is None
+                                  else (process - self._last_process) * 1000), process
         if dt is not None and v.frame_cpu_ms:
             self.drag_ms.append(dt)
             self.drag_cpu_ms.append(v.frame_cpu_ms[-1])
+            self.drag_process_ms.append(dp)
             self.drag_panels.append(dict(v.panel_cpu_ms))
         self._nudge += 1
         z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
@@ -188,6 +195,7 @@ class BenchDriver(Driver):
             self.report["error"] = error
         self.report["renders"] = self.renders
         self.report["dragging"] = {"frame_ms": self.drag_ms, "cpu_ms": self.drag_cpu_ms,
+                                   "process_cpu_ms": self.drag_process_ms,
                                    "levels_shown": self.drag_levels,
                                    "panel_cpu_ms": self.drag_panels,
                                    "seconds": time.perf_counter() - self.t0}
@@ -197,6 +205,7 @@ class BenchDriver(Driver):
             self.report["neural_threads"] = v.neural_threads
             self.report["neural_worker"] = v.neural_worker
             self.report["window_pid"] = os.getpid()
+            self.report["blas_threads"] = blas_threads()
             self.report["render_pid"] = getattr(v.neural.worker, "pid", os.getpid())
             self.report["errors"] = list(v.neural.worker.errors)
         rp.app_shall_exit = True

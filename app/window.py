@@ -24,6 +24,7 @@ from app.panel_view import draw_view_panel
 from app.panel_vocab import draw_vocab_panel
 from app.state import load_viewer_data
 from app.viewer import Viewer
+from texvocab.blas import limit_blas_threads
 from texvocab.errors import TexvocabError
 
 #: frames per second while nothing changes (no input, no new render level, no playback):
@@ -115,6 +116,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     "thread" (app.arguments.NEURAL_WORKERS)."""
     require_display()
     _choose_gl_platform()
+    limit_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
     data = load_viewer_data(source, smpl, capture)
     while True:
         viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice,

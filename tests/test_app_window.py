@@ -116,6 +116,10 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
     assert rep["neural_worker"] == worker and rep["errors"] == []
     assert (rep["render_pid"] != rep["window_pid"]) == (worker == "process")
+    assert rep["blas_threads"] == 1  # texvocab/blas.py: no spinning OpenBLAS thread
+    drag = rep["dragging"]
+    assert len(drag["process_cpu_ms"]) == len(drag["frame_ms"])
+    assert all(p is None or p >= c - 0.5 for p, c in zip(drag["process_cpu_ms"], drag["cpu_ms"]))
     assert len(rep["renders"]) == 4
     for r in rep["renders"]:
         assert [lv["level"] for lv in r["levels"]][-1] == 1

@@ -51,6 +51,15 @@ def stalling_renderer():
     return render
 
 
+def blas_reporting_renderer():
+    """One level whose value is the number of BLAS threads numpy has in the process."""
+    from texvocab.blas import blas_threads
+
+    def render(job, cancelled):
+        yield 1, np.full((2, 2, 3), float(blas_threads()), np.float32), 0.001
+    return render
+
+
 def failing_factory():
     raise RuntimeError("no model here")
 
@@ -84,6 +93,18 @@ def test_levels_arrive_from_another_process():
     finally:
         assert worker.stop()
     assert not worker.alive
+
+
+def test_the_render_process_keeps_numpy_blas_to_its_threads():
+    """texvocab/blas.py: OpenBLAS would start a thread per core that spins after each call."""
+    worker = ProcessWorker(blas_reporting_renderer, threads=1, nice=0, on_frame=lambda: None)
+    try:
+        worker.submit(job(1))
+        wait(lambda: not worker.busy)
+        frame = worker.poll()
+        assert frame is not None and float(frame.image[0, 0, 0]) == 1.0
+    finally:
+        worker.stop()
 
 
 def test_new_version_cancels_and_stale_levels_never_arrive():
