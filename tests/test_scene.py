@@ -141,6 +141,31 @@ def test_novelty_overlay_follows_the_pose(ctx, body):
     assert blue(novel)[mask].mean() > 0.6  # the rest stays cold
 
 
+@pytest.mark.parametrize("options", [SceneOptions(), SceneOptions(part_colors=True),
+                                     SceneOptions(novelty=True), SceneOptions(skeleton=True)],
+                         ids=["textured", "parts", "novelty", "skeleton"])
+def test_indexed_mesh_draws_the_unrolled_pixels_with_fewer_vertices(ctx, body, options):
+    """Without the wireframe the body is drawn indexed, one GL vertex per (vertex, uv)
+    pair: the same pixels as one vertex per triangle corner, and far fewer vertices."""
+    rng = np.random.default_rng(1)
+    poses = rng.normal(0, 0.1, (8, 24, 3))
+    poses[:, 0] = 0
+    data = ViewerData(body, Vocabulary.build(poses, "part", num_keys=4, k=2))
+    state = ViewerState(data)
+    state.set_joint(LEFT_SHOULDER, (0.0, 0.0, 50.0))
+    renderer = SceneRenderer(ctx, data)
+    assert renderer._layout(options) == "indexed"
+    assert renderer.num_indexed < 0.3 * renderer.num_corners
+    images = []
+    for unrolled in (False, True):
+        renderer.force_unrolled = unrolled
+        renderer.render(state, OrbitCamera(), (W, H), options)
+        images.append(renderer.read())
+    assert gl_mask(renderer).mean() > 0.02
+    assert np.array_equal(images[0], images[1])
+    assert renderer._layout(SceneOptions(wireframe=True)) == "unrolled"
+
+
 def test_wireframe_and_skeleton_draw_over_the_body(ctx, body):
     data = ViewerData(body)
     state = ViewerState(data)
