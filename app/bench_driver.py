@@ -29,7 +29,7 @@ from imgui_bundle import hello_imgui
 
 from app.camera import DEFAULT_TARGET, OrbitCamera
 from app.drivers import Driver
-from texvocab.blas import blas_threads
+from texvocab.pipeline import blas_threads
 
 RENDER_POSES = ("walk", "squat")
 RENDERS = 4

@@ -62,7 +62,7 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results,
             pass
     import torch
 
-    from texvocab.blas import limit_blas_threads
+    from texvocab.pipeline import limit_blas_threads
 
     if threads is not None:
         torch.set_num_threads(threads)
@@ -183,7 +183,10 @@ class ProcessWorker(DeliveredLevels):
             try:
                 message = self._results.recv()
             except (EOFError, OSError):
-                code = self._process.exitcode if not self._process.is_alive() else None
+                # the pipe closes while the process is still exiting: reap it to read its
+                # exit code (without the join, a crash was reported as "exit code None")
+                self._process.join(2.0)
+                code = self._process.exitcode
                 if code not in (0, None) or self.busy:
                     self._ended(f"the render process ended (exit code {code})")
                 return

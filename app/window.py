@@ -24,8 +24,8 @@ from app.panel_view import draw_view_panel
 from app.panel_vocab import draw_vocab_panel
 from app.state import load_viewer_data
 from app.viewer import Viewer
-from texvocab.blas import limit_blas_threads
 from texvocab.errors import TexvocabError
+from texvocab.pipeline import limit_blas_threads
 
 #: frames per second while nothing changes (no input, no new render level, no playback):
 #: each frame of this window costs tens of ms of CPU under llvmpipe, which the neural

@@ -49,6 +49,9 @@ _API: dict[str, tuple[str, str]] = {
     "FrameWorker": ("texvocab.pipeline.clip_worker", "FrameWorker"),
     "write_mp4": ("texvocab.pipeline.clip", "write_mp4"),
     "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
+    # threads
+    "limit_blas_threads": ("texvocab.blas", "limit_blas_threads"),
+    "blas_threads": ("texvocab.blas", "blas_threads"),
     # files
     "save_png": ("texvocab.io.images", "save_png"),
     "to_uint8": ("texvocab.io.images", "to_uint8"),
