@@ -25,7 +25,7 @@ from app.panel_vocab import draw_vocab_panel
 from app.state import load_viewer_data
 from app.viewer import Viewer
 from texvocab.errors import TexvocabError
-from texvocab.pipeline import limit_blas_threads
+from texvocab.pipeline import budget_blas_threads
 
 #: frames per second while nothing changes (no input, no new render level, no playback):
 #: each frame of this window costs tens of ms of CPU under llvmpipe, which the neural
@@ -116,7 +116,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     "thread" (app.arguments.NEURAL_WORKERS)."""
     require_display()
     _choose_gl_platform()
-    limit_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
+    budget_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
     data = load_viewer_data(source, smpl, capture)
     while True:
         viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice,

@@ -106,6 +106,7 @@ def train_and_evaluate(job: dict) -> dict:
     grid_rows, threads."""
     import torch
 
+    from texvocab.blas import budget_blas_threads
     from texvocab.capture import open as open_capture
     from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
     from texvocab.pipeline.settings import march_settings
@@ -118,6 +119,7 @@ def train_and_evaluate(job: dict) -> dict:
         if result["steps"] == job["iterations"]:
             return result
     torch.set_num_threads(job["threads"])
+    budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
     cap = open_capture(job["root"])
     settings, shown = run_settings(job)
     trainer = Trainer(cap, settings, run_dir, progress=False)

@@ -47,6 +47,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch loads OpenMP
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from texvocab.blas import budget_blas_threads  # noqa: E402
+
 
 def parse_variant(text: str):
     """'name:key=value,key=value' -> (name, {key: value}) for MarchSettings fields."""
@@ -282,6 +284,7 @@ def main(argv=None) -> int:
                     "the uniform 64+32 reference; ends with a summary line")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
+    budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
     if args.compare:
         model, settings, cap, what = load(args)
         return compare(model, settings, items_of(cap, settings, args.frames), what,

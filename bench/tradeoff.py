@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from texvocab.blas import budget_blas_threads
 from texvocab.io.images import atomic_write_bytes
 from texvocab.metrics import metrics_in_bbox, psnr
 from texvocab.pipeline.evaluate import render_view
@@ -245,6 +246,7 @@ def main(argv=None) -> int:
         print(plot(rows, pareto(rows), Path(args.out) / "pareto.png", str(args.out)))
         return 0
     torch.set_num_threads(2)
+    budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
 
     from texvocab.pipeline.evaluate import build_sets
     from texvocab.pipeline.settings import march_settings

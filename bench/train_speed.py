@@ -14,18 +14,28 @@ those builds, the steady state of a long run being the latter. Reference:
 ``encoder=pyramid, perceptual=off, train_guide=shell`` (the project's numbers before the
 perceptual term, the encoders and the surface band in training were added). Without
 CAPTURE the compositional benchmark capture (bench/ablation.py) is used.
+
+Like the ``texvocab`` command, the bench keeps numpy's BLAS to one thread
+(texvocab/blas.py); the second row runs the reference with OpenBLAS's own default (a
+thread per core, which spin between calls), as training ran before that change.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
 from pathlib import Path
 
 import torch
+from threadpoolctl import threadpool_limits
+
+from texvocab.blas import blas_threads, budget_blas_threads
 
 SHELL = ["encoder=pyramid", "perceptual=off", "train_guide=shell"]
+UNBUDGETED = "reference, numpy's BLAS on every core (before texvocab/blas.py)"
 VARIANTS = {
     "reference (pyramid, no perceptual, shell marcher)": SHELL,
+    UNBUDGETED: SHELL,
     "+ inception-perceptual": SHELL[:1] + ["perceptual=inception"] + SHELL[2:],
     "encoder inception (frozen)": ["encoder=inception"] + SHELL[1:],
     "encoder small (trained)": ["encoder=small"] + SHELL[1:],
@@ -75,12 +85,17 @@ def main(argv=None) -> int:
     from texvocab.capture import open as open_capture
 
     torch.set_num_threads(args.threads)
+    own_blas = blas_threads()  # OpenBLAS's default: one thread per core
+    budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
     cap = open_capture(args.capture)
     rows = []
     for name, overrides in VARIANTS.items():
         if args.only and not any(o in name for o in args.only):
             continue
-        r = measure(cap, overrides, args.steps, args.warmup)
+        blas = (threadpool_limits(limits=max(own_blas, 1), user_api="blas")
+                if name == UNBUDGETED else contextlib.nullcontext())
+        with blas:
+            r = measure(cap, overrides, args.steps, args.warmup)
         rows.append((name, r))
         print(f"{name}: {r['step_s']:.3f} s/step, {r['steady_s']:.3f} without cache builds",
               flush=True)

@@ -162,6 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from texvocab.blas import budget_blas_threads
+
+    budget_blas_threads(1)  # torch's threads do the parallel work; OpenBLAS's would spin
     try:
         return args.func(args)
     except TexvocabError as exc:

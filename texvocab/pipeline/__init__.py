@@ -51,6 +51,7 @@ _API: dict[str, tuple[str, str]] = {
     "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
     # threads
     "limit_blas_threads": ("texvocab.blas", "limit_blas_threads"),
+    "budget_blas_threads": ("texvocab.blas", "budget_blas_threads"),
     "blas_threads": ("texvocab.blas", "blas_threads"),
     # files
     "save_png": ("texvocab.io.images", "save_png"),
