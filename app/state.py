@@ -255,7 +255,8 @@ class ViewerState:
             return None
         if self._vocab_texture is None:
             self._vocab_texture = VocabTexture(self.data.body, self.data.vocab, self.data.textures)
-        return self._cached("texture", lambda: self._vocab_texture.blend(self.pose))
+        return self._cached("texture", lambda: self._vocab_texture.blend(self.pose,
+                                                                         self.query()))
 
     def posed(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertices (V, 3), joints (24, 3)) float32 of the current pose, world space."""

@@ -200,3 +200,25 @@ def test_compiled_blend_equals_the_numpy_reference(body):
             assert got.shape == want.shape == (TEX, TEX, 3) and got.dtype == np.float32
             np.testing.assert_allclose(got, want, atol=2e-6)
             assert want.std() > 0.01  # a real texture, not zeros
+
+
+def test_blend_coefficients_from_the_panels_query_equal_the_batched_query(body):
+    """part_coefficients from a pose's ``vocab.query`` (what the viewer's frame already
+    has for the vocabulary panel) against the batched tensor query, summed per frame."""
+    from texvocab.method.vocab_texture import part_coefficients
+
+    rng = np.random.default_rng(5)
+    data = make_data(body)
+    vocab = data.vocab
+    for _ in range(4):
+        pose = rng.normal(0, 0.4, (24, 3))
+        frames, coef = part_coefficients(vocab, pose, vocab.query(pose))
+        part_frames, part_weights, _ = vocab.query_tensors(pose)
+        want = np.zeros((vocab.num_parts, int(max(f.max() for f in part_frames)) + 1))
+        for p, (f, w) in enumerate(zip(part_frames, part_weights, strict=True)):
+            np.add.at(want[p], f[0].numpy(), w[0].numpy())
+        assert np.array_equal(frames, np.nonzero(want.sum(0))[0])
+        np.testing.assert_allclose(coef, want[:, frames], atol=1e-12)
+        np.testing.assert_allclose(coef.sum(1), 1.0, atol=1e-9)
+        again = part_coefficients(vocab, pose)  # without a query: the same
+        assert np.array_equal(again[0], frames) and np.allclose(again[1], coef)

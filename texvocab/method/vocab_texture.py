@@ -18,26 +18,28 @@ from texvocab.geometry.uv import texel_map
 from texvocab.method._blend_jit import blend_texels
 
 
-def part_coefficients(vocab, pose) -> tuple[np.ndarray, np.ndarray]:
+def part_coefficients(vocab, pose, query=None) -> tuple[np.ndarray, np.ndarray]:
     """The vocabulary query of one pose as blend coefficients per (part, frame).
 
     Args:
         pose: (24, 3) axis-angle.
+        query: ``vocab.query(pose)`` when the caller has it already (the viewer's frame
+            asks once for the panel and the texture); computed here otherwise.
 
     Returns:
         frames (U,) the distinct training frames any part's keys point to; coef (P, U):
         Σ_k ŵ_{p,k} over the keys of part p pointing to frame u (rows sum to one).
     """
-    part_frames, part_weights, _ = vocab.query_tensors(np.asarray(pose, dtype=np.float64))
-    all_frames = torch.cat([f[0] for f in part_frames])
-    frames, inverse = torch.unique(all_frames, return_inverse=True)
-    coef = torch.zeros(vocab.num_parts, len(frames), dtype=torch.float64)
+    parts = vocab.query(np.asarray(pose, dtype=np.float64)) if query is None else query
+    all_frames = np.concatenate([np.asarray(q.frames, np.int64) for q in parts])
+    frames, inverse = np.unique(all_frames, return_inverse=True)
+    coef = np.zeros((vocab.num_parts, len(frames)), np.float64)
     start = 0
-    for p, w in enumerate(part_weights):
-        k = w.shape[-1]
-        coef[p].index_add_(0, inverse[start:start + k], w[0])
+    for p, q in enumerate(parts):
+        k = len(q.weights)
+        np.add.at(coef[p], inverse[start:start + k], np.asarray(q.weights, np.float64))
         start += k
-    return frames.numpy(), coef.numpy()
+    return frames, coef
 
 
 class VocabTexture:
@@ -76,10 +78,11 @@ class VocabTexture:
         self._idx = np.concatenate([i for i, _ in self._part_texels]).astype(np.int64)
         self._omega = np.concatenate([o[:, 0] for _, o in self._part_texels])
 
-    def blend(self, pose) -> np.ndarray:
+    def blend(self, pose, query=None) -> np.ndarray:
         """(S, S, 3) float32 blended texture for a pose (24, 3); uncovered texels copy
-        the nearest covered texel (as the texture maps themselves do)."""
-        frames, coef = part_coefficients(self.vocab, pose)
+        the nearest covered texel (as the texture maps themselves do). ``query``: the
+        pose's ``vocab.query`` if the caller has it."""
+        frames, coef = part_coefficients(self.vocab, pose, query)
         colour = np.zeros((self._flat.shape[1], 3), np.float32)
         blend_texels(self._flat, frames.astype(np.int64), coef.astype(np.float32), self._ptr,
                      self._idx, self._omega, colour)
