@@ -62,11 +62,11 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results,
             pass
     import torch
 
-    from texvocab.pipeline import limit_blas_threads
+    from texvocab.pipeline import budget_blas_threads
 
     if threads is not None:
         torch.set_num_threads(threads)
-    limit_blas_threads(threads or 1)  # numpy's OpenBLAS threads would spin between calls
+    budget_blas_threads(threads or 1)  # numpy's OpenBLAS threads would spin between calls
     try:
         render = factory(*pickle.loads(args))
     except Exception as exc:  # e.g. a model that does not load here: say so, then stop

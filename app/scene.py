@@ -90,7 +90,7 @@ class SceneRenderer:
             (self.vbo_bary, "3f", "in_bary")]))
         # Indexed (without the wireframe): one GL vertex per distinct (vertex, uv) pair, so
         # the per-pose upload and the vertex stage handle ~V vertices instead of 3F corners
-        # (SMPL: 7.6k against 41k; llvmpipe runs the vertex stage on the UI thread).
+        # (the default body: 7.8k against 41k; llvmpipe runs the vertex stage on the UI thread).
         pairs = np.stack([faces.reshape(-1), (ft if ft is not None else faces).reshape(-1)], 1)
         unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
         self.corner_vertex = unique[:, 0]

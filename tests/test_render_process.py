@@ -37,6 +37,9 @@ def stalling_renderer():
         if job.version == 3:
             raise ValueError("bad pose")
         if job.version == 5:
+            mark = os.environ.get("TEXVOCAB_TEST_STARTED")
+            if mark:  # tell the test this job has started (the process may be slow to)
+                open(mark, "w").close()
             time.sleep(1.0)
         if job.version == 99:
             os._exit(7)
@@ -122,13 +125,16 @@ def test_new_version_cancels_and_stale_levels_never_arrive():
         assert worker.stop()
 
 
-def test_the_preview_in_progress_is_finished_and_shown_before_the_newest_job():
+def test_the_preview_in_progress_is_finished_and_shown_before_the_newest_job(
+        tmp_path, monkeypatch):
+    started = tmp_path / "started"
+    monkeypatch.setenv("TEXVOCAB_TEST_STARTED", str(started))  # the child inherits it
     worker = ProcessWorker(stalling_renderer)
     try:
         worker.submit(job(4))  # the process is up and serving
         wait(lambda: not worker.busy)
         worker.submit(job(5))
-        time.sleep(0.2)  # version 5 is in its first level (1 s)
+        wait(started.exists)  # version 5 is in its first level (1 s)
         worker.submit(job(6))
         worker.submit(job(7))
         wait(lambda: not worker.busy)
