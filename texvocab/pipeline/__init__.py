@@ -50,7 +50,6 @@ _API: dict[str, tuple[str, str]] = {
     "write_mp4": ("texvocab.pipeline.clip", "write_mp4"),
     "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
     # threads
-    "limit_blas_threads": ("texvocab.blas", "limit_blas_threads"),
     "budget_blas_threads": ("texvocab.blas", "budget_blas_threads"),
     "blas_threads": ("texvocab.blas", "blas_threads"),
     # files
