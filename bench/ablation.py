@@ -16,7 +16,9 @@ base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptu
 weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none``: the
 project before this ablation chose its defaults), so a variant differs from its
 reference in exactly its own setting; identical settings share one run. ``train_marcher``
-(train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster``. To add seeds to
+(train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster``, ``train_rays``
+(marched, residual rays, residual rays and Newton band rays) with ``--base`` and no
+items (today's defaults). To add seeds to
 a group run before session 9, pass ``--train-with-preset`` (those runs trained at the
 evaluation preset's marcher knobs).
 
@@ -59,6 +61,11 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # the shell marcher's coarse step for the rays training still marches (run with
     # --base ... train_guide=raster)
     "train_marcher": {"coarse 18": [], "coarse 9": ["train_coarse_samples=9"]},
+    # the rays training does not band: marched, or residual rays (session 14); with band
+    # rays of 5 samples, or from the probe and the Newton point (run with --base and no
+    # items: today's defaults)
+    "train_rays": {"marched": ["train_residual=false", "train_band_newton=false"],
+                   "residual": ["train_band_newton=false"], "residual + newton band": []},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }

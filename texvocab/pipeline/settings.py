@@ -21,7 +21,8 @@ PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
 # setting existed) meant then; its default today may differ.
 OPTIONAL_INTS = ("train_coarse_samples",)  # settings that are an integer or None
 LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0,
-          "train_guide": "shell", "train_coarse_samples": None}
+          "train_guide": "shell", "train_coarse_samples": None, "train_residual": False,
+          "train_band_newton": False}
 
 
 @dataclass
@@ -66,6 +67,11 @@ class Settings:
     train_coarse_samples: int | None = 9  # coarse_samples of the rays training marches
     # (none: coarse_samples); with the band, only silhouette and occlusion-edge rays are
     # marched; 9 against 18: the same loss curve, +0.54 dB novel PSNR (README "Training")
+    train_residual: bool = True  # train_guide raster: close silhouette rays and failed
+    # bands as residual rays (3 evaluations; residual_* knobs), the marcher only for the
+    # rays they do not resolve | false: all marched (README "Training")
+    train_band_newton: bool = True  # train_guide raster: band rays from the probe, the
+    # Newton point and one behind it (3 evaluations) | false: band_samples samples
     lr: float = 5e-4
     lambda_color: float = 1.0
     lambda_mask: float = 0.1
@@ -292,6 +298,8 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
         m.coarse_samples = s.train_coarse_samples or s.coarse_samples
+        m.residual_rays = s.train_residual and s.train_guide == "raster"
+        m.band_newton = s.train_band_newton
     elif m.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact
         # grid builds 3-4x faster (0.15 -> 0.04 s) for slightly longer in-shell paths

@@ -191,7 +191,8 @@ class Trainer:
             gen = torch.Generator().manual_seed(s.seed * 1_000_003 + self.step * 64 + self.rank)
         share = self.world * len(o) / total
         out = render_rays_banded(self.model.for_pose(fd.ctx), self.model.beta, o, d, near, far,
-                                 t_band, cos, self.march, gen, fd.shell, t_passing=t_pass)
+                                 t_band, cos, self.march, gen, fd.shell, t_passing=t_pass,
+                                 index=fd.ctx.index)
         eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
                  "eikonal": torch.zeros(()) if eikonal is None else eikonal,
@@ -209,6 +210,7 @@ class Trainer:
                 raise TexvocabError(f"training stopped at step {self.step + 1}: the {name} "
                                     f"term is {float(terms[name].detach())}; {ck}")
         terms["field_evals"], terms["banded"] = out.field_evals, out.banded
+        terms["residual"] = out.residual
         terms["frame"] = fd
         return terms
 
@@ -230,7 +232,7 @@ class Trainer:
                 "eikonal": float(terms["eikonal"].detach()),
                 "perceptual": float(terms["perceptual"].detach()),
                 "beta": float(self.model.beta.detach()), "evals": terms["field_evals"],
-                "banded": terms["banded"]}
+                "banded": terms["banded"], "residual": terms["residual"]}
 
     def state(self) -> dict:
         return {"step": self.step, "settings": self.s.to_dict(),

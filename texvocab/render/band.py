@@ -238,7 +238,7 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
                        near: torch.Tensor, far: torch.Tensor, t_hit: torch.Tensor,
                        cos: torch.Tensor, settings, generator: torch.Generator | None = None,
                        shell=None, background=(0.0, 0.0, 0.0),
-                       t_passing: torch.Tensor | None = None):
+                       t_passing: torch.Tensor | None = None, index=None):
     """Volume-render rays as :func:`texvocab.render.marcher.render_rays` does, but:
 
     * rays with finite ``t_passing`` (R, 2) (rays that pass a surface nearer than their
@@ -249,11 +249,17 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
       ray is marched;
     * rays with a finite ``t_hit`` (R,) (mesh hit at ``cos`` (R,) >= min_cos) and no close
       passed surface by the band — a probe and ``band_samples`` evaluations;
+    * with ``index`` (the posed mesh's :class:`~texvocab.geometry.surface.SurfaceIndex`)
+      and ``settings.residual_rays``, the close passing rays and the band rays the band
+      does not resolve as residual rays (:func:`texvocab.render.residual.render_residual`:
+      the mesh's distance plus the field's residual, three evaluations), from their
+      probes;
     * the rest, and the rays these do not resolve, by the shell marcher over [near, far].
 
     Differentiable w.r.t. the field's outputs and ``beta`` (float or the model's β
     tensor); the band's sample places carry no gradient (as importance samples do not).
-    Returns a :class:`~texvocab.render.marcher.RayResult` (``banded``: band rays)."""
+    Returns a :class:`~texvocab.render.marcher.RayResult` (``banded``: band rays,
+    ``residual``: residual rays)."""
     from texvocab.render.marcher import RayResult, render_rays  # the marcher builds on us
 
     s = settings
@@ -261,6 +267,9 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     bg = torch.as_tensor(background, dtype=origins.dtype)
     close = torch.zeros(R, dtype=torch.bool)  # the ray passes a surface within the margin
     evals = 0
+    # each ray's probes, for the residual rays: the two passing places, the mesh hit
+    probe_t = origins.new_full((R, 3), torch.inf)
+    probe_sdf = origins.new_full((R, 3), torch.inf)
     if t_passing is not None:
         p_idx = torch.nonzero(torch.isfinite(t_passing[:, 0])).squeeze(1)
         o, d = origins[p_idx], dirs[p_idx]
@@ -269,25 +278,49 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
                                     .reshape(-1, 3), d.repeat_interleave(2, 0), s.chunk_points)
         evals += 2 * len(p_idx)
         close[p_idx] = sdf_p.view(-1, 2).min(1).values <= s.miss_margin * _value(beta)
+        probe_t[p_idx, :2], probe_sdf[p_idx, :2] = t_passing[p_idx], sdf_p.view(-1, 2)
     b_idx = torch.nonzero(torch.isfinite(t_hit) & ~close).squeeze(1)
     o, d, t_b = origins[b_idx], dirs[b_idx], t_hit[b_idx]
     sdf0, rgb0 = evaluate_sdf(field, o + t_b[:, None] * d, d, s.chunk_points)
-    acc, color, depth, ok = band_composite(field, s, beta, o, d, t_b, cos[b_idx], sdf0, rgb0)
-    evals += len(b_idx) * (1 + s.band_samples)
+    if s.band_newton:  # the probe, the Newton point and one behind it
+        from texvocab.render.residual import newton_band  # residual builds on the band
+
+        acc, color, depth, ok = newton_band(field, o, d, t_b, cos[b_idx], sdf0, rgb0, beta, s)
+        evals += len(b_idx) * 3
+    else:
+        acc, color, depth, ok = band_composite(field, s, beta, o, d, t_b, cos[b_idx], sdf0,
+                                               rgb0)
+        evals += len(b_idx) * (1 + s.band_samples)
     marched = torch.ones(R, dtype=torch.bool)
     marched[b_idx[ok]] = False
     if t_passing is not None:  # misses that pass a surface far away: the background
         marched[torch.isfinite(t_passing[:, 0]) & ~close & ~torch.isfinite(t_hit)] = False
-    m_idx = torch.nonzero(marched).squeeze(1)
-    rest = render_rays(field, origins[m_idx], dirs[m_idx], near[m_idx], far[m_idx], s,
-                       generator, shell, background) if len(m_idx) else None
     good = b_idx[ok]
     rgb = bg.repeat(R, 1).index_put((good,), color[ok] + (1 - acc[ok])[:, None] * bg)
     opacity = origins.new_zeros(R).index_put((good,), acc[ok])
     depth = origins.new_zeros(R).index_put((good,), depth[ok])
+    resolved = 0
+    if index is not None and s.residual_rays:
+        from texvocab.render.residual import render_residual  # residual builds on the band
+
+        probe_t[b_idx, 2], probe_sdf[b_idx, 2] = t_b, sdf0.detach()
+        r_idx = torch.nonzero(marched & torch.isfinite(probe_sdf).any(1)).squeeze(1)
+        acc_r, color_r, depth_r, ok_r, n = render_residual(
+            field, index, origins[r_idx], dirs[r_idx], near[r_idx], far[r_idx],
+            probe_t[r_idx], probe_sdf[r_idx], beta, s)
+        evals += n
+        done = r_idx[ok_r]
+        marched[done] = False
+        resolved = len(done)
+        rgb = rgb.index_put((done,), color_r[ok_r] + (1 - acc_r[ok_r])[:, None] * bg)
+        opacity = opacity.index_put((done,), acc_r[ok_r])
+        depth = depth.index_put((done,), depth_r[ok_r])
+    m_idx = torch.nonzero(marched).squeeze(1)
+    rest = render_rays(field, origins[m_idx], dirs[m_idx], near[m_idx], far[m_idx], s,
+                       generator, shell, background) if len(m_idx) else None
     if rest is not None:
         rgb = rgb.index_put((m_idx,), rest.rgb)
         opacity = opacity.index_put((m_idx,), rest.opacity)
         depth = depth.index_put((m_idx,), rest.depth)
         evals += rest.field_evals
-    return RayResult(rgb, opacity, depth, evals, banded=len(good))
+    return RayResult(rgb, opacity, depth, evals, banded=len(good), residual=resolved)

@@ -143,7 +143,8 @@ class RenderCancelled(Exception):
 class RayResult:
     """rgb (R, 3) over the background; opacity (R,); depth (R,): expected ray distance of
     the surface, sum(w t) / opacity (0 for empty rays); field_evals: points evaluated;
-    banded: rays resolved by the surface band (:func:`texvocab.render.band.render_rays_banded`).
+    banded: rays resolved by the surface band (:func:`texvocab.render.band.render_rays_banded`);
+    residual: rays resolved as residual rays there.
     """
 
     rgb: torch.Tensor
@@ -151,6 +152,7 @@ class RayResult:
     depth: torch.Tensor
     field_evals: int
     banded: int = 0
+    residual: int = 0
 
 
 @dataclass

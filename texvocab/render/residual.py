@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 from texvocab.render.band import (
+    _value,
     composite_linear_sdf,
     evaluate_sdf,
     interval_optical_depth,
@@ -63,6 +64,14 @@ def _estimate(d: torch.Tensor, r0: torch.Tensor, cap: float) -> torch.Tensor:
     return torch.where(d < cap, d + r0, cap)
 
 
+def _along(origin: torch.Tensor, dirs: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Points (R, ..., 3) at distances t (R, ...) along rays from origin (3,) or (R, 3)
+    in directions dirs (R, 3)."""
+    lead = (len(dirs),) + (1,) * (t.dim() - 1) + (3,)
+    o = origin if origin.dim() == 1 else origin.view(lead)
+    return o + t[..., None] * dirs.view(lead)
+
+
 def _nothing(dirs: torch.Tensor):
     """The (opacity, colour, depth, ok) of no rays."""
     z = dirs.new_zeros(0)
@@ -78,7 +87,7 @@ def _samples(index, origin, dirs, near, far, step: float, cap: float):
     t = torch.minimum(near[:, None] + col * step, far[:, None])
     inside = col <= last[:, None]
     d = torch.full(t.shape, cap, dtype=dirs.dtype)
-    d[inside] = mesh_distance(index, (origin + t[..., None] * dirs[:, None])[inside], cap)
+    d[inside] = mesh_distance(index, _along(origin, dirs, t)[inside], cap)
     return t, torch.where(inside, d, d.gather(1, last[:, None])), inside
 
 
@@ -118,7 +127,7 @@ def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
     keep = part[..., None] & ((k == 0) | low[..., None])
     d = d_c[:, :-1, None].expand_as(t).clone()
     new = keep & (k > 0)
-    d[new] = mesh_distance(index, (origin + t[..., None] * dirs[:, None, None])[new], cap)
+    d[new] = mesh_distance(index, _along(origin, dirs, t)[new], cap)
     t = torch.cat([t.reshape(R, -1), t_c.gather(1, end[:, None])], 1)
     d = torch.cat([d.reshape(R, -1), d_c.gather(1, end[:, None])], 1)
     keep = torch.cat([keep.reshape(R, -1), torch.ones(R, 1, dtype=torch.bool)], 1)
@@ -167,10 +176,14 @@ def _column_weights(t: torch.Tensor, s: torch.Tensor, beta: float) -> torch.Tens
 
 def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
                     near: torch.Tensor, far: torch.Tensor, t_probe: torch.Tensor,
-                    sdf_probe: torch.Tensor, beta: float, settings):
-    """Residual rays (R,) from origin (3,) along dirs (R, 3), in the shell over [near,
-    far] (R,), with probes at t_probe (R, P) that read field SDF sdf_probe (R, P) (inf
-    where a ray has fewer probes; every ray has one).
+                    sdf_probe: torch.Tensor, beta, settings):
+    """Residual rays (R,) from origin (3,) or origins (R, 3) along dirs (R, 3), in the
+    shell over [near, far] (R,), with probes at t_probe (R, P) that read field SDF
+    sdf_probe (R, P) (inf where a ray has fewer probes; every ray has one).
+
+    Differentiable w.r.t. the three evaluations and ``beta`` (a float, or the model's β
+    tensor as training passes it); the probes, the knots' places and ``ok`` carry no
+    gradient.
 
     ``field.sdf_rgb`` is evaluated at 3 points per ray; ``index`` is the posed mesh's
     :class:`~texvocab.geometry.surface.SurfaceIndex`. Knobs from ``settings``
@@ -183,38 +196,39 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     R = len(dirs)
     if R == 0:
         return (*_nothing(dirs), 0)
-    cap, h = float(settings.shell_width), settings.residual_step * beta
+    b = _value(beta)
+    cap, h = float(settings.shell_width), settings.residual_step * b
+    sdf_probe = sdf_probe.detach()
     # the residual at the probe nearest the surface (a hit's own surface before an edge
     # it passes) stands for the ray's until the field is evaluated
     has = torch.isfinite(sdf_probe)
-    pts = origin + torch.where(has, t_probe, 0.0)[..., None] * dirs[:, None]
+    pts = _along(origin, dirs, torch.where(has, t_probe, 0.0))
     d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
     t, d, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap)
-    low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, beta)
+    low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, b)
     t, d = _refine(index, origin, dirs, t, d, low, first, end, cap)
     s_hat = _estimate(d, r0, cap)
     spread = settings.residual_spread
-    cols = _quantile_columns(_column_weights(t, s_hat, beta), (spread, 0.5, 1 - spread))
+    cols = _quantile_columns(_column_weights(t, s_hat, b), (spread, 0.5, 1 - spread))
     knots = t.gather(1, cols)
-    sdf3, rgb3 = evaluate_sdf(field, (origin + knots[..., None] * dirs[:, None]).reshape(-1, 3),
+    sdf3, rgb3 = evaluate_sdf(field, _along(origin, dirs, knots).reshape(-1, 3),
                               dirs.repeat_interleave(3, 0), settings.chunk_points)
     resid = sdf3.view(R, 3) - d.gather(1, cols)
     sdf = torch.where(d < cap, d + _piecewise(t, knots, resid), cap)
     acc, color, depth, _ = composite_linear_sdf(t, sdf, _piecewise(t, knots, rgb3.view(R, 3, 3)),
                                                 beta, front=False)
-    median = _quantile_columns(_column_weights(t, sdf, beta), (0.5,))[:, 0]
-    faint = acc < 1e-4  # shows nothing: where its weight sits does not matter
-    spread_r = torch.cat([resid, r0], 1)
-    smooth = spread_r.amax(1) - spread_r.amin(1) <= settings.residual_tolerance * beta
+    median = _quantile_columns(_column_weights(t, sdf.detach(), b), (0.5,))[:, 0]
+    faint = acc.detach() < 1e-4  # shows nothing: where its weight sits does not matter
+    spread_r = torch.cat([resid.detach(), r0], 1)
+    smooth = spread_r.amax(1) - spread_r.amin(1) <= settings.residual_tolerance * b
     ok = found & (faint | (smooth & (median >= cols[:, 0]) & (median <= cols[:, 2])))
     return acc, color, depth, ok, 3 * R
 
 
-
 def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Tensor,
-                cos: torch.Tensor, sdf0: torch.Tensor, rgb0: torch.Tensor, beta: float,
+                cos: torch.Tensor, sdf0: torch.Tensor, rgb0: torch.Tensor, beta,
                 settings):
     """Band rays (R,) (they meet the mesh at t_hit (R,) at a cosine cos (R,) and pass no
     close surface before) from their probe there (SDF sdf0 (R,), colour rgb0 (R, 3)) and
@@ -241,15 +255,15 @@ def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     R = len(dirs)
     if R == 0:
         return _nothing(dirs)
-    cap = float(settings.shell_width)
-    step = sdf0 / cos
+    cap, b = float(settings.shell_width), _value(beta)
+    step = sdf0.detach() / cos  # the sample places carry no gradient
     t_star = t_hit + step.clamp(-cap, cap)
-    inner = t_star + settings.band_spacing * beta / cos
+    inner = t_star + settings.band_spacing * b / cos
     tq = torch.stack([t_star, inner], 1)
-    sdfq, rgbq = evaluate_sdf(field, (origin + tq[..., None] * dirs[:, None]).reshape(-1, 3),
+    sdfq, rgbq = evaluate_sdf(field, _along(origin, dirs, tq).reshape(-1, 3),
                               dirs.repeat_interleave(2, 0), settings.chunk_points)
     k = torch.arange(-3, 4, dtype=t_hit.dtype)
-    t = t_star[:, None] + k * (settings.residual_step * beta / cos)[:, None]
+    t = t_star[:, None] + k * (settings.residual_step * b / cos)[:, None]
     t = torch.cat([t, t_hit[:, None]], 1).sort(1).values
     plane = cos[:, None] * (t_hit[:, None] - t)
     knots = torch.cat([t_hit[:, None], tq], 1)  # (R, 3): residual and colour known there
@@ -261,7 +275,7 @@ def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     sdf = plane + _piecewise(t, knots, resid)
     rgb = _piecewise(t, knots, colour)
     acc, color, depth, rest = composite_linear_sdf(t, sdf, rgb, beta)
+    r = resid.detach()
     ok = (step.abs() <= cap) & (sdf[:, 0] > 0) & (sdf[:, -1] < 0) & \
-        (rest <= settings.band_leftover) & \
-        (resid.amax(1) - resid.amin(1) <= settings.residual_tolerance * beta)
-    return acc, color, depth, ok
+        (rest <= settings.band_leftover) & (r.amax(1) - r.amin(1) <= settings.residual_tolerance * b)
+    return acc, color, depth, ok.detach()
