@@ -2,6 +2,8 @@
 (texvocab.render.band.render_rays_banded): the same colours as the shell marcher for far
 fewer evaluations, gradients that reach the field and β, passing rays that cost two probes,
 and the trainer's use of it (``train_guide``)."""
+import dataclasses
+
 import pytest
 import torch
 
@@ -48,7 +50,10 @@ def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):  #
     assert shell_only.banded == 0 and shell_only.field_evals == ref.field_evals
 
 
-def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body):  # noqa: F811
+@pytest.mark.parametrize("newton", [True, False])
+def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body, newton):  # noqa: F811
+    """Both band kinds: the probe and the Newton point, or band_samples samples."""
+    march = dataclasses.replace(MARCH, band_newton=newton)
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
     band = torch.isfinite(t_band)
     o, d, near, far, t_band, cos = (x[band] for x in (o, d, near, far, t_band, cos))
@@ -58,7 +63,7 @@ def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body):  # n
         field.albedo = field.albedo.detach().clone().requires_grad_(True)
         field.beta = field.beta.detach().clone().requires_grad_(True)
         t = t_band if name == "band" else torch.full_like(t_band, torch.inf)
-        out = render_rays_banded(field, field.beta, o, d, near, far, t, cos, MARCH, None,
+        out = render_rays_banded(field, field.beta, o, d, near, far, t, cos, march, None,
                                  body["shell"])
         (out.rgb.sum() + out.rgb[:, 0].pow(2).sum()).backward()
         grads[name] = (field.albedo.grad.clone(), field.beta.grad.clone())

@@ -1,0 +1,149 @@
+"""The rays training does not band (texvocab.render.band.render_rays_banded with an
+``index``): close silhouette rays and failed bands as residual rays (three evaluations,
+differentiable), band rays from the probe and the Newton point, both with per-ray origins
+(a training batch mixes two views), and the trainer's knobs for them (``train_residual``,
+``train_band_newton``; runs written before them marched and used the 5-sample band)."""
+import dataclasses
+
+import pytest
+import torch
+
+from tests.test_band import MARCH, rays_of
+from tests.test_render import DELTA, body, psnr  # noqa: F401
+from tests.test_train import capture, tiny_settings  # noqa: F401
+from texvocab.capture import open as open_capture
+from texvocab.geometry.surface import SurfaceIndex
+from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.pipeline.train import Trainer
+from texvocab.render import render_rays
+from texvocab.render.band import band_composite, render_rays_banded
+from texvocab.render.residual import newton_band, render_residual
+
+OLD_BAND = dataclasses.replace(MARCH, band_newton=False)
+
+
+def _index(body):  # noqa: F811
+    return SurfaceIndex(body["v"], body["f"])
+
+
+def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):  # noqa: F811
+    o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
+    field = body["field"]
+    with torch.no_grad():
+        ref = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
+        marched = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
+                                     None, body["shell"], t_passing=t_pass)
+        resid = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
+                                   None, body["shell"], t_passing=t_pass, index=_index(body))
+        off = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos,
+                                 dataclasses.replace(MARCH, residual_rays=False), None,
+                                 body["shell"], t_passing=t_pass, index=_index(body))
+    assert marched.residual == 0 and off.residual == 0
+    assert torch.equal(off.rgb, marched.rgb) and off.field_evals == marched.field_evals
+    assert resid.residual > 20 and resid.banded == marched.banded
+    assert resid.field_evals < 0.6 * marched.field_evals
+    assert psnr(resid.rgb, ref.rgb) > 38
+    assert (resid.opacity - ref.opacity).abs().max() < 0.15
+
+
+def test_residual_rays_carry_gradients_to_the_colour_and_beta(body):  # noqa: F811
+    """Only the rays that are not band rays (passing close, grazing, failed bands): the
+    colour's gradient matches the marcher's, and β gets one."""
+    o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
+    keep = torch.isfinite(t_pass[:, 0])
+    o, d, near, far, t_band, cos, t_pass = (x[keep] for x in (o, d, near, far, t_band, cos,
+                                                              t_pass))
+    field = body["field"]
+    grads = {}
+    for name, index in (("residual", _index(body)), ("marched", None)):
+        field.albedo = field.albedo.detach().clone().requires_grad_(True)
+        field.beta = field.beta.detach().clone().requires_grad_(True)
+        out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
+                                 body["shell"], t_passing=t_pass, index=index)
+        out.rgb.sum().backward()
+        grads[name] = (field.albedo.grad.clone(), field.beta.grad.clone(), out.residual)
+    field.albedo, field.beta = field.albedo.detach(), field.beta.detach()
+    (ga, gb, n), (ma, mb, _) = grads["residual"], grads["marched"]
+    assert n > 10
+    assert torch.isfinite(ga).all() and torch.isfinite(gb) and float(gb) != 0.0
+    assert torch.allclose(ga, ma, rtol=0.03)
+    assert abs(float(gb) - float(mb)) < 0.1 * abs(float(mb))
+
+
+def test_per_ray_origins_give_what_one_origin_gives(body):  # noqa: F811
+    o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
+    field = body["field"]
+    band = torch.nonzero(torch.isfinite(t_band)).squeeze(1)[:100]
+    with torch.no_grad():
+        t_hit = t_band[band]
+        sdf0, rgb0 = field.sdf_rgb(o[band] + t_hit[:, None] * d[band], d[band])
+        one = newton_band(field, o[0], d[band], t_hit, cos[band], sdf0, rgb0, field.beta, MARCH)
+        each = newton_band(field, o[band], d[band], t_hit, cos[band], sdf0, rgb0, field.beta,
+                           MARCH)
+        probes = torch.cat([t_hit[:, None], torch.full_like(t_hit, torch.inf)[:, None]], 1)
+        sdfs = torch.cat([sdf0[:, None], torch.full_like(sdf0, torch.inf)[:, None]], 1)
+        r_one = render_residual(field, _index(body), o[0], d[band], near[band], far[band],
+                                probes, sdfs, float(field.beta), MARCH)
+        r_each = render_residual(field, _index(body), o[band], d[band], near[band], far[band],
+                                 probes, sdfs, field.beta, MARCH)
+    assert torch.equal(o[band], o[0].expand(len(band), 3))  # one camera
+    for a, b in zip(one + r_one[:4], each + r_each[:4], strict=True):
+        assert torch.allclose(a.float(), b.float(), atol=1e-6)
+    assert one[3].any() and r_one[3].any()
+
+
+def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):  # noqa: F811
+    o, d, near, far, t_band, cos, _ = rays_of(body, body["camera"])
+    keep = torch.isfinite(t_band)
+    o, d, near, far, t_band, cos = (x[keep] for x in (o, d, near, far, t_band, cos))
+    field = body["field"]
+    with torch.no_grad():
+        ref = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
+        sdf0, rgb0 = field.sdf_rgb(o + t_band[:, None] * d, d)
+        runs = {}
+        for m in (MARCH, OLD_BAND):
+            out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, m, None,
+                                     body["shell"])
+            ok = (newton_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m)
+                  if m.band_newton else
+                  band_composite(field, m, field.beta, o, d, t_band, cos, sdf0, rgb0))[3]
+            rest = render_rays(field, o[~ok], d[~ok], near[~ok], far[~ok], m, None,
+                               body["shell"])
+            per_ray = 3 if m.band_newton else 1 + m.band_samples
+            assert out.banded == int(ok.sum()) > 0.8 * len(o)
+            assert out.field_evals == per_ray * len(o) + rest.field_evals
+            assert psnr(out.rgb, ref.rgb) > 40
+            runs[m.band_newton] = out
+    assert not torch.equal(runs[True].rgb, runs[False].rgb)
+
+
+@pytest.mark.parametrize("knobs", [{}, {"train_residual": False},
+                                   {"train_residual": False, "train_band_newton": False}])
+def test_training_uses_residual_and_newton_rays_by_their_knobs(capture, tmp_path, knobs):  # noqa: F811
+    cap = open_capture(capture)
+    trainer = Trainer(cap, tiny_settings(iterations=3, **knobs), tmp_path / "run",
+                      progress=False)
+    m = trainer.march
+    assert m.residual_rays == knobs.get("train_residual", True)
+    assert m.band_newton == knobs.get("train_band_newton", True)
+    before = [p.detach().clone() for p in trainer.model.parameters() if p.requires_grad]
+    logs = trainer.run()
+    assert (sum(r["residual"] for r in logs) > 0) == m.residual_rays
+    assert sum(r["banded"] for r in logs) > 0
+    after = [p for p in trainer.model.parameters() if p.requires_grad]
+    assert any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
+
+
+def test_old_runs_marched_and_used_the_five_sample_band():
+    old = Settings().to_dict()
+    for key in ("train_residual", "train_band_newton"):
+        del old[key]
+    s = Settings.from_dict(old)
+    assert s.train_residual is False and s.train_band_newton is False
+    m = march_settings(s, training=True)
+    assert not m.residual_rays and not m.band_newton
+    assert march_settings(Settings(), training=True).residual_rays
+    # the shell guide bands nothing, so it has no residual rays either
+    assert not march_settings(Settings(train_guide="shell"), training=True).residual_rays
+    # render knobs do not follow the training ones
+    assert march_settings(Settings(train_residual=False, train_band_newton=False)).residual_rays
