@@ -64,8 +64,10 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # the rays training does not band: marched, or residual rays (session 14); with band
     # rays of 5 samples, or from the probe and the Newton point (run with --base and no
     # items: today's defaults)
-    "train_rays": {"marched": ["train_residual=false", "train_band_newton=false"],
-                   "residual": ["train_band_newton=false"], "residual + newton band": []},
+    "train_rays": {"marched": ["train_residual=off", "train_band_newton=false"],
+                   "residual": ["train_band_newton=false"], "residual + newton band": [],
+                   "newton band": ["train_residual=off"],
+                   "residual hits + newton band": ["train_residual=hits"]},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }

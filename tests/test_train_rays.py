@@ -12,6 +12,7 @@ from tests.test_band import MARCH, rays_of
 from tests.test_render import DELTA, body, psnr  # noqa: F401
 from tests.test_train import capture, tiny_settings  # noqa: F401
 from texvocab.capture import open as open_capture
+from texvocab.errors import TexvocabError
 from texvocab.geometry.surface import SurfaceIndex
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.train import Trainer
@@ -38,6 +39,11 @@ def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):  # noqa: F
         off = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos,
                                  dataclasses.replace(MARCH, residual_rays=False), None,
                                  body["shell"], t_passing=t_pass, index=_index(body))
+        hits = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
+                                  None, body["shell"], t_passing=t_pass, index=_index(body),
+                                  residual_misses=False)
+    assert 0 < hits.residual < resid.residual  # misses are marched, the hits are not
+    assert resid.field_evals < hits.field_evals < marched.field_evals
     assert marched.residual == 0 and off.residual == 0
     assert torch.equal(off.rgb, marched.rgb) and off.field_evals == marched.field_evals
     assert resid.residual > 20 and resid.banded == marched.banded
@@ -117,14 +123,14 @@ def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):  # noq
     assert not torch.equal(runs[True].rgb, runs[False].rgb)
 
 
-@pytest.mark.parametrize("knobs", [{}, {"train_residual": False},
-                                   {"train_residual": False, "train_band_newton": False}])
+@pytest.mark.parametrize("knobs", [{}, {"train_residual": "hits"}, {"train_residual": "off"},
+                                   {"train_residual": "off", "train_band_newton": False}])
 def test_training_uses_residual_and_newton_rays_by_their_knobs(capture, tmp_path, knobs):  # noqa: F811
     cap = open_capture(capture)
     trainer = Trainer(cap, tiny_settings(iterations=3, **knobs), tmp_path / "run",
                       progress=False)
     m = trainer.march
-    assert m.residual_rays == knobs.get("train_residual", True)
+    assert m.residual_rays == (knobs.get("train_residual", "all") != "off")
     assert m.band_newton == knobs.get("train_band_newton", True)
     before = [p.detach().clone() for p in trainer.model.parameters() if p.requires_grad]
     logs = trainer.run()
@@ -139,11 +145,13 @@ def test_old_runs_marched_and_used_the_five_sample_band():
     for key in ("train_residual", "train_band_newton"):
         del old[key]
     s = Settings.from_dict(old)
-    assert s.train_residual is False and s.train_band_newton is False
+    assert s.train_residual == "off" and s.train_band_newton is False
     m = march_settings(s, training=True)
     assert not m.residual_rays and not m.band_newton
     assert march_settings(Settings(), training=True).residual_rays
     # the shell guide bands nothing, so it has no residual rays either
     assert not march_settings(Settings(train_guide="shell"), training=True).residual_rays
     # render knobs do not follow the training ones
-    assert march_settings(Settings(train_residual=False, train_band_newton=False)).residual_rays
+    assert march_settings(Settings(train_residual="off", train_band_newton=False)).residual_rays
+    with pytest.raises(TexvocabError, match="train_residual"):
+        Settings(train_residual="some")

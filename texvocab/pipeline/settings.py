@@ -17,11 +17,12 @@ from texvocab.metrics.inception_perceptual import MIN_PATCH
 from texvocab.render import GUIDES, MarchSettings
 
 PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
+TRAIN_RESIDUAL = ("all", "hits", "off")
 # What a setting absent from a stored settings dict (a checkpoint written before the
 # setting existed) meant then; its default today may differ.
 OPTIONAL_INTS = ("train_coarse_samples",)  # settings that are an integer or None
 LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0,
-          "train_guide": "shell", "train_coarse_samples": None, "train_residual": False,
+          "train_guide": "shell", "train_coarse_samples": None, "train_residual": "off",
           "train_band_newton": False}
 
 
@@ -67,9 +68,10 @@ class Settings:
     train_coarse_samples: int | None = 9  # coarse_samples of the rays training marches
     # (none: coarse_samples); with the band, only silhouette and occlusion-edge rays are
     # marched; 9 against 18: the same loss curve, +0.54 dB novel PSNR (README "Training")
-    train_residual: bool = True  # train_guide raster: close silhouette rays and failed
-    # bands as residual rays (3 evaluations; residual_* knobs), the marcher only for the
-    # rays they do not resolve | false: all marched (README "Training")
+    train_residual: str = "all"  # train_guide raster: which rays the band leaves are
+    # residual rays (3 evaluations; residual_* knobs) before the marcher: all (close
+    # silhouette misses, failed bands, hits behind a close edge) | hits (the last two,
+    # inside the mask) | off (all marched; README "Training")
     train_band_newton: bool = True  # train_guide raster: band rays from the probe, the
     # Newton point and one behind it (3 evaluations) | false: band_samples samples
     lr: float = 5e-4
@@ -110,6 +112,8 @@ class Settings:
             ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
             ("guide", self.guide in GUIDES, " or ".join(GUIDES)),
             ("train_guide", self.train_guide in GUIDES, " or ".join(GUIDES)),
+            ("train_residual", self.train_residual in TRAIN_RESIDUAL,
+             " or ".join(TRAIN_RESIDUAL)),
             ("k", self.k <= self.num_keys, f"<= num_keys ({self.num_keys}): K of the M keys"),
             ("iterations", self.iterations >= 1, ">= 1"),
             ("checkpoint_every", self.checkpoint_every >= 1, ">= 1"),
@@ -298,7 +302,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
         m.coarse_samples = s.train_coarse_samples or s.coarse_samples
-        m.residual_rays = s.train_residual and s.train_guide == "raster"
+        m.residual_rays = s.train_residual != "off" and s.train_guide == "raster"
         m.band_newton = s.train_band_newton
     elif m.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact

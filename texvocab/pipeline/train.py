@@ -192,7 +192,7 @@ class Trainer:
         share = self.world * len(o) / total
         out = render_rays_banded(self.model.for_pose(fd.ctx), self.model.beta, o, d, near, far,
                                  t_band, cos, self.march, gen, fd.shell, t_passing=t_pass,
-                                 index=fd.ctx.index)
+                                 index=fd.ctx.index, residual_misses=s.train_residual == "all")
         eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
                  "eikonal": torch.zeros(()) if eikonal is None else eikonal,

@@ -238,7 +238,8 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
                        near: torch.Tensor, far: torch.Tensor, t_hit: torch.Tensor,
                        cos: torch.Tensor, settings, generator: torch.Generator | None = None,
                        shell=None, background=(0.0, 0.0, 0.0),
-                       t_passing: torch.Tensor | None = None, index=None):
+                       t_passing: torch.Tensor | None = None, index=None,
+                       residual_misses: bool = True):
     """Volume-render rays as :func:`texvocab.render.marcher.render_rays` does, but:
 
     * rays with finite ``t_passing`` (R, 2) (rays that pass a surface nearer than their
@@ -250,10 +251,10 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     * rays with a finite ``t_hit`` (R,) (mesh hit at ``cos`` (R,) >= min_cos) and no close
       passed surface by the band — a probe and ``band_samples`` evaluations;
     * with ``index`` (the posed mesh's :class:`~texvocab.geometry.surface.SurfaceIndex`)
-      and ``settings.residual_rays``, the close passing rays and the band rays the band
-      does not resolve as residual rays (:func:`texvocab.render.residual.render_residual`:
-      the mesh's distance plus the field's residual, three evaluations), from their
-      probes;
+      and ``settings.residual_rays``, the close passing rays (misses only with
+      ``residual_misses``) and the band rays the band does not resolve as residual rays
+      (:func:`texvocab.render.residual.render_residual`: the mesh's distance plus the
+      field's residual, three evaluations), from their probes;
     * the rest, and the rays these do not resolve, by the shell marcher over [near, far].
 
     Differentiable w.r.t. the field's outputs and ``beta`` (float or the model's β
@@ -304,7 +305,10 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
         from texvocab.render.residual import render_residual  # residual builds on the band
 
         probe_t[b_idx, 2], probe_sdf[b_idx, 2] = t_b, sdf0.detach()
-        r_idx = torch.nonzero(marched & torch.isfinite(probe_sdf).any(1)).squeeze(1)
+        take = marched & torch.isfinite(probe_sdf).any(1)
+        if not residual_misses:
+            take &= torch.isfinite(t_hit)
+        r_idx = torch.nonzero(take).squeeze(1)
         acc_r, color_r, depth_r, ok_r, n = render_residual(
             field, index, origins[r_idx], dirs[r_idx], near[r_idx], far[r_idx],
             probe_t[r_idx], probe_sdf[r_idx], beta, s)
