@@ -61,13 +61,15 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # the shell marcher's coarse step for the rays training still marches (run with
     # --base ... train_guide=raster)
     "train_marcher": {"coarse 18": [], "coarse 9": ["train_coarse_samples=9"]},
-    # the rays training does not band: marched, or residual rays (session 14); with band
-    # rays of 5 samples, or from the probe and the Newton point (run with --base and no
-    # items: today's defaults)
+    # the rays training does not band: marched, or residual rays inside the mask (hits) or
+    # everywhere (all); band rays of 5 samples, or from the probe and the Newton point
+    # (session 14; run with --base and no items: today's defaults)
     "train_rays": {"marched": ["train_residual=off", "train_band_newton=false"],
-                   "residual": ["train_band_newton=false"], "residual + newton band": [],
                    "newton band": ["train_residual=off"],
-                   "residual hits + newton band": ["train_residual=hits"]},
+                   "newton band, residual hits": ["train_residual=hits"],
+                   "newton band, residual all": ["train_residual=all"],
+                   "5-sample band, residual all": ["train_residual=all",
+                                                   "train_band_newton=false"]},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }

@@ -44,7 +44,11 @@ VARIANTS = {
     "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster"],
     "train_guide raster, train_coarse_samples 9": SHELL[:2] + ["train_guide=raster",
                                                              "train_coarse_samples=9"],
-    "defaults": [],
+    "session 13's defaults (5-sample band, the rest marched)": ["train_residual=off",
+                                                                "train_band_newton=false"],
+    "Newton band, the rest marched": ["train_residual=off"],
+    "Newton band, residual rays everywhere (train_residual=all)": ["train_residual=all"],
+    "defaults (Newton band, residual rays inside the mask)": [],
 }
 
 

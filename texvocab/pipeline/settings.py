@@ -68,10 +68,10 @@ class Settings:
     train_coarse_samples: int | None = 9  # coarse_samples of the rays training marches
     # (none: coarse_samples); with the band, only silhouette and occlusion-edge rays are
     # marched; 9 against 18: the same loss curve, +0.54 dB novel PSNR (README "Training")
-    train_residual: str = "all"  # train_guide raster: which rays the band leaves are
-    # residual rays (3 evaluations; residual_* knobs) before the marcher: all (close
-    # silhouette misses, failed bands, hits behind a close edge) | hits (the last two,
-    # inside the mask) | off (all marched; README "Training")
+    train_residual: str = "hits"  # train_guide raster: which rays the band leaves are
+    # residual rays (3 evaluations; residual_* knobs) before the marcher: hits (failed
+    # bands and hits behind a close edge, inside the mask) | all (also the close
+    # silhouette misses: fastest, but -0.44 dB on novel poses) | off (README "Training")
     train_band_newton: bool = True  # train_guide raster: band rays from the probe, the
     # Newton point and one behind it (3 evaluations) | false: band_samples samples
     lr: float = 5e-4
