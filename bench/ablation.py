@@ -63,13 +63,15 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "train_marcher": {"coarse 18": [], "coarse 9": ["train_coarse_samples=9"]},
     # the rays training does not band: marched, or residual rays inside the mask (hits) or
     # everywhere (all); band rays of 5 samples, or from the probe and the Newton point
-    # (session 14; run with --base and no items: today's defaults)
-    "train_rays": {"marched": ["train_residual=off", "train_band_newton=false"],
-                   "newton band": ["train_residual=off"],
-                   "newton band, residual hits": ["train_residual=hits"],
-                   "newton band, residual all": ["train_residual=all"],
-                   "5-sample band, residual all": ["train_residual=all",
-                                                   "train_band_newton=false"]},
+    # (session 14; run with --base and no items: today's defaults; all but the last at
+    # the shell grid's voxel before session 14)
+    "train_rays": {k: v + ["train_shell_voxel=0.01"] for k, v in {
+        "marched": ["train_residual=off", "train_band_newton=false"],
+        "newton band": ["train_residual=off"],
+        "newton band, residual hits": ["train_residual=hits"],
+        "newton band, residual all": ["train_residual=all"],
+        "5-sample band, residual all": ["train_residual=all", "train_band_newton=false"]}.items()}
+    | {"defaults (newton band, residual hits, shell voxel 0.015)": []},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }

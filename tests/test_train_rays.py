@@ -155,3 +155,26 @@ def test_old_runs_marched_and_used_the_five_sample_band():
     assert march_settings(Settings(train_residual="off", train_band_newton=False)).residual_rays
     with pytest.raises(TexvocabError, match="train_residual"):
         Settings(train_residual="some")
+
+
+def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):  # noqa: F811
+    cap = open_capture(capture)
+    shells = {}
+    for voxel in (0.01, 0.015):
+        trainer = Trainer(cap, tiny_settings(iterations=1, train_shell_voxel=voxel),
+                          tmp_path / f"run{voxel}", progress=False)
+        trainer.run()
+        (fd,) = trainer.frames.values()
+        shells[voxel] = fd.shell
+        assert fd.shell.voxel == voxel and fd.shell.has_grid
+    fine, coarse = shells[0.01], shells[0.015]
+    # the coarser grid holds the finer one's shell (both keep every point within δ)
+    idx = torch.nonzero(fine.occupied)
+    centres = torch.from_numpy(fine.origin) + (idx + 0.5) * 0.01
+    assert coarse.contains(centres.float()).float().mean() > 0.99
+    assert coarse.occupied.sum() * 0.015 ** 3 > fine.occupied.sum() * 0.01 ** 3
+    old = Settings().to_dict()
+    del old["train_shell_voxel"]
+    assert Settings.from_dict(old).train_shell_voxel == 0.01  # runs before the setting
+    with pytest.raises(TexvocabError, match="train_shell_voxel"):
+        Settings(train_shell_voxel=0.0)

@@ -126,7 +126,7 @@ class Trainer:
         self.gen = torch.Generator().manual_seed(settings.seed)
         self.step = 0
         self.march = march_settings(settings, training=True)
-        self.rays = TrainingRays(capture, settings, self.model, self.march.min_cos)
+        self.rays = TrainingRays(capture, settings, self.model, self.march)
         self.progress = progress
         self.perceptual = perceptual_term(settings)
         # data-parallel training (texvocab.pipeline.ddp): this process computes shard

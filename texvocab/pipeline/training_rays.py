@@ -44,10 +44,12 @@ class FrameData:
 
 class TrainingRays:
     """Caches and ray draws of one training run: ``capture``, its ``settings``, the
-    ``model`` (its pose contexts) and the band's ``min_cos``."""
+    ``model`` (its pose contexts) and the training's ``march`` settings (the band's
+    ``min_cos``, the shell grid's voxel and exactness)."""
 
-    def __init__(self, capture, settings, model, min_cos: float):
-        self.capture, self.s, self.model, self.min_cos = capture, settings, model, min_cos
+    def __init__(self, capture, settings, model, march):
+        self.capture, self.s, self.model, self.march = capture, settings, model, march
+        self.min_cos = march.min_cos
         self.frames: dict[int, FrameData] = {}
         self.cache_seconds = 0.0  # spent building the frame and view caches (one-off each)
         # view -> (origins, directions) (H·W, 3) of every pixel: the same every frame
@@ -59,8 +61,10 @@ class TrainingRays:
             t0 = time.perf_counter()
             pf = self.model.pose_feature
             ctx = pf.context(self.capture.poses[t], self.capture.trans[t])
+            m = self.march
             shell = ShellGeometry.build(ctx.vertices.detach(), self.capture.body.faces,
-                                        self.s.field.shell_width, index=ctx.index)
+                                        self.s.field.shell_width, m.shell_voxel, m.shell_exact,
+                                        index=ctx.index)
             self.frames[t] = FrameData(ctx, shell)
             self.cache_seconds += time.perf_counter() - t0
         return self.frames[t]
