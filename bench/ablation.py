@@ -13,10 +13,12 @@ weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, c
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The
 base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
-weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none``: the
-project before this ablation chose its defaults), so a variant differs from its
+weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none
+train_residual=off train_band_newton=false train_shell_voxel=0.01``: the project before
+this ablation chose its defaults), so a variant differs from its
 reference in exactly its own setting; identical settings share one run. ``train_marcher``
-(train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster``, ``train_rays``
+(train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster`` (keeping the
+three session-14 items above), ``train_rays``
 (marched, residual rays, residual rays and Newton band rays) with ``--base`` and no
 items (today's defaults). To add seeds to
 a group run before session 9, pass ``--train-with-preset`` (those runs trained at the
@@ -44,10 +46,12 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
 SET = "novel_poses"
+# the training rays before session 14 (marched rest, 5-sample band, shell grid voxel 1 cm)
+BEFORE_14 = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
 DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean",
-                "train_guide=shell", "train_coarse_samples=none"]
+                "train_guide=shell", "train_coarse_samples=none"] + BEFORE_14
 # base settings that name no run folder: every run before the setting existed had them
-UNNAMED = {"train_guide=shell", "train_coarse_samples=none"}
+UNNAMED = {"train_guide=shell", "train_coarse_samples=none"} | set(BEFORE_14)
 GROUPS: dict[str, dict[str, list[str]]] = {
     "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
                    "none": ["strategy=none"]},
@@ -63,15 +67,16 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "train_marcher": {"coarse 18": [], "coarse 9": ["train_coarse_samples=9"]},
     # the rays training does not band: marched, or residual rays inside the mask (hits) or
     # everywhere (all); band rays of 5 samples, or from the probe and the Newton point
-    # (session 14; run with --base and no items: today's defaults; all but the last at
-    # the shell grid's voxel before session 14)
-    "train_rays": {k: v + ["train_shell_voxel=0.01"] for k, v in {
-        "marched": ["train_residual=off", "train_band_newton=false"],
-        "newton band": ["train_residual=off"],
-        "newton band, residual hits": ["train_residual=hits"],
-        "newton band, residual all": ["train_residual=all"],
-        "5-sample band, residual all": ["train_residual=all", "train_band_newton=false"]}.items()}
-    | {"defaults (newton band, residual hits, shell voxel 0.015)": []},
+    # (session 14; run with --base and no items: today's defaults, the reference; the
+    # others at the shell grid's voxel before session 14)
+    "train_rays": {"defaults (newton band, residual hits, shell voxel 0.015)": []} | {
+        k: v + ["train_shell_voxel=0.01"] for k, v in {
+            "marched (before session 14)": ["train_residual=off", "train_band_newton=false"],
+            "newton band": ["train_residual=off"],
+            "newton band, residual hits": ["train_residual=hits"],
+            "newton band, residual all": ["train_residual=all"],
+            "5-sample band, residual all": ["train_residual=all",
+                                            "train_band_newton=false"]}.items()},
     "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
              "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
 }
@@ -95,7 +100,7 @@ def make_capture(out: Path, motion: str = "compositional") -> Path:
 
 def run_name(base: list[str], extra: list[str]) -> str:
     """Folder name of a run: its settings beyond the defaults, sorted (shared by groups)."""
-    items = dict(i.split("=", 1) for i in base + extra if i not in UNNAMED)
+    items = dict(i.split("=", 1) for i in [b for b in base if b not in UNNAMED] + extra)
     return ",".join(f"{k}={v}" for k, v in sorted(items.items())) or "defaults"
 
 
