@@ -31,7 +31,9 @@ from threadpoolctl import threadpool_limits
 
 from texvocab.blas import blas_threads, budget_blas_threads
 
-SHELL = ["encoder=pyramid", "perceptual=off", "train_guide=shell"]
+# the training rays before session 14: the rest marched, 5-sample band, shell voxel 1 cm
+BEFORE_14 = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
+SHELL = ["encoder=pyramid", "perceptual=off", "train_guide=shell", "train_shell_voxel=0.01"]
 UNBUDGETED = "reference, numpy's BLAS on every core (before texvocab/blas.py)"
 VARIANTS = {
     "reference (pyramid, no perceptual, shell marcher)": SHELL,
@@ -41,13 +43,14 @@ VARIANTS = {
     "encoder small (trained)": ["encoder=small"] + SHELL[1:],
     "encoder resnet34-scratch": ["encoder=resnet34-scratch"] + SHELL[1:],
     "texture maps cosine-weighted": SHELL + ["view_weighting=cosine"],
-    "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster"],
+    "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster",
+                                                    "train_coarse_samples=none"] + BEFORE_14,
     "train_guide raster, train_coarse_samples 9": SHELL[:2] + ["train_guide=raster",
-                                                             "train_coarse_samples=9"],
-    "session 13's defaults (5-sample band, the rest marched)": ["train_residual=off",
-                                                                "train_band_newton=false"],
+                                                             "train_coarse_samples=9"] + BEFORE_14,
+    "session 13's defaults (5-sample band, the rest marched)": BEFORE_14,
     "Newton band, the rest marched": ["train_residual=off"],
     "Newton band, residual rays everywhere (train_residual=all)": ["train_residual=all"],
+    "defaults at train_shell_voxel 0.01": ["train_shell_voxel=0.01"],
     "defaults (Newton band, residual rays inside the mask)": [],
 }
 
