@@ -71,7 +71,7 @@ class Settings:
     train_residual: str = "hits"  # train_guide raster: which rays the band leaves are
     # residual rays (3 evaluations; residual_* knobs) before the marcher: hits (failed
     # bands and hits behind a close edge, inside the mask) | all (also the close
-    # silhouette misses: fastest, but -0.44 dB on novel poses) | off (README "Training")
+    # silhouette misses: fastest, but -0.12 dB on novel poses) | off (README "Training")
     train_shell_voxel: float = 0.015  # (S/A) voxel of each training frame's shell grid
     # (metres; exact near its boundary): 0.01 builds 2.7x slower (135 against 50 ms a
     # frame) for an 11% tighter shell around the marched rays

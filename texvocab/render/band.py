@@ -249,7 +249,9 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
       give it), and the ray shows the background when it has no ``t_hit``; otherwise the
       ray is marched;
     * rays with a finite ``t_hit`` (R,) (mesh hit at ``cos`` (R,) >= min_cos) and no close
-      passed surface by the band — a probe and ``band_samples`` evaluations;
+      passed surface by the band — a probe and, with ``settings.band_newton``, two more
+      evaluations (the Newton band, :func:`texvocab.render.residual.newton_band`), else
+      ``band_samples`` (:func:`band_composite`);
     * with ``index`` (the posed mesh's :class:`~texvocab.geometry.surface.SurfaceIndex`)
       and ``settings.residual_rays``, the close passing rays (misses only with
       ``residual_misses``) and the band rays the band does not resolve as residual rays
