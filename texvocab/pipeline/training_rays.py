@@ -49,7 +49,6 @@ class TrainingRays:
 
     def __init__(self, capture, settings, model, march):
         self.capture, self.s, self.model, self.march = capture, settings, model, march
-        self.min_cos = march.min_cos
         self.frames: dict[int, FrameData] = {}
         self.cache_seconds = 0.0  # spent building the frame and view caches (one-off each)
         # view -> (origins, directions) (H·W, 3) of every pixel: the same every frame
@@ -88,13 +87,13 @@ class TrainingRays:
             _, dirs = self.rays_of(v)
             delta = self.s.field.shell_width
             plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
-                                delta, delta, self.min_cos)
+                                delta, delta, self.march.min_cos)
             first = plan.hit
             far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
             raster = self.s.train_guide == "raster"
             # inside the mask every hit at a cosine >= min_cos is a band ray; one behind an
             # occlusion edge (passby) takes the band only if the passed surface reads far
-            banded = first & (plan.cos >= self.min_cos) & mask & raster
+            banded = first & (plan.cos >= self.march.min_cos) & mask & raster
             t_band = torch.where(banded, plan.t_hit, torch.inf)
             passing = plan.passby & raster & torch.where(mask, banded, ~first)
             t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind],

@@ -208,7 +208,7 @@ def band_composite(field, s, beta, o: torch.Tensor, d: torch.Tensor, t_hit: torc
     step = sdf0.detach() / cos  # Newton step along the ray with the face's cosine
     t_star = t_hit + step.clamp(-delta, delta)
     k = torch.arange(s.band_samples, dtype=torch.float32) - (s.band_samples - 1) / 2
-    t_band = t_star[:, None] + k * (s.band_spacing * _value(beta)) / cos[:, None]  # (R, B)
+    t_band = t_star[:, None] + k * (s.band_spacing * beta_value(beta)) / cos[:, None]  # (R, B)
     o = o[:, None] if o.dim() == 2 else o
     sdf_b, rgb_b = evaluate_sdf(field, (o + t_band[..., None] * d[:, None]).reshape(-1, 3),
                                 d.repeat_interleave(s.band_samples, 0), s.chunk_points)
@@ -222,7 +222,7 @@ def band_composite(field, s, beta, o: torch.Tensor, d: torch.Tensor, t_hit: torc
     return acc, color, depth, ok.detach()
 
 
-def _value(beta) -> float:
+def beta_value(beta) -> float:
     """β as a float (a tensor's value without its gradient)."""
     return float(beta.detach()) if torch.is_tensor(beta) else float(beta)
 
@@ -264,6 +264,7 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     Returns a :class:`~texvocab.render.marcher.RayResult` (``banded``: band rays,
     ``residual``: residual rays)."""
     from texvocab.render.marcher import RayResult, render_rays  # the marcher builds on us
+    from texvocab.render.residual import newton_band, render_residual  # so does residual
 
     s = settings
     R = len(origins)
@@ -280,14 +281,12 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
             sdf_p, _ = evaluate_sdf(field, (o[:, None] + t_passing[p_idx, :, None] * d[:, None])
                                     .reshape(-1, 3), d.repeat_interleave(2, 0), s.chunk_points)
         evals += 2 * len(p_idx)
-        close[p_idx] = sdf_p.view(-1, 2).min(1).values <= s.miss_margin * _value(beta)
+        close[p_idx] = sdf_p.view(-1, 2).min(1).values <= s.miss_margin * beta_value(beta)
         probe_t[p_idx, :2], probe_sdf[p_idx, :2] = t_passing[p_idx], sdf_p.view(-1, 2)
     b_idx = torch.nonzero(torch.isfinite(t_hit) & ~close).squeeze(1)
     o, d, t_b = origins[b_idx], dirs[b_idx], t_hit[b_idx]
     sdf0, rgb0 = evaluate_sdf(field, o + t_b[:, None] * d, d, s.chunk_points)
     if s.band_newton:  # the probe, the Newton point and one behind it
-        from texvocab.render.residual import newton_band  # residual builds on the band
-
         acc, color, depth, ok = newton_band(field, o, d, t_b, cos[b_idx], sdf0, rgb0, beta, s)
         evals += len(b_idx) * 3
     else:
@@ -304,8 +303,6 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     depth = origins.new_zeros(R).index_put((good,), depth[ok])
     resolved = 0
     if index is not None and s.residual_rays:
-        from texvocab.render.residual import render_residual  # residual builds on the band
-
         probe_t[b_idx, 2], probe_sdf[b_idx, 2] = t_b, sdf0.detach()
         take = marched & torch.isfinite(probe_sdf).any(1)
         if not residual_misses:

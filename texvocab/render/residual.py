@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from texvocab.render.band import (
-    _value,
+    beta_value,
     composite_linear_sdf,
     evaluate_sdf,
     interval_optical_depth,
@@ -196,7 +196,7 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     R = len(dirs)
     if R == 0:
         return (*_nothing(dirs), 0)
-    b = _value(beta)
+    b = beta_value(beta)
     cap, h = float(settings.shell_width), settings.residual_step * b
     sdf_probe = sdf_probe.detach()
     # the residual at the probe nearest the surface (a hit's own surface before an edge
@@ -255,7 +255,7 @@ def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     R = len(dirs)
     if R == 0:
         return _nothing(dirs)
-    cap, b = float(settings.shell_width), _value(beta)
+    cap, b = float(settings.shell_width), beta_value(beta)
     step = sdf0.detach() / cos  # the sample places carry no gradient
     t_star = t_hit + step.clamp(-cap, cap)
     inner = t_star + settings.band_spacing * b / cos
