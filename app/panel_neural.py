@@ -71,10 +71,11 @@ class NeuralView:
         return _fit(max(8, round(self.resolution * self.image_scale)), aspect)
 
     def update(self, state, camera, aspect: float, force: bool = False, label: str = "",
-               playing: bool = False, background=(0.0, 0.0, 0.0)) -> None:
+               playing: bool = False, background=(0.0, 0.0, 0.0), poll: bool = True) -> None:
         """Submit a job when the pose, camera or size changed (while ``playing``: only
-        once the previous one is done); upload a new level. ``label`` names the pose;
-        ``background``: the 3D view's, so both panels (and screenshots) match."""
+        once the previous one is done); with ``poll``, upload a new level (not while the
+        panel's image may already be in this frame's draw list). ``label`` names the
+        pose; ``background``: the 3D view's, so both panels (and screenshots) match."""
         w, h = self.size_for(aspect)
         view = (state.version, camera_key(camera), w, h, self.preset, tuple(background))
         key = (*view, playing)
@@ -96,7 +97,7 @@ class NeuralView:
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
                                          camera.to_texvocab_camera(w, h), self.march, levels,
                                          tuple(background), finish_preview=not playing))
-        frame = self.worker.poll()
+        frame = self.worker.poll() if poll else None
         if frame is not None:
             self._upload(frame)
             if playing:

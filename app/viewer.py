@@ -25,6 +25,10 @@ from app.wake import ui_waker
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import follow_camera, march_settings
 
+#: panels whose widgets change the pose: the neural job is submitted as soon as they are
+#: drawn, not when the Neural render panel draws after the 3D view (8 ms later, or more)
+SUBMIT_AFTER = ("Pose",)
+
 
 class Viewer:
     """Everything the panels share: loaded data, the edited pose, the orbit camera, scene
@@ -70,6 +74,8 @@ class Viewer:
     # -- lifecycle (hello_imgui callbacks) ---------------------------------------------
     def post_init(self) -> None:
         self.ctx = moderngl.create_context()  # attaches to the window's current context
+        # 0 unless the window's own framebuffer is multisampled (app.window.WINDOW_MSAA_SAMPLES)
+        self.window_sample_buffers = int(self.ctx.info["GL_SAMPLE_BUFFERS"])
         self.scene = SceneRenderer(self.ctx, self.data)
         self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
         if self.data.model is not None:
@@ -101,6 +107,8 @@ class Viewer:
         """Draw one docked panel (``draw(viewer)``), timing its UI-thread CPU."""
         cpu = time.thread_time()
         draw(self)
+        if name in SUBMIT_AFTER:  # its sliders change the pose: the render starts now
+            self.submit_neural(poll=False)
         self.panel_cpu_ms[name] = (time.thread_time() - cpu) * 1000
 
     def pre_new_frame(self) -> None:
@@ -120,15 +128,16 @@ class Viewer:
         self.idling_log.append((busy, playing, bool(idling.enable_idling)))
         self.panel_cpu_ms["before the panels"] = (time.thread_time() - cpu) * 1000
 
-    def submit_neural(self, force: bool = False) -> None:
-        """Hand a changed pose or camera to the neural render worker (and show a finished
-        level). Called before the panels draw, so the render starts before this frame's
-        UI work (the vocabulary texture, the 3D view) rather than after it."""
+    def submit_neural(self, force: bool = False, poll: bool = True) -> None:
+        """Hand a changed pose or camera to the neural render worker (and, with ``poll``,
+        show a finished level). Called before the panels draw and again after the Pose
+        panel, so the render starts before this frame's UI work (the vocabulary texture,
+        the 3D view) rather than after it."""
         if self.neural is None:
             return
         playing = self.sequence is not None and self.sequence.playing
         self.neural.update(self.state, self.camera, self.neural_aspect(), force,
-                           self.pose_label(), playing, self.options.background)
+                           self.pose_label(), playing, self.options.background, poll)
 
     # -- cameras ------------------------------------------------------------------------
     def root_position(self) -> np.ndarray:

@@ -18,8 +18,9 @@ render process and again with the render thread, one after the other.
 
     .venv/bin/python bench/viewer_ui.py RUN/checkpoint.pt [--seconds 10] [--res 256]
 
-A first row times an empty hello_imgui window of the same size at full speed: what GL
-under llvmpipe and the X server cost per frame before the viewer draws anything.
+A first row times an empty hello_imgui window of the same size at full speed, with the
+viewer's framebuffer (no MSAA): what GL under llvmpipe and the X server cost per frame
+before the viewer draws anything.
 """
 from __future__ import annotations
 
@@ -81,6 +82,9 @@ def empty_window_child(size: str, seconds: float, out: str) -> None:
     rp.callbacks.show_gui = gui
     rp.ini_disable = True
     rp.fps_idling.enable_idling = False
+    from app.window import WINDOW_MSAA_SAMPLES  # the viewer's framebuffer, not hello_imgui's 8x
+
+    rp.renderer_backend_options.open_gl_options.anti_aliasing_samples = WINDOW_MSAA_SAMPLES
     immapp.run(rp)
     keep = [i for i, t in enumerate(wall) if t - t0 > 1][1:]  # skip the first second
     Path(out).write_text(json.dumps({

@@ -245,3 +245,38 @@ def test_dialog_program_search_follows_path(monkeypatch, tmp_path):
     assert FileDialogs.missing() == ""
     monkeypatch.setenv("PATH", "/nonexistent")
     assert "zenity" in FileDialogs.missing()
+
+
+def test_a_pose_panel_edit_is_submitted_before_the_3d_view_draws():
+    """The Pose panel's slider changes the pose mid-frame: the neural job goes out right
+    after that panel (Viewer.SUBMIT_AFTER), not when the Neural render panel draws after
+    the 3D view's work; only the frame's start polls levels."""
+    from app.panel_neural import NeuralView
+    from app.state import load_viewer_data
+    from app.viewer import Viewer
+
+    class Recorder:
+        busy, delivered, errors = False, [], []
+
+        def __init__(self):
+            self.jobs, self.polls = [], 0
+
+        def submit(self, job):
+            self.jobs.append(job)
+
+        def poll(self):
+            self.polls += 1
+
+    v = Viewer(load_viewer_data(None))
+    worker = Recorder()
+    v.neural = NeuralView(None, None, None, worker=worker)
+    v.submit_neural()  # what Viewer.pre_new_frame does at a frame's start
+    assert len(worker.jobs) == 1 and worker.polls == 1
+    seen = []
+    v.draw_panel("Pose", lambda viewer: viewer.state.set_joint(16, (0.0, 0.0, -40.0)))
+    v.draw_panel("3D view", lambda viewer: seen.append(len(worker.jobs)))
+    assert seen == [2], "the edited pose was not submitted before the 3D view drew"
+    np.testing.assert_allclose(worker.jobs[-1].pose[16], np.radians([0.0, 0.0, -40.0]), atol=1e-6)
+    assert worker.polls == 1  # a level is not uploaded mid-frame
+    v.draw_panel("Vocabulary", lambda viewer: viewer.state.set_joint(17, (0.0, 0.0, 40.0)))
+    assert len(worker.jobs) == 2  # other panels' edits go out at the next frame's start

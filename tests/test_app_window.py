@@ -88,6 +88,10 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert rep["idling_while_busy"] == [True] and rep["idling_when_done"] is True
     assert rep["idling_while_playing"] == [False]
 
+    # the window's framebuffer is not multisampled (app.window.WINDOW_MSAA_SAMPLES: under
+    # llvmpipe a 4x buffer and its resolve cost ~20 ms of CPU a frame)
+    assert rep["window_sample_buffers"] == 0
+
     # the screenshot is the whole window and shows the body in the 3D view
     img = np.asarray(Image.open(shot).convert("RGB")).astype(np.float32)
     assert img.shape == (800, 1280, 3) and img.std() > 10
