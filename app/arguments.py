@@ -4,6 +4,7 @@ torch (the ``texvocab`` parser imports it to build its ``--help``)."""
 from __future__ import annotations
 
 import argparse
+import os
 
 from texvocab.errors import TexvocabError
 
@@ -15,6 +16,10 @@ NEURAL_NICE = 10
 #: where the neural render runs: a process of its own (app/render_process.py; the
 #: default) or a thread of the viewer's (app/worker.py), which shares the interpreter
 NEURAL_WORKERS = ("process", "thread")
+
+#: render processes that split each view (app/render_process.py), one per core up to 2:
+#: the UI idles while a level renders, so the second core is free then
+NEURAL_PROCESSES = min(2, os.cpu_count() or 1)
 
 #: smallest window the docked panels fit in; smallest offscreen image
 WINDOW_MIN = (320, 240)
@@ -58,6 +63,10 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"niceness added to the neural render (default {NEURAL_NICE}: the UI "
                         "first; 0 shows about 2.5x more previews while a slider is dragged, "
                         "at up to 12%% longer UI frames; bench/viewer_ui.py)")
+    p.add_argument("--neural-processes", type=int, default=NEURAL_PROCESSES, metavar="N",
+                   help=f"render processes that split each neural render (default "
+                        f"{NEURAL_PROCESSES}: one per core, at most 2); each holds a copy of "
+                        "the model. With --neural-worker thread: 1")
     p.add_argument("--neural-worker", choices=NEURAL_WORKERS, default=NEURAL_WORKERS[0],
                    help="where the neural render runs: a process of its own (default; the "
                         "UI's Python does not slow it) or a thread of the viewer's")

@@ -203,6 +203,8 @@ class BenchDriver(Driver):
         if v.neural is not None:
             self.report["resolution"] = self.resolution
             self.report["neural_threads"] = v.neural_threads
+            self.report["neural_processes"] = (v.neural_processes
+                                               if v.neural.worker.in_process is False else 0)
             self.report["neural_worker"] = v.neural_worker
             self.report["window_pid"] = os.getpid()
             self.report["blas_threads"] = blas_threads()

@@ -148,13 +148,15 @@ class NeuralView:
             self.texture = None
 
 
-def start_worker(kind: str, model, march, threads: int = 1, nice: int = 0, on_frame=None):
-    """The neural render's worker: "process" (a process of its own: the UI's Python does
-    not slow the render; about 3.5-4 s from start to its first level, torch imported and
-    the model unpickled there) or "thread" (in the viewer's interpreter)."""
+def start_worker(kind: str, model, march, threads: int = 1, nice: int = 0, on_frame=None,
+                 processes: int = 1):
+    """The neural render's worker: "process" (``processes`` processes of their own, which
+    split each view: the UI's Python does not slow the render; about 3.5-4 s from start
+    to the first level, torch imported and the model unpickled there) or "thread" (in
+    the viewer's interpreter)."""
     if kind == "process":
         return ProcessWorker(model_renderer, (model, march), threads=threads, nice=nice,
-                             on_frame=on_frame)
+                             on_frame=on_frame, processes=processes)
     return ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice,
                              on_frame=on_frame)
 

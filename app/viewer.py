@@ -48,6 +48,7 @@ class Viewer:
         self.options = SceneOptions()
         self.neural_threads, self.neural_nice = neural_threads, neural_nice
         self.neural_worker = neural_worker  # "process" or "thread" (app.arguments)
+        self.neural_processes = 1  # render processes splitting a view (run_viewer sets it)
         self._worker = None  # started by start_neural_worker, handed to the panel
         self.neural_resolution: int | None = None  # long side of the neural render (default 256)
         self.ctx = self.scene = self.thumbs = self.neural = None
@@ -93,7 +94,7 @@ class Viewer:
         if self._worker is None and self.data.model is not None:
             self._worker = start_worker(self.neural_worker, self.data.model,
                                         march_settings(self.data.settings), self.neural_threads,
-                                        self.neural_nice, ui_waker())
+                                        self.neural_nice, ui_waker(), self.neural_processes)
 
     def before_exit(self) -> None:
         if self.neural is not None:

@@ -27,9 +27,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from texvocab.pipeline import ShellGeometry, progressive_render
+from texvocab.pipeline import ShellGeometry, progressive_shard
 
-#: render(job, cancelled) -> iterator of (level, rgb (H_l, W_l, 3), seconds)
+#: render(job, cancelled) -> iterator of (level, rgb (H_l, W_l, 3), seconds[, owned]):
+#: ``owned`` (H_l, W_l) bool, the pixels a shard of the job (RenderJob.shard) rendered
+#: (absent: all of them)
 LevelRenderer = Callable[["RenderJob", Callable[[], bool]], Iterator[tuple[int, object, float]]]
 
 
@@ -65,6 +67,12 @@ class RenderJob:
     #: while a slider is dragged, each pose would otherwise be cancelled before anything
     #: of it reached the screen
     finish_preview: bool = True
+    #: this job is share ``shard`` of ``shards`` of the view (app.render_process splits a
+    #: view over processes; texvocab.render.progressive_shard)
+    shard: int = 0
+    shards: int = 1
+    #: a shard after the first starts once the first has sent this job's preview
+    after_preview: bool = False
 
 
 @dataclass(frozen=True)
@@ -83,7 +91,7 @@ class RenderFrame:
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
     once (the shell only when needed), then the levels (as
-    :func:`texvocab.pipeline.evaluate.render_view` does for one)."""
+    :func:`texvocab.pipeline.evaluate.render_view` does for one), of the job's shard."""
     def render(job: RenderJob, cancelled: Callable[[], bool]):
         m = job.march or march
         with torch.no_grad():
@@ -100,10 +108,10 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             # first, preview level; the shell marcher needs it at once
             shell = None if m.guide == "raster" else shell()
             field = model.for_pose(ctx)
-        yield from progressive_render(field, job.camera, ctx.vertices, model.body.faces, m,
-                                      levels=job.levels or levels, cancelled=cancelled,
-                                      background=job.background, shell=shell,
-                                      index=ctx.index)
+        yield from progressive_shard(field, job.camera, ctx.vertices, model.body.faces, m,
+                                     levels=job.levels or levels, cancelled=cancelled,
+                                     background=job.background, shell=shell,
+                                     index=ctx.index, shard=(job.shard, job.shards))
     return render
 
 
@@ -231,7 +239,7 @@ class ProgressiveWorker(DeliveredLevels):
         def cancelled() -> bool:
             return self._stop or (shown and self._stale(job))
         try:
-            for level, rgb, seconds in self._render(job, cancelled):
+            for level, rgb, seconds, *_ in self._render(job, cancelled):
                 image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32))
                 frame = RenderFrame(job.version, int(level), image, float(seconds),
                                     time.perf_counter() - start)

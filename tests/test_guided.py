@@ -202,3 +202,51 @@ def test_guided_progressive_levels_render_each_pixel_once(body):  # noqa: F811
     for lv, img, _ in levels:
         assert img.shape == (-(-cam.height // lv), -(-cam.width // lv), 3)
         assert torch.allclose(img, last[::lv, ::lv], atol=1e-5)
+
+
+def test_level_owners_split_each_level_once_and_give_the_preview_to_shard_0():
+    from texvocab.render import level_owners
+
+    h, w, levels = 37, 29, (8, 4, 2, 1)
+    seen = torch.zeros(h, w, dtype=torch.bool)
+    for i, (level, owner) in enumerate(zip(levels, level_owners(h, w, levels, 3))):
+        grid = torch.zeros(h, w, dtype=torch.bool)
+        grid[::level, ::level] = True
+        new = owner >= 0
+        assert torch.equal(new, grid & ~seen), level  # each pixel once, at its first level
+        counts = torch.bincount(owner[new].long(), minlength=3)
+        if i == 0:
+            assert counts.tolist() == [int(new.sum()), 0, 0]  # the preview is shard 0's
+        else:
+            assert counts.max() - counts.min() <= 1  # balanced
+        seen |= grid
+    assert seen.all()
+    # one level alone (a playback render) is split too
+    (owner,) = level_owners(h, w, (4,), 2)
+    assert set(torch.unique(owner).tolist()) == {-1, 0, 1}
+
+
+@pytest.mark.parametrize("guide", ["raster", "shell"])
+def test_shards_together_render_the_image_of_one_render(body, guide):  # noqa: F811
+    """Two shards of a view (the viewer's two render processes), merged by their owned
+    pixels, give the progressive render's levels."""
+    from texvocab.render import progressive_render, progressive_shard
+
+    s = dataclasses.replace(SHELL, guide=guide)
+    args = (body["field"], body["camera"], body["v"], body["f"], s)
+    whole = list(progressive_render(*args, shell=body["shell"]))
+    shards = [list(progressive_shard(*args, shell=body["shell"], shard=(k, 2)))
+              for k in range(2)]
+    for i, (level, image, _) in enumerate(whole):
+        merged = torch.zeros_like(image)
+        owned_by = torch.zeros(image.shape[:2], dtype=torch.int64)
+        for k in range(2):
+            lv, img, _, owned = shards[k][i]
+            assert lv == level and img.shape == image.shape
+            merged[owned] = img[owned]
+            owned_by += owned.long()
+        assert (owned_by == 1).all(), level  # every pixel of the level from one shard
+        assert torch.allclose(merged, image, atol=1e-5), level
+        if guide == "raster" and level < 8:  # later levels are split
+            assert 0 < int(shards[1][i][3].sum()) < owned_by.numel()
+    assert not shards[1][0][3].any()  # the preview is shard 0's

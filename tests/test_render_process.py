@@ -63,6 +63,39 @@ def blas_reporting_renderer():
     return render
 
 
+def shard_renderer():
+    """The levels of a 21x13 view as shard ``job.shard`` of ``job.shards`` renders them
+    (texvocab.render.level_owners): its pixels hold 1 + the shard, the others 0; shard 1
+    is slower, so the shards' levels arrive interleaved."""
+    from texvocab.render import level_owners
+
+    def render(job, cancelled):
+        marks = os.environ.get("TEXVOCAB_TEST_SHARDS")  # when each shard started, and
+        if marks:  # when the first shard's first level was done (after 0.3 s)
+            with open(os.path.join(marks, f"start-{job.version}-{job.shard}"), "w") as f:
+                f.write(repr(time.time()))
+        h, w, levels = job.camera.height, job.camera.width, (8, 4, 2, 1)
+        mine = np.zeros((h, w), bool)
+        image = np.zeros((h, w, 3), np.float32)
+        for level, owner in zip(levels, level_owners(h, w, levels, job.shards)):
+            if cancelled():
+                return
+            time.sleep(0.02 * job.shard)
+            if marks and job.shard == 0 and level == 8:
+                time.sleep(0.3)
+                with open(os.path.join(marks, f"preview-{job.version}"), "w") as f:
+                    f.write(repr(time.time()))
+            now = (owner == job.shard).numpy()
+            mine |= now
+            image[now] = 1 + job.shard
+            yield level, image[::level, ::level].copy(), 0.001, mine[::level, ::level].copy()
+    return render
+
+
+class Size:  # what a sharded job reads of its camera
+    height, width = 21, 13
+
+
 def failing_factory():
     raise RuntimeError("no model here")
 
@@ -96,6 +129,67 @@ def test_levels_arrive_from_another_process():
     finally:
         assert worker.stop()
     assert not worker.alive
+
+
+def test_two_processes_split_a_view_and_their_levels_are_merged():
+    from texvocab.render import level_owners
+
+    worker = ProcessWorker(shard_renderer, threads=1, nice=2, processes=2)
+    try:
+        assert len(set(worker.pids)) == 2 and os.getpid() not in worker.pids
+        for version in (1, 2):
+            worker.submit(RenderJob(version, np.zeros((24, 3)), np.zeros(3), camera=Size()))
+            wait(lambda: not worker.busy)
+        levels = (8, 4, 2, 1)
+        assert [lv for v, lv in worker.delivered if v == 2] == list(levels)  # each once
+        frame = worker.latest
+        assert frame.version == 2 and frame.level == 1 and frame.image.shape == (21, 13, 3)
+        # every pixel from the shard that owns it, at any level
+        expected = np.zeros((21, 13), np.float32)
+        for owner in level_owners(21, 13, levels, 2):
+            expected[owner.numpy() >= 0] = 1 + owner.numpy()[owner.numpy() >= 0]
+        np.testing.assert_array_equal(frame.image[..., 0], expected)
+        assert {1.0, 2.0} <= set(np.unique(frame.image).tolist())
+        assert worker.cpu_seconds() > 0
+        # the second shard runs nicer, so the first (the preview's) wins a shared core
+        assert os.getpriority(os.PRIO_PROCESS, worker.pids[1]) == \
+            os.getpriority(os.PRIO_PROCESS, worker.pids[0]) + 5
+    finally:
+        assert worker.stop()
+    assert not worker.alive
+
+
+def test_later_shards_wait_for_the_preview_and_skip_jobs_superseded_by_then(
+        tmp_path, monkeypatch):
+    """While a slider is dragged each pose is cancelled after its preview: the second
+    shard starts a job only once the first has sent that preview, so it neither slows
+    the preview nor works on poses already left. A playback job (no preview) starts on
+    both at once."""
+    monkeypatch.setenv("TEXVOCAB_TEST_SHARDS", str(tmp_path))  # the children inherit it
+
+    def mark(name):
+        return float((tmp_path / name).read_text())
+
+    worker = ProcessWorker(shard_renderer, processes=2)
+    try:
+        def submit(version, **kw):
+            worker.submit(RenderJob(version, np.zeros((24, 3)), np.zeros(3), camera=Size(),
+                                    **kw))
+        submit(1)
+        wait(lambda: not worker.busy)
+        assert mark("start-1-1") >= mark("preview-1")
+        submit(2)
+        wait(lambda: (tmp_path / "start-2-0").exists())
+        submit(3)  # version 2's preview is still 0.3 s away
+        wait(lambda: not worker.busy)
+        assert (tmp_path / "preview-2").exists() and not (tmp_path / "start-2-1").exists()
+        assert [lv for v, lv in worker.delivered if v == 3] == [8, 4, 2, 1]
+        assert mark("start-3-1") >= mark("preview-3")
+        submit(4, finish_preview=False)  # as a playback render: no preview to wait for
+        wait(lambda: not worker.busy)
+        assert mark("start-4-1") < mark("preview-4")
+    finally:
+        assert worker.stop()
 
 
 def test_the_render_process_keeps_numpy_blas_to_its_threads():

@@ -280,8 +280,9 @@ def test_model_renderer_uses_the_models_pose_context(levels):
 
     render = model_renderer(stub_model(field, calls), SETTINGS, levels)
     out = list(render(job(1, 32), lambda: False))
-    assert [lv for lv, _, _ in out] == list(levels)
+    assert [lv for lv, *_ in out] == list(levels)
     assert tuple(out[-1][1].shape) == (32, 32, 3)
+    assert all(bool(owned.all()) for *_, owned in out)  # one shard: every pixel is its own
     assert calls == {"context": 1, "for_pose": 1}
 
 

@@ -37,6 +37,7 @@ _API: dict[str, tuple[str, str]] = {
     "ShellGeometry": ("texvocab.render", "ShellGeometry"),
     "render_image": ("texvocab.render", "render_image"),
     "progressive_render": ("texvocab.render", "progressive_render"),
+    "progressive_shard": ("texvocab.render", "progressive_shard"),
     # runs
     "Settings": ("texvocab.pipeline.settings", "Settings"),
     "RENDER_PRESETS": ("texvocab.pipeline.settings", "PRESETS"),
