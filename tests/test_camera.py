@@ -38,6 +38,21 @@ def test_scaled_camera_keeps_pixel_centres(cam):
     assert (half.width, half.height) == (80, 60)
 
 
+@pytest.mark.parametrize("step", [3, 8])
+def test_every_nth_pixel_camera_has_the_same_rays(cam, step):
+    """Camera.every(step): pixel (x, y) is the full camera's pixel (step x, step y) (a
+    progressive render's preview level), ceil(W / step) x ceil(H / step) pixels."""
+    import torch
+
+    sub = cam.every(step)
+    assert (sub.width, sub.height) == (-(-160 // step), -(-120 // step))
+    o_full, d_full = cam.pixel_rays(dtype=torch.float64)
+    o_sub, d_sub = sub.pixel_rays(dtype=torch.float64)
+    pick = d_full.view(120, 160, 3)[::step, ::step].reshape(-1, 3)
+    np.testing.assert_allclose(d_sub.numpy(), pick.numpy(), atol=1e-12)
+    np.testing.assert_allclose(o_sub.numpy(), o_full[:len(o_sub)].numpy())
+
+
 def test_undistort_recovers_the_ideal_image(cam):
     cam.dist = np.array([-0.25, 0.08, 0.001, -0.002, 0.0])
     ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(float)

@@ -178,8 +178,10 @@ def test_every_guided_knob_changes_the_render(body, knob, value):  # noqa: F811
 
 
 def test_guided_progressive_levels_render_each_pixel_once(body):  # noqa: F811
-    """Levels are the full image's pixel grids [::L, ::L]; together they cost one full
-    render (same field evaluations) and the last level is that render."""
+    """Levels are the full image's pixel grids [::L, ::L]; after the preview they cost
+    one full render together (same field evaluations) and the last level is that render.
+    The preview (its own camera of every 8th pixel, fallback rays at their probe's
+    colour) differs at few pixels."""
     from texvocab.render import progressive_render
     from texvocab.render.guided import GuidedImage
 
@@ -201,7 +203,10 @@ def test_guided_progressive_levels_render_each_pixel_once(body):  # noqa: F811
     assert torch.allclose(last, full.rgb, atol=1e-5)
     for lv, img, _ in levels:
         assert img.shape == (-(-cam.height // lv), -(-cam.width // lv), 3)
-        assert torch.allclose(img, last[::lv, ::lv], atol=1e-5)
+        if lv < 8:
+            assert torch.allclose(img, last[::lv, ::lv], atol=1e-5)
+    off = (levels[0][1] - last[::8, ::8]).abs().max(-1).values > 1e-3
+    assert off.float().mean() <= 0.05
 
 
 def test_level_owners_split_each_level_once_and_give_the_preview_to_shard_0():
@@ -213,12 +218,12 @@ def test_level_owners_split_each_level_once_and_give_the_preview_to_shard_0():
         grid = torch.zeros(h, w, dtype=torch.bool)
         grid[::level, ::level] = True
         new = owner >= 0
-        assert torch.equal(new, grid & ~seen), level  # each pixel once, at its first level
         counts = torch.bincount(owner[new].long(), minlength=3)
-        if i == 0:
-            assert counts.tolist() == [int(new.sum()), 0, 0]  # the preview is shard 0's
-        else:
-            assert counts.max() - counts.min() <= 1  # balanced
+        if i == 0:  # the preview is shard 0's, and its pixels are rendered again
+            assert torch.equal(new, grid) and counts.tolist() == [int(new.sum()), 0, 0]
+            continue
+        assert torch.equal(new, grid & ~seen), level  # each pixel once, at its first level
+        assert counts.max() - counts.min() <= 1  # balanced
         seen |= grid
     assert seen.all()
     # one level alone (a playback render) is split too

@@ -62,6 +62,15 @@ class Camera:
         return Camera(K, self.R, self.t, round(self.width * factor), round(self.height * factor),
                       self.dist, self.name)
 
+    def every(self, step: int) -> "Camera":
+        """The camera of every ``step``-th pixel of this one in both directions: its pixel
+        (x, y) is pixel (step·x, step·y) here, the same ray (a progressive render's
+        coarse level, ``image[::step, ::step]``); size ceil(W / step) x ceil(H / step)."""
+        K = self.K.copy()
+        K[:2] /= step
+        return Camera(K, self.R, self.t, -(-self.width // step), -(-self.height // step),
+                      self.dist, self.name)
+
     def project(self, points) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (N, 2) and depths (N,) of world points (N, 3); ignores distortion
         (images are undistorted on load)."""

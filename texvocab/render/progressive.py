@@ -2,9 +2,11 @@
 levels first, so a viewer can show something at once and refine while the pose is still.
 
 With the surface-guided marcher (``guide="raster"``) a level is every ``level``-th pixel
-of the full image in both directions, and each level renders only the pixels the coarser
-ones have not: the levels together cost one full-resolution render (its plan, the
-rasterisation, is made once), and the last level *is* that render. With the shell
+of the full image in both directions. The first of several levels is a preview with a
+plan of its own (see :func:`_guided_levels`); after it, each level renders only the
+pixels the coarser ones have not: those levels together cost one full-resolution render
+(its plan, the rasterisation, is made once), and the last level *is* that render. With
+the shell
 marcher each level renders the camera scaled by 1 / level. The per-pose shell geometry
 is built once and shared by all levels; ``cancelled()`` is checked between levels and
 between ray chunks, so a newer pose aborts stale work.
@@ -36,8 +38,8 @@ def progressive_render(field: Field, camera, vertices, faces,
                        index=None) -> Iterator[tuple[int, torch.Tensor, float]]:
     """Yield ``(level, image (H_l, W_l, 3), seconds)`` for each downscale ``level``
     without autograd: with ``settings.guide == "raster"`` the full image's pixels
-    [::level, ::level] (H_l = ceil(H / level)), rendered once each across the levels;
-    otherwise a render of ``camera.scaled(1 / level)``.
+    [::level, ::level] (H_l = ceil(H / level)), rendered once each across the levels
+    after the preview; otherwise a render of ``camera.scaled(1 / level)``.
 
     ``seconds`` is the wall time of that level (the first level includes building the
     shell geometry unless ``shell`` is given). Stops, without yielding the level in
@@ -94,47 +96,75 @@ def progressive_shard(field: Field, camera, vertices, faces,
 def level_owners(height: int, width: int, levels=(8, 4, 2, 1), shards: int = 1
                  ) -> Iterator[torch.Tensor]:
     """For each of the guided marcher's ``levels``: (H, W) int8, the shard that renders
-    each pixel first rendered at that level (-1 elsewhere). The first of several levels
-    (the preview) is shard 0's; later levels' new pixels go round the shards in
-    row-major order."""
+    each pixel of the full image at that level (-1: none). The first of several levels
+    is a preview, shard 0's alone; its pixels are rendered again with the next level.
+    Later levels render the pixels of their grid not rendered before, round the shards
+    in row-major order."""
     done = torch.zeros(height, width, dtype=torch.bool)
     for i, level in enumerate(levels):
         grid = torch.zeros_like(done)
         grid[::level, ::level] = True
-        new = (grid & ~done).view(-1).nonzero().squeeze(1)
         owner = torch.full((height * width,), -1, dtype=torch.int8)
-        preview = i == 0 and len(levels) > 1
-        owner[new] = 0 if preview else (torch.arange(len(new)) % shards).to(torch.int8)
-        done |= grid
+        if i == 0 and len(levels) > 1:
+            owner[grid.view(-1)] = 0
+        else:
+            new = (grid & ~done).view(-1).nonzero().squeeze(1)
+            owner[new] = (torch.arange(len(new)) % shards).to(torch.int8)
+            done |= grid
         yield owner.view(height, width)
 
 
 def _guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, cancelled,
                    background, shell, index=None, shard=(0, 1)
                    ) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
-    """The guided marcher's levels. The coarsest level is a preview: its rays that fall
-    back to the shell marcher (silhouette fringes, grazing hits) show their probe's colour
-    and are marched with the next level, so the first image needs no shell geometry
-    (``shell`` may be a function that builds it)."""
+    """The guided marcher's levels. The first of several levels is a preview of its own:
+    the camera of every ``level``-th pixel (``Camera.every``: the same rays as
+    ``image[::level, ::level]``) with its own small plan, and rays that would fall back
+    to the shell marcher (silhouette fringes, grazing hits) shown with their probe's
+    colour. So the first image needs neither the full image's plan nor any shell
+    geometry (``shell`` may be a function that builds it); the next level renders those
+    pixels again with the rest (1/64 more rays at levels 8, 4, 2, 1)."""
     from texvocab.render.guided import GuidedImage  # it builds on the marcher
 
     start = time.perf_counter()
-    with torch.no_grad():
-        image = GuidedImage(field, camera, vertices, faces, s, background, shell, index)
     k, n = shard
-    mine = torch.zeros(camera.height, camera.width, dtype=torch.bool)  # rendered by this shard
-    owners = level_owners(camera.height, camera.width, levels, n)
-    for i, (level, owner) in enumerate(zip(levels, owners)):
+    H, W = camera.height, camera.width
+    mine = torch.zeros(H, W, dtype=torch.bool)  # rendered by this shard
+    image = None  # the full image's, built after the preview
+    for i, (level, owner) in enumerate(zip(levels, level_owners(H, W, levels, n))):
         if cancelled():
             return
-        todo = owner == k
         try:
-            with torch.no_grad():  # the first of several levels is a preview (no fallback)
-                if todo.any() or image.deferred.any():
-                    image.render(todo, cancelled, defer_fallback=i == 0 and len(levels) > 1)
+            with torch.no_grad():
+                if i == 0 and len(levels) > 1:
+                    rgb = _preview(field, camera.every(level), vertices, faces, s, background,
+                                   shell, index, cancelled, k == 0)
+                    yield level, rgb, time.perf_counter() - start, owner[::level, ::level] == k
+                    start = time.perf_counter()
+                    continue
+                if image is None:
+                    image = GuidedImage(field, camera, vertices, faces, s, background, shell,
+                                        index)
+                todo = owner == k
+                if todo.any():
+                    image.render(todo, cancelled)
         except RenderCancelled:
             return
         mine |= todo
-        rgb = image.rgb.view(camera.height, camera.width, 3)[::level, ::level].clone()
+        rgb = image.rgb.view(H, W, 3)[::level, ::level].clone()
         yield level, rgb, time.perf_counter() - start, mine[::level, ::level].clone()
         start = time.perf_counter()
+
+
+def _preview(field, camera, vertices, faces, s, background, shell, index, cancelled,
+             render: bool) -> torch.Tensor:
+    """The image (H, W, 3) of ``camera`` with fallback rays left at their probe's colour
+    (the background when not ``render``: another shard's preview)."""
+    from texvocab.render.guided import GuidedImage
+
+    if not render:
+        return torch.as_tensor(background, dtype=torch.float32).expand(
+            camera.height, camera.width, 3).clone()
+    small = GuidedImage(field, camera, vertices, faces, s, background, shell, index)
+    small.render(None, cancelled, defer_fallback=True)
+    return small.rgb.view(camera.height, camera.width, 3).clone()
