@@ -1,6 +1,7 @@
-"""The viewer's two render workers without a window: how much a UI thread's Python work
+"""The viewer's render workers without a window: how much a UI thread's Python work
 slows the render when both share one interpreter (the thread worker, app/worker.py)
-against a render process of its own (app/render_process.py, the viewer's default).
+against a render process of its own (app/render_process.py), and the same view split
+over two render processes (``process x2``, the viewer's default on 2 cores).
 
 The "UI" here is a thread in this process that holds the GIL in pure Python for
 ``--ui-ms`` (default 25: the UI thread's CPU per frame while a slider is dragged,
@@ -12,9 +13,10 @@ rendered coarse to fine, interleaved: each round runs both workers without and w
 UI load. Prints a table (median first level and full level, ratio to the same worker
 without load) and a last line
 
-    summary: thread_slowdown=… process_slowdown=…
+    summary: thread_slowdown=… process_slowdown=… process_x2_slowdown=… split_speedup=…
 
-(full-level time with the UI load over without, per worker).
+(full-level time with the UI load over without, per worker; ``split_speedup``: one
+process's full level over two processes', without load).
 
     .venv/bin/python bench/render_worker.py RUN/checkpoint.pt [--rounds 4]
 """
@@ -77,7 +79,9 @@ def main() -> int:
         sys.exit(f"error: {args.checkpoint}: not a checkpoint")
     state, march = ViewerState(data), march_settings(data.settings)
     workers = {"thread": ProgressiveWorker(model_renderer(data.model, march), threads=1),
-               "process": ProcessWorker(model_renderer, (data.model, march), threads=1)}
+               "process": ProcessWorker(model_renderer, (data.model, march), threads=1),
+               "process x2": ProcessWorker(model_renderer, (data.model, march), threads=1,
+                                           processes=2)}
     w, h = round(args.res * 132 / 256), args.res
     version = 0
 
@@ -121,8 +125,11 @@ def main() -> int:
         slowdown[name] = ratio if load == "ui" else slowdown.get(name, 1.0)
         print(f"| {name} | {load} | {len(a)} | {1000 * np.median(a[:, 0]):.0f} | "
               f"{np.median(a[:, 1]):.3f} | {ratio:.2f} |")
+    full = {name: np.median(np.asarray(times[(name, "none")])[:, 1]) for name in workers}
     print(f"\nsummary: thread_slowdown={slowdown['thread']:.2f} "
-          f"process_slowdown={slowdown['process']:.2f}")
+          f"process_slowdown={slowdown['process']:.2f} "
+          f"process_x2_slowdown={slowdown['process x2']:.2f} "
+          f"split_speedup={full['process'] / full['process x2']:.2f}")
     return 0
 
 

@@ -144,19 +144,22 @@ def test_viewer_without_display_says_what_to_do(cmd):
     assert "texvocab shot" in lines[0] and "xvfb-run" in lines[0]
 
 
-def test_render_worker_bench_runs_both_workers(tiny_checkpoint):
-    """bench/render_worker.py, short: both workers render with and without the UI-like
-    load, and the summary line gives each one's slowdown."""
+def test_render_worker_bench_runs_all_workers(tiny_checkpoint):
+    """bench/render_worker.py, short: the thread, one process and two processes render
+    with and without the UI-like load, and the summary line gives each one's slowdown
+    and what the split gains."""
     proc = subprocess.run([PYTHON, "bench/render_worker.py", str(tiny_checkpoint), "--rounds",
                            "1", "--res", "32"], cwd=ROOT, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rows = [line for line in proc.stdout.splitlines() if line.startswith("| thread")
             or line.startswith("| process")]
-    assert len(rows) == 4 and all(" | 2 | " in row for row in rows), proc.stdout
+    assert len(rows) == 6 and all(" | 2 | " in row for row in rows), proc.stdout
+    assert sum(row.startswith("| process x2 |") for row in rows) == 2
     last = proc.stdout.strip().splitlines()[-1]
     values = dict(kv.split("=") for kv in last.removeprefix("summary: ").split())
-    assert set(values) == {"thread_slowdown", "process_slowdown"}
+    assert set(values) == {"thread_slowdown", "process_slowdown", "process_x2_slowdown",
+                           "split_speedup"}
     assert all(float(v) > 0 for v in values.values())
 
 
