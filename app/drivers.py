@@ -224,7 +224,7 @@ class Driver:
         v = self.viewer
         self.report["view_rect"] = list(v.view_rect)
         self.report["window"] = list(v.size)
-        self.report["window_sample_buffers"] = getattr(v, "window_sample_buffers", None)
+        self.report["window_sample_buffers"] = v.window_sample_buffers
         if v.neural is not None:
             self.report["worker_stopped"] = not v.neural.worker.alive
         if screenshot_path and shot is not None and shot.size:

@@ -30,9 +30,10 @@ The same protocol as the thread worker, over two pipes and one shared integer:
   shard 0's alone, later levels' pixels go round the shards) and sends the pixels it
   owns with each level; the listener merges them and delivers a level once every
   shard has sent it. Shards after the first run at ``SHARD_NICE`` more niceness, so
-  while the UI holds one core the preview's shard gets most of the other. Measured
-  outside the window (1 torch thread each, 256x132): a full render 0.62 s in one
-  process, 0.44 s in one process with 2 threads, 0.33-0.39 s split over 2 processes.
+  while the UI holds one core the preview's shard gets most of the other; and they
+  start a job only once its preview is sent (``after_preview``). bench/render_worker.py
+  (no window, 1 torch thread per process, 256x132): a full level in 0.577 s in one
+  process, 0.412 s in two.
 """
 from __future__ import annotations
 

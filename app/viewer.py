@@ -52,6 +52,7 @@ class Viewer:
         self._worker = None  # started by start_neural_worker, handed to the panel
         self.neural_resolution: int | None = None  # long side of the neural render (default 256)
         self.ctx = self.scene = self.thumbs = self.neural = None
+        self.window_sample_buffers: int | None = None  # read from GL in post_init
         self.preset = ""
         self.sequence = None
         self.sequence_path, self.sequence_error = "", ""
