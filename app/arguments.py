@@ -68,5 +68,5 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
                         f"{NEURAL_PROCESSES}: one per core, at most 2); each holds a copy of "
                         "the model. With --neural-worker thread: 1")
     p.add_argument("--neural-worker", choices=NEURAL_WORKERS, default=NEURAL_WORKERS[0],
-                   help="where the neural render runs: a process of its own (default; the "
-                        "UI's Python does not slow it) or a thread of the viewer's")
+                   help="where the neural render runs: processes of their own (default; the "
+                        "UI's Python does not slow them) or a thread of the viewer's")

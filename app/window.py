@@ -131,7 +131,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
         viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice,
                         neural_worker)
         viewer.smpl = smpl
-        viewer.neural_processes = max(1, int(neural_processes))
+        viewer.neural_processes = int(neural_processes)
         viewer.start_neural_worker()  # a render process starts up meanwhile
         if data.vocab is not None and data.textures is not None:
             print("preparing the vocabulary texture ...", flush=True)
@@ -160,6 +160,8 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Run the viewer from :func:`app.arguments.add_view_arguments`' namespace."""
+    if args.neural_processes < 1:
+        raise TexvocabError(f"--neural-processes {args.neural_processes}: expected at least 1")
     return run_viewer(args.source, args.smpl, parse_size(args.size, WINDOW_MIN), args.script,
                       args.report, args.screenshot, args.neural_resolution,
                       args.neural_threads, args.poses, args.neural_nice, args.capture,

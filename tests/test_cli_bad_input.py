@@ -224,6 +224,8 @@ CASES = [
      "refused by the weights-only reader"),
     ("eval-missing-checkpoint", ["eval", "{base}/nope.pt", CAP], "nope.pt"),
     ("eval-missing-capture", ["eval", RUN + "/checkpoint.pt", "{base}/nope_cap"], "nope_cap"),
+    ("view-neural-processes-0", ["view", RUN + "/checkpoint.pt", "--neural-processes", "0"],
+     "--neural-processes"),
     ("vocab-k-0", ["vocab", CAP, "--pose", "frame:0", "-k", "0"], "k"),
     ("vocab-keys-0", ["vocab", CAP, "--pose", "frame:0", "--keys", "0"], "keys"),
     ("vocab-frame-abc", ["vocab", CAP, "--pose", "frame:abc"], "frame:abc"),
