@@ -91,7 +91,11 @@ class RenderFrame:
 def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
     """A :data:`LevelRenderer` for a trained avatar: per-pose context and shell built
     once (the shell only when needed), then the levels (as
-    :func:`texvocab.pipeline.evaluate.render_view` does for one), of the job's shard."""
+    :func:`texvocab.pipeline.evaluate.render_view` does for one), of the job's shard.
+    Every key's feature maps are encoded up front (``PoseFeature.warm_feature_maps``)."""
+    with torch.no_grad():
+        model.pose_feature.warm_feature_maps()
+
     def render(job: RenderJob, cancelled: Callable[[], bool]):
         m = job.march or march
         with torch.no_grad():

@@ -196,3 +196,34 @@ def test_none_strategy_conditions_the_field_on_the_pose_only(setup, body, strate
         outs.append(rgb)
     assert torch.equal(outs[0], outs[1]) == (strategy == "none")
     assert f"strategy={strategy}" in vocab.format_query(poses[3])
+
+
+def test_warm_feature_maps_encodes_every_key_once_up_front(body):
+    """PoseFeature.warm_feature_maps: a frozen encoder's cache holds every key frame's
+    maps afterwards, so no pose's context runs the encoder; the maps are the ones a
+    context would have encoded; a trainable encoder is left alone."""
+    class Counting(PassThrough):
+        calls = 0
+
+        def forward(self, x):
+            Counting.calls += len(x)
+            return x
+
+    vocab = Vocabulary.build(np.random.default_rng(5).normal(0, 0.3, (12, 24, 3)),
+                             num_keys=4, k=2)
+    textures = torch.rand(12, 3, 16, 16)
+    keys = {int(f) for frames in vocab.key_frames for f in frames}
+    warm = PoseFeature(body, vocab, textures, Counting())
+    assert warm.warm_feature_maps(batch=3) == len(keys) == Counting.calls
+    assert warm.warm_feature_maps() == 0  # nothing left to encode
+    cold = PoseFeature(body, vocab, textures, PassThrough())
+    for seed in range(4):
+        pose = np.random.default_rng(seed).normal(0, 0.3, (24, 3))
+        a, b = warm.context(pose), cold.context(pose)
+        assert torch.equal(a.frames, b.frames)
+        fa, fb, n = a.features, b.features, a.features.height * a.features.width
+        for ra, rb in zip(fa.rows.tolist(), fb.rows.tolist(), strict=True):
+            assert torch.equal(fa.table[ra:ra + n], fb.table[rb:rb + n])
+    assert Counting.calls == len(keys)  # no context encoded anything
+    trainable = PoseFeature(body, vocab, textures, build_encoder("small"))
+    assert trainable.warm_feature_maps() == 0

@@ -258,6 +258,12 @@ def stub_model(make_field, calls=None):
 
         class pose_feature:
             @staticmethod
+            def warm_feature_maps():
+                if calls is not None:
+                    calls["warm"] = calls.get("warm", 0) + 1
+                return 0
+
+            @staticmethod
             def context(pose, trans):
                 if calls is not None:
                     calls["context"] += 1
@@ -283,7 +289,7 @@ def test_model_renderer_uses_the_models_pose_context(levels):
     assert [lv for lv, *_ in out] == list(levels)
     assert tuple(out[-1][1].shape) == (32, 32, 3)
     assert all(bool(owned.all()) for *_, owned in out)  # one shard: every pixel is its own
-    assert calls == {"context": 1, "for_pose": 1}
+    assert calls == {"context": 1, "for_pose": 1, "warm": 1}  # the key maps: once, up front
 
 
 def test_worker_thread_runs_at_the_requested_niceness():
