@@ -73,7 +73,8 @@ def progressive_shard(field: Field, camera, vertices, faces,
         return
     if k > 0:  # the shell marcher renders scaled cameras: not split
         for level in levels:
-            h, w = camera.scaled(1.0 / level).height, camera.scaled(1.0 / level).width
+            scaled = camera.scaled(1.0 / level)
+            h, w = scaled.height, scaled.width
             yield level, torch.zeros(h, w, 3), 0.0, torch.zeros(h, w, dtype=torch.bool)
         return
     start = time.perf_counter()
@@ -134,25 +135,25 @@ def _guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, can
     for i, (level, owner) in enumerate(zip(levels, level_owners(H, W, levels, n))):
         if cancelled():
             return
+        preview = i == 0 and len(levels) > 1
         try:
-            with torch.no_grad():
-                if i == 0 and len(levels) > 1:
+            with torch.no_grad():  # not held across the yield: the caller keeps autograd
+                if preview:
                     rgb = _preview(field, camera.every(level), vertices, faces, s, background,
                                    shell, index, cancelled, k == 0)
-                    yield level, rgb, time.perf_counter() - start, owner[::level, ::level] == k
-                    start = time.perf_counter()
-                    continue
-                if image is None:
-                    image = GuidedImage(field, camera, vertices, faces, s, background, shell,
-                                        index)
-                todo = owner == k
-                if todo.any():
-                    image.render(todo, cancelled)
+                else:
+                    if image is None:
+                        image = GuidedImage(field, camera, vertices, faces, s, background,
+                                            shell, index)
+                    todo = owner == k
+                    if todo.any():
+                        image.render(todo, cancelled)
+                    mine |= todo
+                    rgb = image.rgb.view(H, W, 3)[::level, ::level].clone()
         except RenderCancelled:
             return
-        mine |= todo
-        rgb = image.rgb.view(H, W, 3)[::level, ::level].clone()
-        yield level, rgb, time.perf_counter() - start, mine[::level, ::level].clone()
+        owned = owner[::level, ::level] == k if preview else mine[::level, ::level].clone()
+        yield level, rgb, time.perf_counter() - start, owned
         start = time.perf_counter()
 
 
