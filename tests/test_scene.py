@@ -226,3 +226,38 @@ def test_missing_osmesa_is_one_clear_error(monkeypatch):
     with pytest.raises(TexvocabError, match="libOSMesa not found .*libOSMesa-not-here.so.99.*"
                                             "install the Debian package libosmesa6"):
         gh.create_headless_context()
+
+
+def test_back_faces_are_culled_without_changing_the_image(ctx, body):
+    """The closed body's back faces are culled (the winding GL keeps is the body's own):
+    seen from outside, the image is pixel for pixel the one drawn with both sides, for
+    several poses, cameras and modes; from inside the hips the view sees out."""
+    data = ViewerData(body)
+    state = ViewerState(data)
+    renderer = SceneRenderer(ctx, data)
+    assert renderer.front_face == "ccw"
+    views = (("walk", 30.0, SceneOptions()),
+             ("squat", 160.0, SceneOptions(part_colors=True)),
+             ("kick", -70.0, SceneOptions(wireframe=True, skeleton=True)))
+
+    def both_ways(cam, options):
+        images = []
+        for front in ("ccw", None):
+            renderer.front_face = front
+            renderer.render(state, cam, (W, H), options)
+            images.append((renderer.read((W, H)), gl_mask(renderer)))
+        renderer.front_face = "ccw"
+        return images
+    for preset, yaw, options in views:
+        state.reset_all()
+        state.apply_preset(preset)
+        cam = OrbitCamera(target=state.posed()[1][0], yaw=yaw, pitch=10).to_texvocab_camera(W, H)
+        (culled, _), (drawn, _) = both_ways(cam, options)
+        np.testing.assert_array_equal(culled, drawn)
+    state.reset_all()
+    pelvis = state.posed()[1][0]
+    inside = OrbitCamera(target=pelvis, yaw=0.0, pitch=0.0, distance=0.04)
+    (_, culled), (_, drawn) = both_ways(inside.to_texvocab_camera(W, H), SceneOptions())
+    print(f"inside the hips: body covers {drawn.mean():.3f} drawn both ways, "
+          f"{culled.mean():.3f} culled")
+    assert drawn.mean() > 0.99 and culled.mean() < 0.5

@@ -13,6 +13,7 @@ from texvocab.body.poses import preset
 from texvocab.geometry.surface import (
     SurfaceIndex,
     closest_on_triangles,
+    outward_orientation,
     project_brute_force,
     project_to_surface,
 )
@@ -271,3 +272,35 @@ def test_torch_in_torch_out_and_index_reuse(posed):
         project_to_surface(pts, verts, faces[:10], index=index)
     empty = index.project(np.zeros((0, 3)))
     assert empty.face.shape == (0,) and empty.closest.shape == (0, 3)
+
+
+def test_a_borrowed_layout_gives_the_same_answers_and_relayout_the_own_split(body, posed):
+    """An index built on another pose's slot layout (a T-pose's for the walk) answers as
+    one built fresh (distances, closest points and signs; faces up to ties between
+    equally near faces); relayout() swaps in exactly the fresh build's split."""
+    verts, faces, fresh = posed
+    rest = SurfaceIndex(body.v_template.double().numpy(), faces)
+    lent = SurfaceIndex(verts, faces, like=rest)
+    assert lent.borrowed and not fresh.borrowed
+    assert not np.array_equal(lent._slot_face, fresh._slot_face)  # a different layout
+    rng = np.random.default_rng(3)
+    pts = verts[rng.integers(0, len(verts), 3000)] + rng.normal(0, 0.03, (3000, 3))
+    a, b = fresh.project(pts), lent.project(pts)
+    np.testing.assert_allclose(b.distance, a.distance, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b.closest, a.closest, rtol=0, atol=1e-12)
+    assert (a.face == b.face).mean() > 0.8  # the rest are ties (shared vertices, edges)
+    lent.relayout()
+    assert not lent.borrowed and np.array_equal(lent._slot_face, fresh._slot_face)
+    np.testing.assert_array_equal(lent.project(pts).face, a.face)
+    other = SurfaceIndex(TET, TET_FACES, like=rest)  # other faces: nothing to borrow
+    assert not other.borrowed
+
+
+def test_outward_orientation_of_closed_and_open_meshes(body):
+    """+1 for the outward-wound tetrahedron and body, -1 wound inwards, 0 when open."""
+    assert outward_orientation(TET, TET_FACES) == 1
+    assert outward_orientation(TET, TET_FACES[:, ::-1]) == -1
+    assert outward_orientation(TET, TET_FACES[:3]) == 0
+    faces = body.faces.numpy()
+    assert outward_orientation(body.v_template, faces) == 1
+    assert outward_orientation(body.v_template, faces[:, ::-1]) == -1

@@ -244,13 +244,20 @@ def test_same_version_is_not_rendered_twice():
     assert calls == [7]
 
 
-def stub_model(make_field, calls=None):
+def stub_model(make_field, calls=None, contexts=None):
     """A stand-in avatar with the attributes model_renderer uses: the sphere mesh as the
-    posed body, ``make_field()`` as its field; counts context() calls in ``calls``."""
+    posed body (with its surface index, on a lent layout as the real context builds it),
+    ``make_field()`` as its field; counts context() calls in ``calls``, keeps each
+    context in ``contexts``."""
+    from texvocab.geometry.surface import SurfaceIndex
+
     v, f = sphere_mesh()
 
     class Ctx:
-        vertices, index = v, None
+        vertices = v
+
+        def __init__(self, like):
+            self.like, self.index = like, SurfaceIndex(v.numpy(), f.numpy(), like=like)
 
     class Model:
         class body:
@@ -264,10 +271,13 @@ def stub_model(make_field, calls=None):
                 return 0
 
             @staticmethod
-            def context(pose, trans):
+            def context(pose, trans, like=None):
                 if calls is not None:
                     calls["context"] += 1
-                return Ctx()
+                ctx = Ctx(like)
+                if contexts is not None:
+                    contexts.append(ctx)
+                return ctx
 
         @staticmethod
         def for_pose(ctx):
@@ -290,6 +300,38 @@ def test_model_renderer_uses_the_models_pose_context(levels):
     assert tuple(out[-1][1].shape) == (32, 32, 3)
     assert all(bool(owned.all()) for *_, owned in out)  # one shard: every pixel is its own
     assert calls == {"context": 1, "for_pose": 1, "warm": 1}  # the key maps: once, up front
+
+
+def test_model_renderer_lends_the_last_layout_to_the_preview_then_splits_anew():
+    """A job's surface index borrows the previous job's slot layout (a cheaper first
+    level) and gets its own split before a finer level is rendered; a one-level job
+    keeps the borrowed one, and a later shard (whose first level is not the preview)
+    never borrows."""
+    from dataclasses import replace
+
+    contexts, borrowed_at = [], []
+    sphere = SphereField(radius=0.3)
+
+    def field(points, dirs):
+        borrowed_at.append((contexts[-1].index.borrowed, points.shape[0]))
+        return sphere(points, dirs)
+
+    render = model_renderer(stub_model(lambda: field, contexts=contexts), SETTINGS, (4, 1))
+    list(render(job(1, 32), lambda: False))
+    assert contexts[0].like is None and not contexts[0].index.borrowed
+    borrowed_at.clear()
+    levels = render(job(2, 32), lambda: False)
+    next(levels)  # the first level, on the lent layout
+    assert contexts[1].like is contexts[0].index
+    assert borrowed_at and all(b for b, _ in borrowed_at)
+    borrowed_at.clear()
+    list(levels)
+    assert borrowed_at and not any(b for b, _ in borrowed_at)  # the full level: own split
+    assert not contexts[1].index.borrowed
+    list(render(replace(job(3, 32), levels=(4,)), lambda: False))
+    assert contexts[2].like is contexts[1].index and contexts[2].index.borrowed
+    list(render(replace(job(4, 32), shard=1, shards=2), lambda: False))
+    assert contexts[3].like is None
 
 
 def test_worker_thread_runs_at_the_requested_niceness():

@@ -85,6 +85,19 @@ def _edge_topology(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, in
     return _TOPOLOGY[key]
 
 
+def outward_orientation(vertices, faces) -> int:
+    """+1 when the mesh (V, 3), (F, 3) is closed and consistently wound with its faces
+    counter-clockwise seen from outside (positive signed volume), -1 when closed and
+    wound the other way, 0 when it is open or inconsistent (then neither side of a face
+    may be assumed hidden)."""
+    v, f = _numpy(vertices, np.float64), _numpy(faces, np.int64).reshape(-1, 3)
+    if not _edge_topology(f, len(v))[2]:
+        return 0
+    a, b, c = (v[f[:, k]] - v.mean(0) for k in range(3))
+    volume = float(np.einsum("ij,ij->", a, np.cross(b, c)))
+    return 0 if volume == 0 else (1 if volume > 0 else -1)
+
+
 def _default_workers() -> int:
     """Query threads: torch's intra-op thread count, capped by the usable CPUs."""
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
@@ -185,9 +198,16 @@ class SurfaceIndex:
         vertices: (V, 3) posed vertices (metres). faces: (F, 3) vertex indices.
         workers: threads for queries (default: torch's intra-op thread count, at most the
             CPUs this process may use, so a caller that limits torch limits this too).
+        like: an index of another pose of the same faces whose slot layout to reuse
+            instead of splitting anew (:attr:`borrowed`; :meth:`relayout` splits later).
+            Every answer stays exact: the boxes are recomputed from this pose's faces, so
+            each still bounds the faces below it; only the search slows as the poses
+            differ (a T-pose's layout for a squat: up to 1.3x per query). Saves the split,
+            about half of a build (3 of 6 ms for the 13.8k-face body).
     """
 
-    def __init__(self, vertices, faces, workers: int | None = None):
+    def __init__(self, vertices, faces, workers: int | None = None,
+                 like: SurfaceIndex | None = None):
         self.vertices = _numpy(vertices, np.float64)
         self.faces = _numpy(faces, np.int64).reshape(-1, 3)
         if not len(self.faces):
@@ -197,14 +217,28 @@ class SurfaceIndex:
             raise ValueError(f"faces index vertices 0..{len(self.vertices) - 1}, got "
                              f"{self.faces.min()}..{self.faces.max()}")
         self.workers = workers  # None: decided per query (_default_workers)
-        self._slot_face = _slot_layout(face_centroids(self.vertices, self.faces))
-        self._table, self._box_lo, self._box_hi, self._box_offset = slot_tables(
-            self.vertices, self.faces, self._slot_face, _DEGENERATE, _FAN)
+        #: True while the slot layout is another pose's (``like``), until :meth:`relayout`
+        self.borrowed = like is not None and np.array_equal(like.faces, self.faces)
+        self._lay_out(like._slot_face if self.borrowed else None)
         # pseudo-normals of faces, edges (edge k of a face joins corners k and k + 1; its
         # pseudo-normal sums the faces on it) and vertices; closedness from the topology
         inverse, edges, self.closed = _edge_topology(self.faces, len(self.vertices))
         (self._face_normal, self._vertex_normal, self._edge_normal,
          self._orientation) = pseudo_normals(self.vertices, self.faces, inverse, edges)
+
+    def _lay_out(self, slot_face: np.ndarray | None) -> None:
+        """Slot layout (this pose's median split when None) and the tables over it."""
+        self._slot_face = (_slot_layout(face_centroids(self.vertices, self.faces))
+                           if slot_face is None else slot_face)
+        self._table, self._box_lo, self._box_hi, self._box_offset = slot_tables(
+            self.vertices, self.faces, self._slot_face, _DEGENERATE, _FAN)
+
+    def relayout(self) -> None:
+        """Replace a borrowed slot layout by this pose's own split (no-op otherwise):
+        the same answers, the search as fast as a fresh build's. Not during a query."""
+        if self.borrowed:
+            self._lay_out(None)
+            self.borrowed = False
 
     def project(self, points, vt=None, ft=None, weights=None,
                 max_distance: float | None = None) -> SurfaceProjection:

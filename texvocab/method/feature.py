@@ -120,14 +120,17 @@ class PoseFeature(nn.Module):
             self.feature_maps(torch.as_tensor(frames[i:i + batch], dtype=torch.long))
         return len(frames)
 
-    def context(self, pose, trans=None) -> PoseContext:
-        """Per-pose work: posed body, its surface index, the vocabulary query, features."""
+    def context(self, pose, trans=None, like=None) -> PoseContext:
+        """Per-pose work: posed body, its surface index, the vocabulary query, features.
+        ``like``: a surface index of another pose whose slot layout the new index borrows
+        (:class:`~texvocab.geometry.surface.SurfaceIndex`; same answers, a cheaper build)."""
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float32).reshape(24, 3)
         trans = torch.zeros(3) if trans is None else torch.as_tensor(np.asarray(trans),
                                                                      dtype=torch.float32)
         posed = self.body.forward(pose[None], trans.reshape(1, 3), self.betas)
         verts = posed.vertices[0]
-        index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy())
+        index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy(),
+                             like=like)
         part_frames, part_weights, _ = self.vocab.query_tensors(pose.double())
         if not part_frames:  # strategy "none": no vocabulary, no texture feature (zeros)
             return PoseContext(pose, verts, posed.transforms[0], index,

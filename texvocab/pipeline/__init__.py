@@ -24,6 +24,7 @@ _API: dict[str, tuple[str, str]] = {
     "corrective_pose_feature": ("texvocab.body.lbs", "pose_feature"),
     "rotvec_to_rotmat": ("texvocab.geometry.rotations", "rotvec_to_rotmat"),
     "quat_to_rotvec": ("texvocab.geometry.rotations", "quat_to_rotvec"),
+    "outward_orientation": ("texvocab.geometry.surface", "outward_orientation"),
     # captures (step 2)
     "Camera": ("texvocab.capture", "Camera"),
     "look_at": ("texvocab.capture.camera", "look_at"),
