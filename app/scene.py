@@ -54,6 +54,19 @@ def as_camera(camera, width: int, height: int) -> Camera:
     return camera.scaled(factor)
 
 
+def face_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) area-weighted face normals (b - a) x (c - a) of verts (V, 3), faces (F, 3),
+    in verts' dtype: the cross product written out (np.cross on float64, with its axis
+    handling, made the per-pose normals 2.4 ms instead of 0.75 with this in float32)."""
+    a = verts[faces[:, 0]]
+    e1, e2 = verts[faces[:, 1]] - a, verts[faces[:, 2]] - a
+    out = np.empty_like(e1)
+    out[:, 0] = e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1]
+    out[:, 1] = e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2]
+    out[:, 2] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    return out
+
+
 class SceneRenderer:
     """Draws a :class:`~app.state.ViewerState` of ``data`` into its own framebuffer.
 
@@ -116,7 +129,7 @@ class SceneRenderer:
         # vertex -> incident faces, for smooth normals: (V, F) sparse incidence
         rows = faces.reshape(-1)
         cols = np.repeat(np.arange(len(faces)), 3)
-        self._incidence = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)),
+        self._incidence = sparse.csr_matrix((np.ones(len(rows), np.float32), (rows, cols)),
                                             shape=(body.num_vertices, len(faces)))
         #: the winding GL culls against ("ccw"/"cw"), None to draw both sides: a closed,
         #: consistently wound body seen from outside never shows a back face (each lies
@@ -179,11 +192,8 @@ class SceneRenderer:
         if key == self._geometry_key:
             return
         verts, joints = state.posed()
-        verts = verts.astype(np.float64)
-        tri = verts[self.faces]
-        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        vn = self._incidence @ fn
-        vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
+        vn = self._incidence @ face_normals(verts.astype(np.float32, copy=False), self.faces)
+        vn /= np.maximum(np.sqrt((vn * vn).sum(1, keepdims=True)), 1e-12)
         pos, nrm = (self.vbo_pos, self.vbo_nrm) if layout == "unrolled" else (self.ivbo_pos,
                                                                                self.ivbo_nrm)
         pos.write(self._per_vertex(verts, layout))

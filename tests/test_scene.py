@@ -9,7 +9,7 @@ import torch
 from app.camera import OrbitCamera, gl_mvp
 from app.colors import PART_COLORS
 from app.gl_headless import create_headless_context, make_current, release
-from app.scene import SceneOptions, SceneRenderer
+from app.scene import SceneOptions, SceneRenderer, face_normals
 from app.state import ViewerData, ViewerState
 from texvocab.body import default_body
 from texvocab.body.parts import BODY_PARTS
@@ -261,3 +261,19 @@ def test_back_faces_are_culled_without_changing_the_image(ctx, body):
     print(f"inside the hips: body covers {drawn.mean():.3f} drawn both ways, "
           f"{culled.mean():.3f} culled")
     assert drawn.mean() > 0.99 and culled.mean() < 0.5
+
+
+def test_face_normals_are_the_cross_product(body):
+    """The written-out float32 cross product equals np.cross in float64 (to float32's
+    precision), so the 3D view's shading normals are unchanged."""
+    state = ViewerState(ViewerData(body))
+    state.apply_preset("kick")
+    verts = state.posed()[0]
+    faces = body.faces.numpy()
+    tri = verts.astype(np.float64)[faces]
+    want = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    got = face_normals(verts.astype(np.float32), faces)
+    assert got.dtype == np.float32
+    scale = np.linalg.norm(want, axis=1).max()
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5 * scale)
+    assert np.all(np.einsum("ij,ij->i", got, want) >= 0)  # no flipped face
