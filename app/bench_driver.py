@@ -8,7 +8,8 @@ Phases, in order:
   level: a margin that keeps any full-speed tail out of the phase). Measured: the CPU
   the process spends outside the neural render (UI, GL under llvmpipe, GLFW) per second
   of wall time, i.e. the share of one core the idle UI takes.
-- ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all)
+- ``render``: the pose is set to a preset (walk, squat, alternating; ``RENDERS`` in all
+  unless the script says how many)
   with the camera of ``texvocab shot --camera 0,0,3.2``, and the progressive render runs
   to full resolution. Measured per render: when each level reached the screen after the
   pose change (after the buffer swap of the first frame that drew it), how long the
@@ -32,7 +33,7 @@ from app.drivers import Driver
 from texvocab.pipeline import blas_threads
 
 RENDER_POSES = ("walk", "squat")
-RENDERS = 4
+RENDERS = 12  # default; alternating RENDER_POSES (bench:SECONDS:RES:RENDERS)
 AFTER = 1.5  # seconds watched after the last render ("after" phase)
 SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default --camera
 
@@ -40,9 +41,10 @@ SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default -
 class BenchDriver(Driver):
     """See the module docstring; writes the measurements into the report."""
 
-    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256):
+    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256,
+                 renders: int = RENDERS):
         super().__init__("bench", viewer)
-        self.seconds, self.resolution = seconds, resolution
+        self.seconds, self.resolution, self.render_count = seconds, resolution, renders
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
         self.drag_ms: list[float] = []
         self.drag_cpu_ms: list[float] = []
@@ -176,7 +178,7 @@ class BenchDriver(Driver):
             r.pop("start")
             self.renders.append(r)
             self._render = None
-            if len(self.renders) >= RENDERS:
+            if len(self.renders) >= self.render_count:
                 self.phase, self.t0, self._frames_at_mark = "after", now, self.count
 
     def _after_tick(self, now: float) -> None:

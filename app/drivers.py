@@ -266,15 +266,17 @@ class EngineDriver(Driver):
 
 
 def make_driver(name: str, viewer, rp) -> Driver:
-    """The driver for ``--script NAME``: an engine script or ``bench[:SECONDS[:RES]]``."""
+    """The driver for ``--script NAME``: an engine script or
+    ``bench[:SECONDS[:RES[:RENDERS]]]``."""
     if name.startswith("bench"):
-        from app.bench_driver import BenchDriver
+        from app.bench_driver import RENDERS, BenchDriver
 
         parts = name.split(":")
         seconds = float(parts[1]) if len(parts) > 1 else 8.0
         res = int(parts[2]) if len(parts) > 2 else 256
-        return BenchDriver(viewer, rp, seconds, res)
+        renders = int(parts[3]) if len(parts) > 3 else RENDERS
+        return BenchDriver(viewer, rp, seconds, res, renders)
     if name not in engine_scripts():
         raise TexvocabError(f"--script {name!r}: expected one of {sorted(engine_scripts())} or "
-                            "bench[:SECONDS[:RESOLUTION]]")
+                            "bench[:SECONDS[:RESOLUTION[:RENDERS]]]")
     return EngineDriver(name, viewer, rp)

@@ -6,10 +6,11 @@ frame times while a slider is dragged.
 Runs ``python -m app.window CHECKPOINT --script bench:SECONDS:RES`` under xvfb-run (the
 driver in app/bench_driver.py), then ``texvocab shot CHECKPOINT --pose P --camera 0,0,3.2
 --size WxH`` for each pose the window rendered, one after the other (nothing else
-running). Prints three tables and a last line
+running). Prints tables (per render, their spread, frames, panels) and a last line
 
     summary: worker=… idle_ui_cpu_share=… window_full_s=… shot_s=… window_over_shot=…
-             first_level_ms=… dragging_frame_ms=…
+             first_level_ms=… dragging_frame_ms=… renders=… first_level_p75_ms=…
+             first_within_target=k/N full_within_target=k/N
 
 (medians over the renders, for the first worker run; issue targets: idle share <= 0.10
 of a core, window / shot <= 1.5, first level <= 50 ms, full level <= 0.5 s, UI frames
@@ -36,18 +37,20 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # issue 16's viewer targets
+RENDERS = 12  # pose changes timed per worker (app.bench_driver.RENDERS)
 TEXVOCAB = Path(sys.executable).parent / "texvocab"
 
 
 def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: int | None,
-               nice: int | None, worker: str) -> dict:
+               nice: int | None, worker: str, renders: int) -> dict:
     xvfb = shutil.which("xvfb-run")
     if xvfb is None:
         sys.exit("error: xvfb-run is missing (apt-get install xvfb xauth)")
     with tempfile.TemporaryDirectory() as tmp:
         report = Path(tmp) / "bench.json"
         cmd = [xvfb, "-a", "-s", "-screen 0 1920x1200x24", sys.executable, "-m", "app.window",
-               checkpoint, "--size", size, "--script", f"bench:{seconds}:{res}",
+               checkpoint, "--size", size, "--script", f"bench:{seconds}:{res}:{renders}",
                "--report", str(report), "--neural-worker", worker]
         if threads:
             cmd += ["--neural-threads", str(threads)]
@@ -142,6 +145,34 @@ def _render_rows(worker: str, renders: list[dict], shot_s: dict[str, float],
     return ratios
 
 
+def _spread(a: np.ndarray, fmt: str) -> str:
+    """'median (p25-p75, max)'."""
+    p25, med, p75 = np.percentile(a, [25, 50, 75])
+    return f"{med:{fmt}} ({p25:{fmt}}-{p75:{fmt}}, {a.max():{fmt}})"
+
+
+def spread_table(runs: dict[str, list[dict]]) -> str:
+    """Per worker, over its renders: when the first level and the full level were on
+    screen (median, quartiles, worst; how many within the issue's targets), and when the
+    frame that changed the pose (the 3D view's) was."""
+    lines = ["| worker | renders | first level on screen ms: median (p25-p75, max) | "
+             f"within {FIRST_TARGET_MS:g} ms | full level s: median (p25-p75, max) | "
+             f"within {FULL_TARGET_S:g} s | frame that changed the pose ms: median (max) |",
+             "|---|---|---|---|---|---|---|"]
+    for worker, renders in runs.items():
+        first = np.array([r["levels"][0]["on_screen_s"] * 1000 for r in renders if r["levels"]])
+        full = np.array([r["levels"][-1]["on_screen_s"] for r in renders if r["levels"]])
+        pose = np.array([r["pose_frame_s"] * 1000 for r in renders if "pose_frame_s" in r])
+        if not len(first):
+            continue
+        lines.append(f"| {worker} | {len(first)} | {_spread(first, '.0f')} | "
+                     f"{int((first <= FIRST_TARGET_MS).sum())}/{len(first)} | "
+                     f"{_spread(full, '.2f')} | "
+                     f"{int((full <= FULL_TARGET_S).sum())}/{len(full)} | "
+                     f"{np.median(pose):.0f} ({pose.max():.0f}) |")
+    return "\n".join(lines)
+
+
 def panel_table(reps: dict) -> str:
     """Per worker: the median UI-thread CPU of each panel per dragging frame (and the
     work before the panels: input, the render's submission and upload)."""
@@ -170,6 +201,8 @@ def main() -> int:
                    help="torch threads of the render worker (default: the viewer's)")
     p.add_argument("--nice", type=int, default=None,
                    help="niceness of the neural render thread (default: the viewer's)")
+    p.add_argument("--renders", type=int, default=RENDERS,
+                   help=f"pose changes timed per worker (default {RENDERS}, walk and squat in turn)")
     p.add_argument("--worker", choices=("both", "process", "thread"), default="both",
                    help="where the viewer renders: its render process (the default), a thread "
                         "of the UI's interpreter (the previous default), or both, one after "
@@ -187,7 +220,7 @@ def main() -> int:
     reps = {}
     for worker in workers:
         rep = run_window(args.checkpoint, args.seconds, args.res, args.size, args.threads,
-                         args.nice, worker)
+                         args.nice, worker, args.renders)
         if not rep.get("ok"):
             sys.exit(f"error: {worker} worker: {rep.get('error', 'the bench did not finish')}")
         reps[worker] = rep
@@ -214,6 +247,8 @@ def main() -> int:
     print("\nneural render in the window (time after the pose change at which each level "
           "was on screen) against texvocab shot, same pose, camera and size:\n")
     print(table)
+    print("\nthe same renders, spread:\n")
+    print(spread_table(runs))
     print("\n| window at full speed | frames | median ms | p95 ms | UI-thread CPU ms (median) | "
           "window-process CPU ms (UI + GL raster threads) |")
     print("|---|---|---|---|---|---|")
@@ -248,7 +283,10 @@ def main() -> int:
     print(f"\nsummary: worker={w} idle_ui_cpu_share={first_rep['idle']['ui_cpu_share']:.3f} "
           f"window_full_s={np.median(full):.2f} shot_s={np.median(list(shot_s.values())):.2f} "
           f"window_over_shot={np.median(ratios[w]):.2f} first_level_ms={np.median(first):.0f} "
-          f"dragging_frame_ms={np.median(drag) if len(drag) else float('nan'):.1f}")
+          f"dragging_frame_ms={np.median(drag) if len(drag) else float('nan'):.1f} "
+          f"renders={len(first)} first_level_p75_ms={np.percentile(first, 75):.0f} "
+          f"first_within_target={sum(f <= FIRST_TARGET_MS for f in first)}/{len(first)} "
+          f"full_within_target={sum(f <= FULL_TARGET_S for f in full)}/{len(full)}")
     return 0
 
 

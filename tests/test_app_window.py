@@ -112,10 +112,10 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
 @pytest.mark.parametrize("worker", ["process", "thread"])
 def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
         tiny_checkpoint, tmp_path, worker):
-    """bench/viewer_ui.py's driver, short: four renders to full resolution in the render
-    process (or thread), the CPU of each side measured, and after the last level the window
-    idles again (a level's wake draws a frame, app/wake.py)."""
-    proc, rep, _ = run_window(tiny_checkpoint, "bench:1:64", tmp_path, "--neural-worker",
+    """bench/viewer_ui.py's driver, short: three renders (the script's count) to full
+    resolution in the render process (or thread), the CPU of each side measured, and after
+    the last level the window idles again (a level's wake draws a frame, app/wake.py)."""
+    proc, rep, _ = run_window(tiny_checkpoint, "bench:1:64:3", tmp_path, "--neural-worker",
                               worker)
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
     assert rep["neural_worker"] == worker and rep["errors"] == []
@@ -124,7 +124,8 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     drag = rep["dragging"]
     assert len(drag["process_cpu_ms"]) == len(drag["frame_ms"])
     assert all(p is None or p >= c - 0.5 for p, c in zip(drag["process_cpu_ms"], drag["cpu_ms"]))
-    assert len(rep["renders"]) == 4
+    assert len(rep["renders"]) == 3
+    assert [r["pose"] for r in rep["renders"]] == ["walk", "squat", "walk"]
     for r in rep["renders"]:
         assert [lv["level"] for lv in r["levels"]][-1] == 1
         assert r["render_cpu_share"] > 0 and r["ui_cpu_share"] > 0
