@@ -225,6 +225,7 @@ class Driver:
         self.report["view_rect"] = list(v.view_rect)
         self.report["window"] = list(v.size)
         self.report["window_sample_buffers"] = v.window_sample_buffers
+        self.report["view_blits"] = v.view_blits
         if v.neural is not None:
             self.report["worker_stopped"] = not v.neural.worker.alive
         if screenshot_path and shot is not None and shot.size:

@@ -1,8 +1,8 @@
 """3D view panel: the posed body drawn by :class:`app.scene.SceneRenderer` into its own
-texture, overlay toggles, and the camera: orbit (left drag orbits, wheel zooms, right or
-middle drag pans), the capture's own cameras as presets (letterboxed to their aspect; a
-drag leaves the preset for the nearest orbit), a follow mode that moves the camera with
-the root, and Screenshot (also F12).
+framebuffer (copied into the window's, app/view_blit.py), overlay toggles, and the camera:
+orbit (left drag orbits, wheel zooms, right or middle drag pans), the capture's own
+cameras as presets (letterboxed to their aspect; a drag leaves the preset for the nearest
+orbit), a follow mode that moves the camera with the root, and Screenshot (also F12).
 
 Widget IDs: window "3D view", checkboxes ``**/Texture``, ``**/Part colours``,
 ``**/Novelty``, ``**/Wireframe``, ``**/Skeleton``, ``**/Follow``, the camera combo
@@ -14,6 +14,7 @@ from __future__ import annotations
 from imgui_bundle import imgui
 
 from app.camera import CaptureViewCamera, fit_aspect
+from app.view_blit import ViewBlit
 
 TOGGLES = (("textured", "Texture"), ("part_colors", "Part colours"), ("novelty", "Novelty"),
            ("wireframe", "Wireframe"), ("skeleton", "Skeleton"))
@@ -141,9 +142,10 @@ def draw_view_panel(viewer) -> None:
     x0, y0 = pos.x + (w - iw) // 2, pos.y + (h - ih) // 2
     tex = viewer.render_scene((iw, ih))
     draw = imgui.get_window_draw_list()
-    if tex is not None:
-        draw.add_image(imgui.ImTextureRef(tex.glo), imgui.ImVec2(x0, y0),
-                       imgui.ImVec2(x0 + iw, y0 + ih), imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
+    if tex is not None:  # copied into the window's framebuffer before the GUI is drawn
+        lo, hi = draw.get_clip_rect_min(), draw.get_clip_rect_max()
+        viewer.view_blit = ViewBlit(viewer.scene.fbo.glo, x0, y0, iw, ih,
+                                    (lo.x, lo.y, hi.x, hi.y))
     grey = imgui.get_color_u32(imgui.ImVec4(0.85, 0.85, 0.85, 1.0))
     draw.add_text(imgui.ImVec2(pos.x + 8, pos.y + 6), grey, viewer.view_caption())
     if viewer.options.novelty:

@@ -21,6 +21,7 @@ from app.panel_pose import load_sequence, tick_sequence
 from app.panel_vocab import ThumbnailCache
 from app.scene import SceneOptions, SceneRenderer
 from app.state import ViewerState, load_viewer_data
+from app.view_blit import ViewBlit, blit_view
 from app.wake import ui_waker
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import follow_camera, march_settings
@@ -58,6 +59,8 @@ class Viewer:
         self.sequence_path, self.sequence_error = "", ""
         self.export = None  # the last app.export.Export job
         self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
+        self.view_blit: ViewBlit | None = None  # where the 3D view's image goes this frame
+        self.view_blits = 0  # frames whose 3D view was copied into the window
         self.frame_ms: deque[float] = deque(maxlen=600)  # wall time between frames
         self.frame_cpu_ms: deque[float] = deque(maxlen=600)  # of it, this thread's CPU time
         self.panel_cpu_ms: dict[str, float] = {}  # per panel: UI-thread CPU of its last draw
@@ -119,6 +122,7 @@ class Viewer:
             self.frame_ms.append((now - self._last_frame[0]) * 1000)
             self.frame_cpu_ms.append((cpu - self._last_frame[1]) * 1000)
         self._last_frame = (now, cpu)
+        self.view_blit = None  # the 3D view panel sets it if it draws this frame
         self.poll_dialogs()
         tick_sequence(self)
         self.follow_root()
@@ -129,6 +133,15 @@ class Viewer:
         idling.enable_idling = not playing  # a render in progress wakes the UI per level
         self.idling_log.append((busy, playing, bool(idling.enable_idling)))
         self.panel_cpu_ms["before the panels"] = (time.thread_time() - cpu) * 1000
+
+    def before_imgui_render(self) -> None:
+        """After the panels, before ImGui draws: the 3D view's image into the window."""
+        if self.view_blit is not None:
+            io = imgui.get_io()
+            scale = (io.display_framebuffer_scale.x, io.display_framebuffer_scale.y)
+            size = (round(io.display_size.x * scale[0]), round(io.display_size.y * scale[1]))
+            self.view_blits += blit_view(self.view_blit, size, scale)
+            self.ctx.screen.use()  # moderngl's idea of the bound framebuffer, again
 
     def submit_neural(self, force: bool = False, poll: bool = True) -> None:
         """Hand a changed pose or camera to the neural render worker (and, with ``poll``,

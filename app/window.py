@@ -108,6 +108,7 @@ def _runner_params(viewer: Viewer, title: str):
     rp.callbacks.post_init = viewer.post_init
     rp.callbacks.before_exit = viewer.before_exit
     rp.callbacks.pre_new_frame = viewer.pre_new_frame
+    rp.callbacks.before_imgui_render = viewer.before_imgui_render
     return rp
 
 

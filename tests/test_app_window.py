@@ -92,7 +92,9 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     # llvmpipe a 4x buffer and its resolve cost ~20 ms of CPU a frame)
     assert rep["window_sample_buffers"] == 0
 
-    # the screenshot is the whole window and shows the body in the 3D view
+    # the screenshot is the whole window and shows the body in the 3D view, copied into
+    # the window's framebuffer (app/view_blit.py), not drawn by ImGui
+    assert rep["view_blits"] > 0
     img = np.asarray(Image.open(shot).convert("RGB")).astype(np.float32)
     assert img.shape == (800, 1280, 3) and img.std() > 10
     x, y, w, h = (int(round(v)) for v in rep["view_rect"])

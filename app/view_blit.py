@@ -1,0 +1,70 @@
+"""The 3D view's image copied straight into the window's framebuffer.
+
+The panel (app/panel_view.py) leaves the view's rectangle empty and says where it is
+(:class:`ViewBlit`); just before ImGui draws the frame (``Viewer.before_imgui_render``),
+the scene's framebuffer is copied there with ``glBlitFramebuffer``, one to one, and the
+GUI (caption, legend, popups) is drawn over it. Under Mesa llvmpipe this is a copy, where
+ImGui's textured, alpha-blended quad over the same pixels cost about 2 ms of rasterisation
+in every frame (bench/viewer_ui.py; a 520x700 view of a 1280x800 window).
+
+PyOpenGL is imported at the first copy, once the window has chosen its platform
+(app.window._choose_gl_platform).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class ViewBlit:
+    """Where the 3D view goes this frame, in ImGui's coordinates (pixels from the window's
+    top left): the image's rectangle x, y, w, h and the panel's clip rectangle."""
+
+    fbo: int  # GL name of the scene's framebuffer, w x h
+    x: float
+    y: float
+    w: int
+    h: int
+    clip: tuple[float, float, float, float]  # x0, y0, x1, y1
+
+
+def blit_rects(blit: ViewBlit, framebuffer_size: tuple[int, int],
+               scale: tuple[float, float] = (1.0, 1.0)):
+    """(src, dst) rectangles (x0, y0, x1, y1) of ``glBlitFramebuffer``, rows counted from
+    the bottom in both framebuffers, for the part of ``blit``'s image inside its clip
+    rectangle; None when none of it is in the window. ``scale``: ImGui's display
+    framebuffer scale (window pixels per ImGui unit)."""
+    sx, sy = scale
+    fw, fh = framebuffer_size
+    x0, y0 = max(blit.x, blit.clip[0]), max(blit.y, blit.clip[1])
+    x1 = min(blit.x + blit.w, blit.clip[2])
+    y1 = min(blit.y + blit.h, blit.clip[3])
+    # the visible part in the scene image's pixels (rows counted from its top)
+    left, top = round(x0 - blit.x), round(y0 - blit.y)
+    right, bottom = round(x1 - blit.x), round(y1 - blit.y)
+    if right <= left or bottom <= top:
+        return None
+    src = (left, blit.h - bottom, right, blit.h - top)
+    dst = (round((blit.x + left) * sx), round(fh - (blit.y + bottom) * sy),
+           round((blit.x + right) * sx), round(fh - (blit.y + top) * sy))
+    if dst[2] <= 0 or dst[3] <= 0 or dst[0] >= fw or dst[1] >= fh:
+        return None
+    return src, dst
+
+
+def blit_view(blit: ViewBlit, framebuffer_size: tuple[int, int],
+              scale: tuple[float, float] = (1.0, 1.0)) -> bool:
+    """Copy the scene's framebuffer into the window's (GL framebuffer 0) at ``blit``'s
+    rectangle (:func:`blit_rects`). False when nothing of it is visible."""
+    rects = blit_rects(blit, framebuffer_size, scale)
+    if rects is None:
+        return False
+    from OpenGL import GL
+
+    GL.glDisable(GL.GL_SCISSOR_TEST)
+    GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, blit.fbo)
+    GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, 0)
+    GL.glBlitFramebuffer(*rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT,
+                         GL.GL_NEAREST if tuple(scale) == (1.0, 1.0) else GL.GL_LINEAR)
+    GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+    return True
