@@ -36,9 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
+from app.bench_driver import RENDERS  # pose changes timed per worker
+
 ROOT = Path(__file__).resolve().parent.parent
 FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # issue 16's viewer targets
-RENDERS = 12  # pose changes timed per worker (app.bench_driver.RENDERS)
 TEXVOCAB = Path(sys.executable).parent / "texvocab"
 
 

@@ -87,15 +87,16 @@ def _edge_topology(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, in
 
 def outward_orientation(vertices, faces) -> int:
     """+1 when the mesh (V, 3), (F, 3) is closed and consistently wound with its faces
-    counter-clockwise seen from outside (positive signed volume), -1 when closed and
-    wound the other way, 0 when it is open or inconsistent (then neither side of a face
-    may be assumed hidden)."""
-    v, f = _numpy(vertices, np.float64), _numpy(faces, np.int64).reshape(-1, 3)
-    if not _edge_topology(f, len(v))[2]:
+    counter-clockwise seen from outside (non-negative signed volume, as
+    :class:`SurfaceIndex` orients its sign), -1 when closed and wound the other way, 0
+    when it is open or inconsistent (then neither side of a face may be assumed
+    hidden)."""
+    v = np.ascontiguousarray(_numpy(vertices, np.float64))
+    f = np.ascontiguousarray(_numpy(faces, np.int64).reshape(-1, 3))
+    inverse, edges, closed = _edge_topology(f, len(v))
+    if not closed:
         return 0
-    a, b, c = (v[f[:, k]] - v.mean(0) for k in range(3))
-    volume = float(np.einsum("ij,ij->", a, np.cross(b, c)))
-    return 0 if volume == 0 else (1 if volume > 0 else -1)
+    return int(pseudo_normals(v, f, inverse, edges)[3])  # the index's own orientation
 
 
 def _default_workers() -> int:
