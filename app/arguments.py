@@ -21,6 +21,13 @@ NEURAL_WORKERS = ("process", "thread")
 #: the UI idles while a level renders, so the second core is free then
 NEURAL_PROCESSES = min(2, os.cpu_count() or 1)
 
+#: milliseconds from a pose change (after a pause) that its frame waits, after its
+#: panels and before it is drawn, for the neural render's preview, so both reach the
+#: screen in one frame instead of the preview a frame later (app.panel_neural)
+NEURAL_PREVIEW_WAIT_MS = 30.0
+#: the longest wait accepted: a frame held longer would feel like a stall
+PREVIEW_WAIT_MAX_MS = 200.0
+
 #: smallest window the docked panels fit in; smallest offscreen image
 WINDOW_MIN = (320, 240)
 IMAGE_MIN = (16, 16)
@@ -67,6 +74,12 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"render processes that split each neural render (default "
                         f"{NEURAL_PROCESSES}: one per core, at most 2); each holds a copy of "
                         "the model. With --neural-worker thread: 1")
+    p.add_argument("--neural-preview-wait", type=float, default=NEURAL_PREVIEW_WAIT_MS,
+                   metavar="MS",
+                   help=f"after a pause, the frame that changes the pose waits up to MS "
+                        f"milliseconds from the change for the neural preview, so the 3D view "
+                        f"and the preview show together (default {NEURAL_PREVIEW_WAIT_MS:g}; "
+                        "0: never wait; never while a slider is dragged; bench/viewer_ui.py)")
     p.add_argument("--neural-worker", choices=NEURAL_WORKERS, default=NEURAL_WORKERS[0],
                    help="where the neural render runs: processes of their own (default; the "
                         "UI's Python does not slow them) or a thread of the viewer's")

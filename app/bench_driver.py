@@ -168,11 +168,15 @@ class BenchDriver(Driver):
         nv = self.viewer.neural
         r = self._render
         if r is None:
-            self._start_render(now)
+            if not nv.busy:  # the resolution's render (first render) is not timed
+                self._start_render(now)
             return
         done = r["levels"] and r["levels"][-1]["level"] == 1 and not nv.busy
         if done or now - r["start"] > 600:
             r.update(self._ui_share(self._mark))
+            # the pose frame's wait for the preview (NeuralView.late_poll): ms, whether it came
+            r["preview_wait"] = next(([round(s * 1000, 2), came] for v, s, came in nv.waits
+                                      if v == nv.version), None)
             r["frames"] = self.count - r.pop("first_frame")
             r.pop("seen")
             r.pop("start")

@@ -131,6 +131,7 @@ def script_look_stale(ctx, viewer, report: dict) -> None:
     wait_neural(ctx, viewer, report)
     ctx.set_ref("Pose")
     viewer.neural.resolution = 512  # slower levels: the stale image stays a while
+    viewer.neural.preview_wait = 0.0  # the pose's frame shows the old image, stale
     ctx.item_input_value(*LEFT_ARM_MOVE)
     report["stale_line"] = viewer.neural_stale_shown
 

@@ -8,11 +8,13 @@ Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render 
 """
 from __future__ import annotations
 
+import time
 from collections import deque
 
 import numpy as np
 from imgui_bundle import imgui
 
+from app.arguments import NEURAL_PREVIEW_WAIT_MS
 from app.render_process import ProcessWorker
 from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 from texvocab.pipeline import RENDER_PRESETS as PRESETS
@@ -22,6 +24,10 @@ from texvocab.pipeline import march_settings, render_overrides
 #: frame took under half this many seconds, a coarser one when it took more
 PLAYBACK_SECONDS = 0.5
 STALE_TINT = (0.45, 0.45, 0.45, 1.0)
+#: a submission follows a pause when the one before is at least this many seconds older:
+#: only then does its frame wait for the preview (NeuralView.preview_wait). Poses that
+#: stream in, as under a dragged slider, never hold a frame.
+PREVIEW_PAUSE = 0.25
 
 
 class NeuralView:
@@ -55,6 +61,17 @@ class NeuralView:
         self._current_label = ""
         #: (version, level, milliseconds, seconds since the job started, (h, w)) per shown level
         self.history: deque[tuple] = deque(maxlen=200)
+        #: seconds from a submission after a pause that its frame waits, after the panels,
+        #: for the new pose's first level, so the 3D view and the preview reach the screen
+        #: in one frame (``--neural-preview-wait``; 0: never)
+        self.preview_wait = NEURAL_PREVIEW_WAIT_MS / 1000
+        #: (version, seconds waited, whether the preview came) per waiting frame
+        self.waits: deque[tuple[int, float, bool]] = deque(maxlen=200)
+        self._submitted_at = -np.inf  # perf_counter of the last submission
+        self._await: tuple[int, float] | None = None  # (version, deadline) for late_poll
+        self._playing = False
+        #: where draw_neural_panel left room for the status line and the image (late_draw)
+        self.canvas: dict | None = None
 
     @property
     def busy(self) -> bool:
@@ -93,15 +110,36 @@ class NeuralView:
             for old in [v for v in self.labels if v < self.version - 64]:
                 del self.labels[old], self.keys[old]
             levels = (self.playback_level,) if playing else None
+            now = time.perf_counter()
+            paused = now - self._submitted_at >= PREVIEW_PAUSE
+            self._await = ((self.version, now + self.preview_wait)
+                           if paused and not playing and self.preview_wait > 0 else None)
+            self._submitted_at = now
             # playback renders one level and is never cancelled by the timeline anyway
             self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
                                          camera.to_texvocab_camera(w, h), self.march, levels,
                                          tuple(background), finish_preview=not playing))
-        frame = self.worker.poll() if poll else None
+        self._playing = playing
+        if poll:
+            self._take(self.worker.poll())
+
+    def _take(self, frame: RenderFrame | None) -> None:
         if frame is not None:
             self._upload(frame)
-            if playing:
+            if self._playing:
                 self._adapt_playback_level(frame)
+
+    def late_poll(self) -> None:
+        """After the frame's panels, before it is drawn: take the newest level; if this
+        frame submitted a pose after a pause, first wait for that pose's preview until
+        ``preview_wait`` seconds after the submission (the 3D view's image is being
+        rasterised meanwhile)."""
+        pending, self._await = self._await, None
+        if pending is not None and pending[0] == self.version:
+            start = time.perf_counter()
+            came = self.worker.wait_for(pending[0], pending[1] - start)
+            self.waits.append((pending[0], time.perf_counter() - start, came))
+        self._take(self.worker.poll())
 
     def _adapt_playback_level(self, frame: RenderFrame) -> None:
         if frame.elapsed < PLAYBACK_SECONDS / 2 and self.playback_level > 1:
@@ -196,8 +234,8 @@ def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | Non
 
 
 def draw_neural_panel(viewer) -> None:
-    """The "Neural render" window's contents. A stale image (pose or camera changed since)
-    is dimmed and labelled with the pose it shows until the first new level replaces it."""
+    """The "Neural render" window's widgets; its status and image follow in
+    :func:`late_draw`."""
     nv = viewer.neural
     if nv is None:
         imgui.push_text_wrap_pos(0.0)
@@ -221,31 +259,64 @@ def draw_neural_panel(viewer) -> None:
         imgui.set_tooltip("speed/accuracy preset of the render knobs (bench/tradeoff.py)")
     playing = viewer.sequence is not None and viewer.sequence.playing
     viewer.submit_neural(force)  # also done before the panels draw (Viewer.pre_new_frame)
-    imgui.text(status_line(nv.frame, nv.busy, nv.playback_level if playing else None,
-                           nv.stale))
-    if playing and nv.frame is not None:
-        imgui.text_disabled(f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
-                            f"the timeline is at {viewer.pose_label()}")
+    # the status lines and the image are drawn by late_draw, after the frame's last poll
+    # (NeuralView.late_poll): a level that arrives while this frame is built is in it
+    line = imgui.get_text_line_height()
+    canvas = {"draw": imgui.get_window_draw_list(), "status": imgui.get_cursor_screen_pos(),
+              "playing": playing}
+    imgui.dummy(imgui.ImVec2(1.0, line))
+    if playing:
+        canvas["playback"] = imgui.get_cursor_screen_pos()
+        imgui.dummy(imgui.ImVec2(1.0, line))
     for err in list(nv.worker.errors)[-1:]:
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), err)
-    if nv.texture is None:
-        return
     avail = imgui.get_content_region_avail()
-    tw, th = nv.texture.size
-    scale = min(avail.x / tw, avail.y / th) if avail.x > 0 and avail.y > 0 else 1.0
-    pos = imgui.get_cursor_screen_pos()
-    size = imgui.ImVec2(tw * scale, th * scale)
-    imgui.dummy(size)
-    draw = imgui.get_window_draw_list()
-    tint = imgui.get_color_u32(imgui.ImVec4(*(STALE_TINT if nv.stale else (1, 1, 1, 1))))
-    draw.add_image(imgui.ImTextureRef(nv.texture.glo), pos,
-                   imgui.ImVec2(pos.x + size.x, pos.y + size.y), imgui.ImVec2(0, 0),
-                   imgui.ImVec2(1, 1), tint)
-    line = nv.stale_line()
-    if line and not playing:
-        draw.add_rect_filled(imgui.ImVec2(pos.x, pos.y), imgui.ImVec2(pos.x + size.x, pos.y + 22),
-                             imgui.get_color_u32(imgui.ImVec4(0.0, 0.0, 0.0, 0.6)))
-        draw.add_text(imgui.ImVec2(pos.x + 6, pos.y + 4),
-                      imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), line)
+    canvas["image"] = (imgui.get_cursor_screen_pos(), avail)
+    imgui.dummy(imgui.ImVec2(max(avail.x, 1.0), max(avail.y, 1.0)))  # the image's room
+    d = canvas["draw"]
+    canvas["clip"] = (d.get_clip_rect_min(), d.get_clip_rect_max())
+    nv.canvas = canvas
+
+
+def late_draw(viewer) -> None:
+    """Draw what the Neural render panel left room for (status lines, the image, the stale
+    banner) into its window, once :meth:`NeuralView.late_poll` took the frame's newest
+    level. A stale image (pose or camera changed since) is dimmed and labelled with the
+    pose it shows until the first new level replaces it."""
+    nv = viewer.neural
+    if nv is None or nv.canvas is None:
+        return
+    canvas, nv.canvas = nv.canvas, None
+    draw, playing = canvas["draw"], canvas["playing"]
+    text = imgui.get_color_u32(imgui.Col_.text)
+    draw.push_clip_rect(*canvas["clip"])
+    try:
+        draw.add_text(canvas["status"], text, status_line(
+            nv.frame, nv.busy, nv.playback_level if playing else None, nv.stale))
+        if "playback" in canvas and nv.frame is not None:
+            draw.add_text(canvas["playback"], imgui.get_color_u32(imgui.Col_.text_disabled),
+                          f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
+                          f"the timeline is at {viewer.pose_label()}")
+        line = nv.stale_line()
+        if nv.texture is not None:
+            _draw_image(draw, nv, *canvas["image"], "" if playing else line)
+    finally:
+        draw.pop_clip_rect()
     viewer.neural_stale_shown = line
     viewer.stale_log.append(line)
+
+
+def _draw_image(draw, nv, pos, avail, banner: str) -> None:
+    """The shown level scaled into ``avail`` at ``pos``, dimmed with ``banner`` on top
+    when stale."""
+    tw, th = nv.texture.size
+    scale = min(avail.x / tw, avail.y / th) if avail.x > 0 and avail.y > 0 else 1.0
+    end = imgui.ImVec2(pos.x + tw * scale, pos.y + th * scale)
+    tint = imgui.get_color_u32(imgui.ImVec4(*(STALE_TINT if nv.stale else (1, 1, 1, 1))))
+    draw.add_image(imgui.ImTextureRef(nv.texture.glo), pos, end, imgui.ImVec2(0, 0),
+                   imgui.ImVec2(1, 1), tint)
+    if banner:
+        draw.add_rect_filled(pos, imgui.ImVec2(end.x, pos.y + 22),
+                             imgui.get_color_u32(imgui.ImVec4(0.0, 0.0, 0.0, 0.6)))
+        draw.add_text(imgui.ImVec2(pos.x + 6, pos.y + 4),
+                      imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), banner)

@@ -267,6 +267,7 @@ class ProcessWorker(DeliveredLevels):
                 if current:
                     self._merge["done"].add(shard)
                     self._busy = len(self._merge["done"]) < n
+                    self._arrived.notify_all()  # a UI waiting for a level stops waiting
                 return current and not self._busy
             _, _, level, image, seconds, elapsed, preview, owned = message
             if preview and (current or self._frame is None or version > self._frame.version):
@@ -302,11 +303,13 @@ class ProcessWorker(DeliveredLevels):
         self._frame = RenderFrame(version, level, image, seconds, elapsed)
         self._fresh = True
         self.delivered.append((version, level))
+        self._arrived.notify_all()
 
     def _ended(self, why: str) -> None:
         with self._lock:
             if self._busy:
                 self.errors.append(why)
             self._busy = False
+            self._arrived.notify_all()
         if self._on_frame is not None:
             self._on_frame()

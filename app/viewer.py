@@ -16,7 +16,7 @@ from app.arguments import NEURAL_NICE
 from app.camera import CaptureViewCamera, OrbitCamera
 from app.colors import heat_color
 from app.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
-from app.panel_neural import NeuralView, camera_key, start_worker
+from app.panel_neural import NeuralView, camera_key, late_draw, start_worker
 from app.panel_pose import load_sequence, tick_sequence
 from app.panel_vocab import ThumbnailCache
 from app.scene import SceneOptions, SceneRenderer
@@ -50,6 +50,7 @@ class Viewer:
         self.neural_threads, self.neural_nice = neural_threads, neural_nice
         self.neural_worker = neural_worker  # "process" or "thread" (app.arguments)
         self.neural_processes = 1  # render processes splitting a view (run_viewer sets it)
+        self.neural_preview_wait: float | None = None  # seconds (None: the panel's default)
         self._worker = None  # started by start_neural_worker, handed to the panel
         self.neural_resolution: int | None = None  # long side of the neural render (default 256)
         self.ctx = self.scene = self.thumbs = self.neural = None
@@ -90,6 +91,8 @@ class Viewer:
                                      settings=self.data.settings, worker=self._worker)
             if self.neural_resolution:
                 self.neural.resolution = int(self.neural_resolution)
+            if self.neural_preview_wait is not None:
+                self.neural.preview_wait = self.neural_preview_wait
 
     def start_neural_worker(self) -> None:
         """Start the neural render's worker (once; nothing without a model). The window
@@ -135,7 +138,13 @@ class Viewer:
         self.panel_cpu_ms["before the panels"] = (time.thread_time() - cpu) * 1000
 
     def before_imgui_render(self) -> None:
-        """After the panels, before ImGui draws: the 3D view's image into the window."""
+        """After the panels, before ImGui draws: the neural render's last poll (and, after
+        a pause, its wait for the new pose's preview) and its image, then the 3D view's
+        image into the window (the blit waits for the view's rasterisation, which the
+        neural wait overlaps)."""
+        if self.neural is not None:
+            self.neural.late_poll()
+            late_draw(self)
         if self.view_blit is not None:
             io = imgui.get_io()
             scale = (io.display_framebuffer_scale.x, io.display_framebuffer_scale.y)

@@ -16,7 +16,15 @@ import sys
 # still choose its platform first (_choose_gl_platform).
 from imgui_bundle import hello_imgui, imgui, immapp
 
-from app.arguments import NEURAL_NICE, NEURAL_PROCESSES, WINDOW_MIN, add_view_arguments, parse_size
+from app.arguments import (
+    NEURAL_NICE,
+    NEURAL_PREVIEW_WAIT_MS,
+    NEURAL_PROCESSES,
+    PREVIEW_WAIT_MAX_MS,
+    WINDOW_MIN,
+    add_view_arguments,
+    parse_size,
+)
 from app.drivers import AFTER_REOPEN, make_driver
 from app.panel_neural import draw_neural_panel
 from app.panel_pose import draw_pose_panel, load_sequence
@@ -117,13 +125,14 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
                screenshot: str | None = None, neural_resolution: int | None = None,
                neural_threads: int = 1, poses: str | None = None,
                neural_nice: int = NEURAL_NICE, capture: str | None = None,
-               neural_worker: str = "process", neural_processes: int = NEURAL_PROCESSES) -> int:
+               neural_worker: str = "process", neural_processes: int = NEURAL_PROCESSES,
+               neural_preview_wait_ms: float = NEURAL_PREVIEW_WAIT_MS) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
     0). ``script``: a driver from app/drivers.py (tests, benchmarks) writing a JSON
     ``report`` and the last frame to ``screenshot``. ``neural_worker``: "process" or
     "thread" (app.arguments.NEURAL_WORKERS); ``neural_processes``: how many render processes
-    split each view."""
+    split each view; ``neural_preview_wait_ms``: app.panel_neural.NeuralView.preview_wait."""
     require_display()
     _choose_gl_platform()
     budget_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
@@ -133,6 +142,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
                         neural_worker)
         viewer.smpl = smpl
         viewer.neural_processes = int(neural_processes)
+        viewer.neural_preview_wait = float(neural_preview_wait_ms) / 1000
         viewer.start_neural_worker()  # a render process starts up meanwhile
         if data.vocab is not None and data.textures is not None:
             print("preparing the vocabulary texture ...", flush=True)
@@ -163,10 +173,13 @@ def run_from_args(args: argparse.Namespace) -> int:
     """Run the viewer from :func:`app.arguments.add_view_arguments`' namespace."""
     if args.neural_processes < 1:
         raise TexvocabError(f"--neural-processes {args.neural_processes}: expected at least 1")
+    if not 0 <= args.neural_preview_wait <= PREVIEW_WAIT_MAX_MS:
+        raise TexvocabError(f"--neural-preview-wait {args.neural_preview_wait:g}: expected "
+                            f"0..{PREVIEW_WAIT_MAX_MS:g} milliseconds")
     return run_viewer(args.source, args.smpl, parse_size(args.size, WINDOW_MIN), args.script,
                       args.report, args.screenshot, args.neural_resolution,
                       args.neural_threads, args.poses, args.neural_nice, args.capture,
-                      args.neural_worker, args.neural_processes)
+                      args.neural_worker, args.neural_processes, args.neural_preview_wait)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -143,6 +143,7 @@ class DeliveredLevels:
         self._version = -1
         self._frame: RenderFrame | None = None
         self._fresh = False
+        self._arrived = threading.Condition(self._lock)  # notified per level and at the end
         self._busy = False
         self.delivered: deque[tuple[int, int]] = deque(maxlen=256)  # (version, level), in order
         self.errors: deque[str] = deque(maxlen=16)  # "Type: message (file:line)"
@@ -155,6 +156,19 @@ class DeliveredLevels:
                 return None
             self._fresh = False
             return self._frame
+
+    def wait_for(self, version: int, timeout: float) -> bool:
+        """Block until a level of job ``version`` (or a newer job) is delivered, for at
+        most ``timeout`` seconds, and not once the worker is idle (done or failed). True
+        if one was."""
+        deadline = time.perf_counter() + timeout
+        with self._arrived:
+            while self._frame is None or self._frame.version < version:
+                left = deadline - time.perf_counter()
+                if left <= 0 or not self._busy:
+                    return False
+                self._arrived.wait(left)
+            return True
 
     @property
     def latest(self) -> RenderFrame | None:
@@ -265,6 +279,7 @@ class ProgressiveWorker(DeliveredLevels):
                         return
                     self._frame, self._fresh = frame, True
                     self.delivered.append((job.version, int(level)))
+                    self._arrived.notify_all()
                 shown = True
                 if self._on_frame is not None:
                     self._on_frame()
@@ -278,5 +293,6 @@ class ProgressiveWorker(DeliveredLevels):
             with self._lock:
                 if not self._stale(job) and self._job is None:
                     self._busy = False
+                self._arrived.notify_all()  # a UI waiting for a level stops waiting
             if self._on_frame is not None:
                 self._on_frame()  # the UI shows "done" (or the error) without waiting

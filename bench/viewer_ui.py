@@ -10,7 +10,7 @@ running). Prints tables (per render, their spread, frames, panels) and a last li
 
     summary: worker=… idle_ui_cpu_share=… window_full_s=… shot_s=… window_over_shot=…
              first_level_ms=… dragging_frame_ms=… renders=… first_level_p75_ms=…
-             first_within_target=k/N full_within_target=k/N
+             first_within_target=k/N full_within_target=k/N preview_in_pose_frame=k/N
 
 (medians over the renders, for the first worker run; issue targets: idle share <= 0.10
 of a core, window / shot <= 1.5, first level <= 50 ms, full level <= 0.5 s, UI frames
@@ -44,7 +44,8 @@ TEXVOCAB = Path(sys.executable).parent / "texvocab"
 
 
 def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: int | None,
-               nice: int | None, worker: str, renders: int) -> dict:
+               nice: int | None, worker: str, renders: int,
+               preview_wait: float | None = None) -> dict:
     xvfb = shutil.which("xvfb-run")
     if xvfb is None:
         sys.exit("error: xvfb-run is missing (apt-get install xvfb xauth)")
@@ -57,6 +58,8 @@ def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: in
             cmd += ["--neural-threads", str(threads)]
         if nice is not None:
             cmd += ["--neural-nice", str(nice)]
+        if preview_wait is not None:
+            cmd += ["--neural-preview-wait", str(preview_wait)]
         proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
         if not report.is_file():
             sys.exit(f"error: the window wrote no report (rc {proc.returncode}):\n"
@@ -158,8 +161,9 @@ def spread_table(runs: dict[str, list[dict]]) -> str:
     frame that changed the pose (the 3D view's) was."""
     lines = ["| worker | renders | first level on screen ms: median (p25-p75, max) | "
              f"within {FIRST_TARGET_MS:g} ms | full level s: median (p25-p75, max) | "
-             f"within {FULL_TARGET_S:g} s | frame that changed the pose ms: median (max) |",
-             "|---|---|---|---|---|---|---|"]
+             f"within {FULL_TARGET_S:g} s | frame that changed the pose ms: median (max) | "
+             "preview in that frame | its wait ms: median (max) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for worker, renders in runs.items():
         first = np.array([r["levels"][0]["on_screen_s"] * 1000 for r in renders if r["levels"]])
         full = np.array([r["levels"][-1]["on_screen_s"] for r in renders if r["levels"]])
@@ -170,8 +174,21 @@ def spread_table(runs: dict[str, list[dict]]) -> str:
                      f"{int((first <= FIRST_TARGET_MS).sum())}/{len(first)} | "
                      f"{_spread(full, '.2f')} | "
                      f"{int((full <= FULL_TARGET_S).sum())}/{len(full)} | "
-                     f"{np.median(pose):.0f} ({pose.max():.0f}) |")
+                     f"{np.median(pose):.0f} ({pose.max():.0f}) | "
+                     f"{in_pose_frame(renders)}/{len(first)} | {_waits(renders)} |")
     return "\n".join(lines)
+
+
+def in_pose_frame(renders: list[dict]) -> int:
+    """How many renders showed their first level in the frame that changed the pose."""
+    return sum(1 for r in renders if r["levels"] and "pose_frame_s" in r
+               and r["levels"][0]["on_screen_s"] == r["pose_frame_s"])
+
+
+def _waits(renders: list[dict]) -> str:
+    """'median (max)' of the pose frames' waits for the preview ('-' when none waited)."""
+    w = np.array([r["preview_wait"][0] for r in renders if r.get("preview_wait")])
+    return f"{np.median(w):.0f} ({w.max():.0f})" if len(w) else "-"
 
 
 def panel_table(reps: dict) -> str:
@@ -202,6 +219,9 @@ def main() -> int:
                    help="torch threads of the render worker (default: the viewer's)")
     p.add_argument("--nice", type=int, default=None,
                    help="niceness of the neural render thread (default: the viewer's)")
+    p.add_argument("--preview-wait", type=float, default=None, metavar="MS",
+                   help="how long the frame that changes the pose waits for the preview "
+                        "(default: the viewer's; 0: the frame never waits)")
     p.add_argument("--renders", type=int, default=RENDERS,
                    help=f"pose changes timed per worker (default {RENDERS}, walk and squat in turn)")
     p.add_argument("--worker", choices=("both", "process", "thread"), default="both",
@@ -221,7 +241,7 @@ def main() -> int:
     reps = {}
     for worker in workers:
         rep = run_window(args.checkpoint, args.seconds, args.res, args.size, args.threads,
-                         args.nice, worker, args.renders)
+                         args.nice, worker, args.renders, args.preview_wait)
         if not rep.get("ok"):
             sys.exit(f"error: {worker} worker: {rep.get('error', 'the bench did not finish')}")
         reps[worker] = rep
@@ -287,7 +307,8 @@ def main() -> int:
           f"dragging_frame_ms={np.median(drag) if len(drag) else float('nan'):.1f} "
           f"renders={len(first)} first_level_p75_ms={np.percentile(first, 75):.0f} "
           f"first_within_target={sum(f <= FIRST_TARGET_MS for f in first)}/{len(first)} "
-          f"full_within_target={sum(f <= FULL_TARGET_S for f in full)}/{len(full)}")
+          f"full_within_target={sum(f <= FULL_TARGET_S for f in full)}/{len(full)} "
+          f"preview_in_pose_frame={in_pose_frame(runs[w])}/{len(first)}")
     return 0
 
 

@@ -55,7 +55,10 @@ def ok(proc, rep):
 
 def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(checkpoint,
                                                                           tmp_path):
-    proc, rep, _ = run_window(checkpoint, "stale", tmp_path)
+    # the frame that changes the pose does not wait for the preview here, so the old
+    # image is shown stale for at least that frame (with the wait, the preview usually
+    # comes in that frame and nothing is ever stale: test_app_window's bench run)
+    proc, rep, _ = run_window(checkpoint, "stale", tmp_path, "--neural-preview-wait", "0")
     ok(proc, rep)
     assert rep["change"] == "left shoulder z -70°"
     lines = rep["stale_lines"]
@@ -280,3 +283,78 @@ def test_a_pose_panel_edit_is_submitted_before_the_3d_view_draws():
     assert worker.polls == 1  # a level is not uploaded mid-frame
     v.draw_panel("Vocabulary", lambda viewer: viewer.state.set_joint(17, (0.0, 0.0, 40.0)))
     assert len(worker.jobs) == 2  # other panels' edits go out at the next frame's start
+
+
+def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
+    """NeuralView.late_poll (called after the panels, before the frame is drawn): a pose
+    submitted after a pause makes its frame wait for that job's first level, at most
+    ``preview_wait`` from the submission; poses streaming in (a dragged slider) never
+    make a frame wait, nor does ``preview_wait`` 0; the level then goes up in this frame."""
+    import app.panel_neural as pn
+    from app.panel_neural import NeuralView
+    from app.state import load_viewer_data
+    from app.viewer import Viewer
+    from app.worker import RenderFrame
+
+    class Texture:
+        def __init__(self, size):
+            self.size, self.written = size, 0
+
+        def write(self, data):
+            self.written += 1
+
+    class Context:
+        LINEAR = 0
+
+        def texture(self, size, components):
+            return Texture(size)
+
+    class Waiter:
+        busy, delivered, errors = True, [], []
+
+        def __init__(self):
+            self.jobs, self.waits, self.frame = [], [], None
+
+        def submit(self, job):
+            self.jobs.append(job)
+
+        def poll(self):
+            frame, self.frame = self.frame, None
+            return frame
+
+        def wait_for(self, version, timeout):
+            self.waits.append((version, timeout))
+            self.frame = RenderFrame(version, 8, np.zeros((4, 6, 3), np.float32), 0.01, 0.01)
+            return True
+
+    clock = [100.0]
+    monkeypatch.setattr(pn.time, "perf_counter", lambda: clock[0])
+    v = Viewer(load_viewer_data(None))
+    worker = Waiter()
+    v.neural = nv = NeuralView(Context(), None, None, worker=worker)
+    nv.preview_wait = 0.03
+    v.submit_neural()  # the first pose: after a pause
+    nv.late_poll()
+    assert worker.waits == [(nv.version, pytest.approx(0.03))]
+    assert nv.frame.version == nv.version and nv.texture.size == (6, 4)  # shown this frame
+    assert nv.waits[-1][0] == nv.version and nv.waits[-1][2]
+    for step in range(3):  # a dragged slider: a pose every 20 ms
+        clock[0] += 0.02
+        v.state.set_joint(16, (0.0, 0.0, -10.0 * (step + 1)))
+        v.submit_neural()
+        nv.late_poll()
+    assert len(worker.waits) == 1 and len(worker.jobs) == 4
+    clock[0] += 0.3  # the slider rests, then moves again
+    v.state.set_joint(16, (0.0, 0.0, 20.0))
+    v.submit_neural()
+    clock[0] += 0.01  # the frame's panels took 10 ms: 20 ms of the wait are left
+    nv.late_poll()
+    assert worker.waits[-1] == (nv.version, pytest.approx(0.02))
+    nv.late_poll()  # the next frame does not wait again
+    assert len(worker.waits) == 2
+    nv.preview_wait = 0.0
+    clock[0] += 1.0
+    v.state.set_joint(16, (0.0, 0.0, 30.0))
+    v.submit_neural()
+    nv.late_poll()
+    assert len(worker.waits) == 2 and len(worker.jobs) == 6

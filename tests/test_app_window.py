@@ -118,7 +118,7 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     resolution in the render process (or thread), the CPU of each side measured, and after
     the last level the window idles again (a level's wake draws a frame, app/wake.py)."""
     proc, rep, _ = run_window(tiny_checkpoint, "bench:1:64:3", tmp_path, "--neural-worker",
-                              worker)
+                              worker, "--neural-preview-wait", "200")
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
     assert rep["neural_worker"] == worker and rep["errors"] == []
     assert (rep["render_pid"] != rep["window_pid"]) == (worker == "process")
@@ -131,6 +131,14 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     for r in rep["renders"]:
         assert [lv["level"] for lv in r["levels"]][-1] == 1
         assert r["render_cpu_share"] > 0 and r["ui_cpu_share"] > 0
+    # a pose frame after a pause waits for its preview (at most --neural-preview-wait
+    # from the change, here 200 ms, far more than the tiny model's preview needs) and
+    # shows it: the first level is on screen in the very frame that changed the pose.
+    # (The first render's pose can be followed by a second submission of its own.)
+    waited = [r for r in rep["renders"] if r["preview_wait"]]
+    assert len(waited) >= 2, [r["preview_wait"] for r in rep["renders"]]
+    assert all(r["preview_wait"][1] and 0 <= r["preview_wait"][0] < 200 for r in waited)
+    assert all(r["levels"][0]["on_screen_s"] == r["pose_frame_s"] for r in waited)
     # the levels' wakes leave the window idling
     assert rep["after_render"]["seconds"] >= 1.5 and rep["after_render"]["frames"] <= 6
     assert rep["idle"]["frames"] <= 4  # 1 s idle at 1 frame per second

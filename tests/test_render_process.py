@@ -271,3 +271,26 @@ def test_a_renderer_that_cannot_be_built_is_reported(factory):
     wait(lambda: not worker.busy)
     assert any(e.startswith("RuntimeError: no model here (") for e in worker.errors)
     worker.stop()
+
+
+def test_the_ui_can_wait_for_a_jobs_first_level():
+    """ProcessWorker.wait_for (the viewer's pose frame waiting for the preview,
+    NeuralView.late_poll): False once its timeout passes, True as soon as a level of the
+    job is delivered, and False at once when the job ends without one (an error)."""
+    worker = ProcessWorker(stalling_renderer)
+    try:
+        worker.submit(job(2))  # renders at once: the process is ready after it
+        wait(lambda: not worker.busy)
+        worker.submit(job(3))  # raises before any level
+        t0 = time.perf_counter()
+        assert not worker.wait_for(3, 30.0)
+        assert time.perf_counter() - t0 < 15 and not worker.busy
+        worker.submit(job(5))  # 1 s before its first level
+        t0 = time.perf_counter()
+        assert not worker.wait_for(5, 0.1)
+        assert 0.09 <= time.perf_counter() - t0 < 0.9
+        assert worker.wait_for(5, 30.0)
+        assert worker.latest.version == 5 and time.perf_counter() - t0 >= 0.5
+        assert worker.wait_for(4, 0.0)  # an older job's: the newer level counts
+    finally:
+        assert worker.stop()

@@ -365,3 +365,27 @@ def test_a_job_renders_with_its_own_march_settings():
     base = job(2, 32)
     list(render(RenderJob(2, base.pose, base.trans, base.camera, cheap), lambda: False))
     assert 0 < sum(evals) < 0.6 * own
+
+
+def test_the_ui_can_wait_for_a_jobs_first_level():
+    """ProgressiveWorker.wait_for: False once its timeout passes, True as soon as the
+    job's first level is delivered, False at once when the worker is idle."""
+    gate = threading.Event()
+
+    def render(job, cancelled):
+        gate.wait(10)
+        yield 8, np.zeros((2, 2, 3), np.float32), 0.001
+
+    worker = ProgressiveWorker(render)
+    try:
+        assert not worker.wait_for(1, 5.0)  # nothing submitted: no waiting
+        worker.submit(job(1))
+        t0 = time.perf_counter()
+        assert not worker.wait_for(1, 0.1)
+        assert 0.09 <= time.perf_counter() - t0 < 2
+        threading.Timer(0.2, gate.set).start()
+        assert worker.wait_for(1, 10.0) and worker.latest.version == 1
+        assert time.perf_counter() - t0 >= 0.25
+    finally:
+        gate.set()
+        assert worker.stop()
