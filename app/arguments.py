@@ -23,8 +23,12 @@ NEURAL_PROCESSES = min(2, os.cpu_count() or 1)
 
 #: milliseconds from a pose change (after a pause) that its frame waits, after its
 #: panels and before it is drawn, for the neural render's preview, so both reach the
-#: screen in one frame instead of the preview a frame later (app.panel_neural)
-NEURAL_PREVIEW_WAIT_MS = 30.0
+#: screen in one frame instead of the preview a frame later (app.panel_neural). In the
+#: 1280x800 window under llvmpipe on 2 cores the preview of a 256-px render arrived
+#: 17-34 ms after the change while the frame waited; with 30 ms about 1 render in 12
+#: missed the wait (then the preview shows a frame later, as without it), with 40 none
+#: of 24 (bench/viewer_ui.py, session 17)
+NEURAL_PREVIEW_WAIT_MS = 40.0
 #: the longest wait accepted: a frame held longer would feel like a stall
 PREVIEW_WAIT_MAX_MS = 200.0
 
