@@ -21,9 +21,10 @@ NEURAL_WORKERS = ("process", "thread")
 #: the UI idles while a level renders, so the second core is free then
 NEURAL_PROCESSES = min(2, os.cpu_count() or 1)
 
-#: milliseconds from a pose change (after a pause) that its frame waits, after its
-#: panels and before it is drawn, for the neural render's preview, so both reach the
-#: screen in one frame instead of the preview a frame later (app.panel_neural). In the
+#: milliseconds from a pose change (after a pause) that its frame waits, once ImGui drew
+#: it and before the swap (llvmpipe rasterises it meanwhile), for the neural render's
+#: preview, which is then drawn over the panel's image: both reach the screen in one
+#: frame instead of the preview a frame later (app.viewer.Viewer.before_swap). In the
 #: 1280x800 window under llvmpipe on 2 cores the preview of a 256-px render arrived
 #: 17-34 ms after the change while the frame waited; with 30 ms about 1 render in 12
 #: missed the wait (then the preview shows a frame later, as without it), with 40 none

@@ -226,6 +226,7 @@ class Driver:
         self.report["window"] = list(v.size)
         self.report["window_sample_buffers"] = v.window_sample_buffers
         self.report["view_blits"] = v.view_blits
+        self.report["preview_blits"] = v.preview_blits
         if v.neural is not None:
             self.report["worker_stopped"] = not v.neural.worker.alive
         if screenshot_path and shot is not None and shot.size:

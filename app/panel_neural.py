@@ -72,6 +72,8 @@ class NeuralView:
         self._playing = False
         #: where draw_neural_panel left room for the status line and the image (late_draw)
         self.canvas: dict | None = None
+        #: where late_draw put the image this frame: x0, y0, x1, y1 (None: not drawn)
+        self.image_rect: tuple[float, float, float, float] | None = None
 
     @property
     def busy(self) -> bool:
@@ -130,16 +132,38 @@ class NeuralView:
                 self._adapt_playback_level(frame)
 
     def late_poll(self) -> None:
-        """After the frame's panels, before it is drawn: take the newest level; if this
-        frame submitted a pose after a pause, first wait for that pose's preview until
-        ``preview_wait`` seconds after the submission (the 3D view's image is being
-        rasterised meanwhile)."""
-        pending, self._await = self._await, None
-        if pending is not None and pending[0] == self.version:
-            start = time.perf_counter()
-            came = self.worker.wait_for(pending[0], pending[1] - start)
-            self.waits.append((pending[0], time.perf_counter() - start, came))
+        """After the frame's panels, before ImGui draws: take the newest level, so one
+        that arrived while the frame was built is in it (:func:`late_draw`)."""
         self._take(self.worker.poll())
+
+    @property
+    def awaiting(self) -> bool:
+        """True when this frame submitted a pose after a pause whose preview is not shown
+        yet: :meth:`wait_preview` would wait for it."""
+        pending = self._await
+        return (pending is not None and pending[0] == self.version
+                and (self.frame is None or self.frame.version < pending[0]))
+
+    def cancel_wait(self) -> None:
+        """This frame does not wait for its preview (it shows a frame later)."""
+        self._await = None
+
+    def wait_preview(self) -> bool:
+        """After ImGui drew the frame, before the swap: if :attr:`awaiting`, wait for the
+        pose's preview until ``preview_wait`` seconds after its submission and take it.
+        True when a level of the pose was taken (the caller draws it over the frame)."""
+        pending, self._await = self._await, None
+        if pending is None or pending[0] != self.version:
+            return False
+        if self.frame is not None and self.frame.version >= pending[0]:
+            self.waits.append((pending[0], 0.0, True))  # it came while the frame was built
+            return False
+        start = time.perf_counter()
+        came = self.worker.wait_for(pending[0], pending[1] - start)
+        self.waits.append((pending[0], time.perf_counter() - start, came))
+        frame = self.worker.poll()
+        self._take(frame)
+        return frame is not None and frame.version >= pending[0]
 
     def _adapt_playback_level(self, frame: RenderFrame) -> None:
         if frame.elapsed < PLAYBACK_SECONDS / 2 and self.playback_level > 1:
@@ -287,6 +311,7 @@ def late_draw(viewer) -> None:
     if nv is None or nv.canvas is None:
         return
     canvas, nv.canvas = nv.canvas, None
+    nv.image_rect = None
     draw, playing = canvas["draw"], canvas["playing"]
     text = imgui.get_color_u32(imgui.Col_.text)
     draw.push_clip_rect(*canvas["clip"])
@@ -299,24 +324,27 @@ def late_draw(viewer) -> None:
                           f"the timeline is at {viewer.pose_label()}")
         line = nv.stale_line()
         if nv.texture is not None:
-            _draw_image(draw, nv, *canvas["image"], "" if playing else line)
+            nv.image_rect = _draw_image(draw, nv, *canvas["image"], "" if playing else line)
     finally:
         draw.pop_clip_rect()
     viewer.neural_stale_shown = line
     viewer.stale_log.append(line)
 
 
-def _draw_image(draw, nv, pos, avail, banner: str) -> None:
+def _draw_image(draw, nv, pos, avail, banner: str) -> tuple[float, float, float, float]:
     """The shown level scaled into ``avail`` at ``pos``, dimmed with ``banner`` on top
-    when stale."""
+    when stale; its rectangle (x0, y0, x1, y1)."""
     tw, th = nv.texture.size
     scale = min(avail.x / tw, avail.y / th) if avail.x > 0 and avail.y > 0 else 1.0
     end = imgui.ImVec2(pos.x + tw * scale, pos.y + th * scale)
     tint = imgui.get_color_u32(imgui.ImVec4(*(STALE_TINT if nv.stale else (1, 1, 1, 1))))
     draw.add_image(imgui.ImTextureRef(nv.texture.glo), pos, end, imgui.ImVec2(0, 0),
                    imgui.ImVec2(1, 1), tint)
-    if banner:
+    if banner:  # within the image, which a preview drawn before the swap covers wholly
+        draw.push_clip_rect(pos, end, True)
         draw.add_rect_filled(pos, imgui.ImVec2(end.x, pos.y + 22),
                              imgui.get_color_u32(imgui.ImVec4(0.0, 0.0, 0.0, 0.6)))
         draw.add_text(imgui.ImVec2(pos.x + 6, pos.y + 4),
                       imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), banner)
+        draw.pop_clip_rect()
+    return pos.x, pos.y, end.x, end.y

@@ -7,6 +7,10 @@ GUI (caption, legend, popups) is drawn over it. Under Mesa llvmpipe this is a co
 ImGui's textured, alpha-blended quad over the same pixels cost about 2 ms of rasterisation
 in every frame (bench/viewer_ui.py; a 520x700 view of a 1280x800 window).
 
+The neural render's preview is drawn the same way, scaled (:func:`image_rects`,
+:func:`blit_image`), over the frame ImGui drew, just before the swap
+(``Viewer.before_swap``).
+
 PyOpenGL is imported at the first copy, once the window has chosen its platform
 (app.window._choose_gl_platform).
 """
@@ -68,3 +72,31 @@ def blit_view(blit: ViewBlit, framebuffer_size: tuple[int, int],
                          GL.GL_NEAREST if tuple(scale) == (1.0, 1.0) else GL.GL_LINEAR)
     GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
     return True
+
+
+def image_rects(rect: tuple[float, float, float, float], texture_size: tuple[int, int],
+                framebuffer_size: tuple[int, int], scale: tuple[float, float] = (1.0, 1.0)):
+    """(src, dst) rectangles of ``glBlitFramebuffer`` that draw a whole texture (w, h) whose
+    row 0 is the image's top (as the neural render's levels are uploaded) into ``rect``
+    (x0, y0, x1, y1 in ImGui's coordinates); None when the rectangle is empty or not
+    wholly inside the window."""
+    sx, sy = scale
+    fw, fh = framebuffer_size
+    x0, y0 = round(rect[0] * sx), round(fh - rect[1] * sy)  # the image's top edge
+    x1, y1 = round(rect[2] * sx), round(fh - rect[3] * sy)  # its bottom edge
+    if x1 <= x0 or y0 <= y1 or x0 < 0 or y1 < 0 or x1 > fw or y0 > fh:
+        return None
+    tw, th = texture_size
+    return (0, 0, tw, th), (x0, y0, x1, y1)  # texture row 0 to the top: flipped
+
+
+def blit_image(fbo: int, rects) -> None:
+    """Draw ``rects`` (:func:`image_rects`) of framebuffer ``fbo`` into the window's,
+    filtered linearly."""
+    from OpenGL import GL
+
+    GL.glDisable(GL.GL_SCISSOR_TEST)
+    GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fbo)
+    GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, 0)
+    GL.glBlitFramebuffer(*rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+    GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)

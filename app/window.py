@@ -117,6 +117,7 @@ def _runner_params(viewer: Viewer, title: str):
     rp.callbacks.before_exit = viewer.before_exit
     rp.callbacks.pre_new_frame = viewer.pre_new_frame
     rp.callbacks.before_imgui_render = viewer.before_imgui_render
+    rp.callbacks.before_swap = viewer.before_swap
     return rp
 
 

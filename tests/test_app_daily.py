@@ -286,10 +286,11 @@ def test_a_pose_panel_edit_is_submitted_before_the_3d_view_draws():
 
 
 def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
-    """NeuralView.late_poll (called after the panels, before the frame is drawn): a pose
+    """NeuralView.wait_preview (Viewer.before_swap, after ImGui drew the frame): a pose
     submitted after a pause makes its frame wait for that job's first level, at most
-    ``preview_wait`` from the submission; poses streaming in (a dragged slider) never
-    make a frame wait, nor does ``preview_wait`` 0; the level then goes up in this frame."""
+    ``preview_wait`` from the submission, and take it; poses streaming in (a dragged
+    slider) never make a frame wait, nor does ``preview_wait`` 0, a preview that came
+    while the frame was built (late_poll took it) or a cancelled wait (a popup)."""
     import app.panel_neural as pn
     from app.panel_neural import NeuralView
     from app.state import load_viewer_data
@@ -334,27 +335,57 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     v.neural = nv = NeuralView(Context(), None, None, worker=worker)
     nv.preview_wait = 0.03
     v.submit_neural()  # the first pose: after a pause
-    nv.late_poll()
+    nv.late_poll()  # before ImGui draws: nothing has come yet
+    assert nv.awaiting and nv.frame is None
+    assert nv.wait_preview()  # before the swap: waits, then takes the preview
     assert worker.waits == [(nv.version, pytest.approx(0.03))]
     assert nv.frame.version == nv.version and nv.texture.size == (6, 4)  # shown this frame
-    assert nv.waits[-1][0] == nv.version and nv.waits[-1][2]
+    assert nv.waits[-1][0] == nv.version and nv.waits[-1][2] and not nv.awaiting
     for step in range(3):  # a dragged slider: a pose every 20 ms
         clock[0] += 0.02
         v.state.set_joint(16, (0.0, 0.0, -10.0 * (step + 1)))
         v.submit_neural()
         nv.late_poll()
+        assert not nv.awaiting and not nv.wait_preview()
     assert len(worker.waits) == 1 and len(worker.jobs) == 4
     clock[0] += 0.3  # the slider rests, then moves again
     v.state.set_joint(16, (0.0, 0.0, 20.0))
     v.submit_neural()
     clock[0] += 0.01  # the frame's panels took 10 ms: 20 ms of the wait are left
-    nv.late_poll()
+    assert nv.awaiting and nv.wait_preview()
     assert worker.waits[-1] == (nv.version, pytest.approx(0.02))
-    nv.late_poll()  # the next frame does not wait again
+    assert not nv.wait_preview()  # the next frame does not wait again
     assert len(worker.waits) == 2
+    clock[0] += 1.0  # a preview that comes while the frame is built: no wait, counted
+    v.state.set_joint(16, (0.0, 0.0, 25.0))
+    v.submit_neural()
+    worker.frame = RenderFrame(nv.version, 8, np.zeros((4, 6, 3), np.float32), 0.01, 0.01)
+    nv.late_poll()
+    assert not nv.awaiting and not nv.wait_preview()
+    assert len(worker.waits) == 2 and nv.waits[-1] == (nv.version, 0.0, True)
+    clock[0] += 1.0  # a popup could lie over the image: the frame does not wait
+    v.state.set_joint(16, (0.0, 0.0, 27.0))
+    v.submit_neural()
+    nv.cancel_wait()
+    assert not nv.awaiting and not nv.wait_preview() and len(worker.waits) == 2
     nv.preview_wait = 0.0
     clock[0] += 1.0
     v.state.set_joint(16, (0.0, 0.0, 30.0))
     v.submit_neural()
-    nv.late_poll()
-    assert len(worker.waits) == 2 and len(worker.jobs) == 6
+    assert not nv.awaiting and not nv.wait_preview()
+    assert len(worker.waits) == 2 and len(worker.jobs) == 8
+
+
+def test_the_preview_blit_rectangles():
+    """app.view_blit.image_rects: the whole texture, its row 0 (the image's top) to the
+    rectangle's top in the window's bottom-up rows, scaled for HiDPI; nothing when the
+    rectangle is empty or leaves the window."""
+    from app.view_blit import image_rects
+
+    src, dst = image_rects((10.0, 20.0, 110.0, 70.0), (32, 17), (1280, 800))
+    assert src == (0, 0, 32, 17) and dst == (10, 780, 110, 730)  # flipped: y0 > y1
+    assert image_rects((10.0, 20.0, 110.0, 70.0), (32, 17), (2560, 1600), (2.0, 2.0))[1] == \
+        (20, 1560, 220, 1460)
+    assert image_rects((10.0, 20.0, 10.0, 70.0), (32, 17), (1280, 800)) is None
+    assert image_rects((1200.0, 20.0, 1300.0, 70.0), (32, 17), (1280, 800)) is None
+    assert image_rects((10.0, 780.0, 110.0, 810.0), (32, 17), (1280, 800)) is None

@@ -139,6 +139,9 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     assert len(waited) >= 2, [r["preview_wait"] for r in rep["renders"]]
     assert all(r["preview_wait"][1] and 0 <= r["preview_wait"][0] < 200 for r in waited)
     assert all(r["levels"][0]["on_screen_s"] == r["pose_frame_s"] for r in waited)
+    # those that came after ImGui drew the frame were drawn over it just before the swap
+    # (as were other pauses' previews: the bench's resolution change, its dragging's start)
+    assert rep["preview_blits"] >= sum(1 for r in waited if r["preview_wait"][0] > 0)
     # the levels' wakes leave the window idling
     assert rep["after_render"]["seconds"] >= 1.5 and rep["after_render"]["frames"] <= 6
     assert rep["idle"]["frames"] <= 4  # 1 s idle at 1 frame per second
