@@ -174,7 +174,7 @@ class BenchDriver(Driver):
         done = r["levels"] and r["levels"][-1]["level"] == 1 and not nv.busy
         if done or now - r["start"] > 600:
             r.update(self._ui_share(self._mark))
-            # the pose frame's wait for the preview (NeuralView.late_poll): ms, whether it came
+            # the pose frame's wait for the preview (NeuralView.wait_preview): ms, whether it came
             r["preview_wait"] = next(([round(s * 1000, 2), came] for v, s, came in nv.waits
                                       if v == nv.version), None)
             r["frames"] = self.count - r.pop("first_frame")

@@ -133,8 +133,13 @@ class NeuralView:
 
     def late_poll(self) -> None:
         """After the frame's panels, before ImGui draws: take the newest level, so one
-        that arrived while the frame was built is in it (:func:`late_draw`)."""
+        that arrived while the frame was built is in it (:func:`late_draw`). A preview this
+        frame was to wait for that came so counts as a wait of 0 s."""
         self._take(self.worker.poll())
+        pending = self._await
+        if pending is not None and self.frame is not None and self.frame.version >= pending[0]:
+            self.waits.append((pending[0], 0.0, True))
+            self._await = None
 
     @property
     def awaiting(self) -> bool:
@@ -152,12 +157,10 @@ class NeuralView:
         """After ImGui drew the frame, before the swap: if :attr:`awaiting`, wait for the
         pose's preview until ``preview_wait`` seconds after its submission and take it.
         True when a level of the pose was taken (the caller draws it over the frame)."""
+        if not self.awaiting:
+            self._await = None
+            return False
         pending, self._await = self._await, None
-        if pending is None or pending[0] != self.version:
-            return False
-        if self.frame is not None and self.frame.version >= pending[0]:
-            self.waits.append((pending[0], 0.0, True))  # it came while the frame was built
-            return False
         start = time.perf_counter()
         came = self.worker.wait_for(pending[0], pending[1] - start)
         self.waits.append((pending[0], time.perf_counter() - start, came))

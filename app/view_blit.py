@@ -63,14 +63,7 @@ def blit_view(blit: ViewBlit, framebuffer_size: tuple[int, int],
     rects = blit_rects(blit, framebuffer_size, scale)
     if rects is None:
         return False
-    from OpenGL import GL
-
-    GL.glDisable(GL.GL_SCISSOR_TEST)
-    GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, blit.fbo)
-    GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, 0)
-    GL.glBlitFramebuffer(*rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT,
-                         GL.GL_NEAREST if tuple(scale) == (1.0, 1.0) else GL.GL_LINEAR)
-    GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+    blit_image(blit.fbo, rects, linear=tuple(scale) != (1.0, 1.0))
     return True
 
 
@@ -90,13 +83,40 @@ def image_rects(rect: tuple[float, float, float, float], texture_size: tuple[int
     return (0, 0, tw, th), (x0, y0, x1, y1)  # texture row 0 to the top: flipped
 
 
-def blit_image(fbo: int, rects) -> None:
-    """Draw ``rects`` (:func:`image_rects`) of framebuffer ``fbo`` into the window's,
-    filtered linearly."""
+def blit_image(fbo: int, rects, linear: bool = True) -> None:
+    """Copy the (src, dst) ``rects`` (:func:`blit_rects`, :func:`image_rects`) of
+    framebuffer ``fbo`` into the window's (GL framebuffer 0), filtered linearly or not."""
     from OpenGL import GL
 
     GL.glDisable(GL.GL_SCISSOR_TEST)
     GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fbo)
     GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, 0)
-    GL.glBlitFramebuffer(*rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+    GL.glBlitFramebuffer(*rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT,
+                         GL.GL_LINEAR if linear else GL.GL_NEAREST)
     GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+
+def warm_image_blit(ctx, colour: tuple[float, float, float]) -> None:
+    """Blits as ``Viewer.before_swap`` draws a preview (an RGB texture, scaled, flipped,
+    linear) of ``colour`` (the window's background) onto 2x3 pixels of the window's
+    bottom-left corner, from textures whose sides are and are not powers of two (Mesa
+    llvmpipe compiles a sampler per combination): called in the first frame, so that code
+    is compiled there (the first blit of a preview took 30-40 ms, later ones 1.3 ms), not
+    in a pose's frame. ``ctx``: the window's moderngl context."""
+    texel = bytes(round(255 * max(0.0, min(1.0, c))) for c in colour)
+    for w, h in ((4, 4), (4, 3), (3, 4), (3, 3)):
+        texture = ctx.texture((w, h), 3, texel * (w * h), alignment=1)
+        fbo = ctx.framebuffer(color_attachments=[texture])
+        blit_image(fbo.glo, ((0, 0, w, h), (0, 3, 2, 0)))
+        fbo.release()
+        texture.release()
+    ctx.screen.use()
+
+
+def window_framebuffer() -> tuple[tuple[int, int], tuple[float, float]]:
+    """(the window's framebuffer size in pixels, ImGui's display framebuffer scale)."""
+    from imgui_bundle import imgui
+
+    io = imgui.get_io()
+    scale = (io.display_framebuffer_scale.x, io.display_framebuffer_scale.y)
+    return (round(io.display_size.x * scale[0]), round(io.display_size.y * scale[1])), scale

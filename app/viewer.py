@@ -21,7 +21,14 @@ from app.panel_pose import load_sequence, tick_sequence
 from app.panel_vocab import ThumbnailCache
 from app.scene import SceneOptions, SceneRenderer
 from app.state import ViewerState, load_viewer_data
-from app.view_blit import ViewBlit, blit_image, blit_view, image_rects
+from app.view_blit import (
+    ViewBlit,
+    blit_image,
+    blit_view,
+    image_rects,
+    warm_image_blit,
+    window_framebuffer,
+)
 from app.wake import ui_waker
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import follow_camera, march_settings
@@ -63,7 +70,7 @@ class Viewer:
         self.view_blit: ViewBlit | None = None  # where the 3D view's image goes this frame
         self.view_blits = 0  # frames whose 3D view was copied into the window
         self.preview_blits = 0  # frames whose awaited preview was drawn just before the swap
-        self._warmed = False  # the preview blit's code compiled (_warm_preview_blit)
+        self._warmed = False  # the preview blit's code compiled (warm_image_blit)
         self.frame_ms: deque[float] = deque(maxlen=600)  # wall time between frames
         self.frame_cpu_ms: deque[float] = deque(maxlen=600)  # of it, this thread's CPU time
         self.panel_cpu_ms: dict[str, float] = {}  # per panel: UI-thread CPU of its last draw
@@ -95,23 +102,6 @@ class Viewer:
                 self.neural.resolution = int(self.neural_resolution)
             if self.neural_preview_wait is not None:
                 self.neural.preview_wait = self.neural_preview_wait
-
-    def _warm_preview_blit(self) -> None:
-        """In the first frame, blits as before_swap draws a preview (an RGB texture, scaled,
-        flipped, linear) of the window's background colour onto 2x3 pixels of its
-        bottom-left corner, from textures whose sides are and are not powers of two (Mesa
-        llvmpipe compiles a sampler per combination): that code is compiled here (the
-        first blit of a preview took 30-40 ms, later ones 1.3 ms), not in a pose's frame."""
-        self._warmed = True
-        colour = hello_imgui.get_runner_params().imgui_window_params.background_color
-        texel = bytes(round(255 * max(0.0, min(1.0, c))) for c in (colour.x, colour.y, colour.z))
-        for w, h in ((4, 4), (4, 3), (3, 4), (3, 3)):
-            texture = self.ctx.texture((w, h), 3, texel * (w * h), alignment=1)
-            fbo = self.ctx.framebuffer(color_attachments=[texture])
-            blit_image(fbo.glo, ((0, 0, w, h), (0, 3, 2, 0)))
-            fbo.release()
-            texture.release()
-        self.ctx.screen.use()
 
     def start_neural_worker(self) -> None:
         """Start the neural render's worker (once; nothing without a model). The window
@@ -163,10 +153,7 @@ class Viewer:
             self.neural.late_poll()
             late_draw(self)
         if self.view_blit is not None:
-            io = imgui.get_io()
-            scale = (io.display_framebuffer_scale.x, io.display_framebuffer_scale.y)
-            size = (round(io.display_size.x * scale[0]), round(io.display_size.y * scale[1]))
-            self.view_blits += blit_view(self.view_blit, size, scale)
+            self.view_blits += blit_view(self.view_blit, *window_framebuffer())
             self.ctx.screen.use()  # moderngl's idea of the bound framebuffer, again
 
     def before_swap(self) -> None:
@@ -177,7 +164,9 @@ class Viewer:
         could lie over the image)."""
         nv = self.neural
         if nv is not None and not self._warmed:
-            self._warm_preview_blit()
+            colour = hello_imgui.get_runner_params().imgui_window_params.background_color
+            warm_image_blit(self.ctx, (colour.x, colour.y, colour.z))
+            self._warmed = True
         if nv is None or not nv.awaiting:
             return
         rect = nv.image_rect
@@ -189,10 +178,7 @@ class Viewer:
         GL.glFlush()  # the frame so far rasterises while the render process finishes
         if not nv.wait_preview():
             return
-        io = imgui.get_io()
-        scale = (io.display_framebuffer_scale.x, io.display_framebuffer_scale.y)
-        size = (round(io.display_size.x * scale[0]), round(io.display_size.y * scale[1]))
-        rects = image_rects(rect, nv.texture.size, size, scale)
+        rects = image_rects(rect, nv.texture.size, *window_framebuffer())
         if rects is not None:
             fbo = self.ctx.framebuffer(color_attachments=[nv.texture])
             blit_image(fbo.glo, rects)
