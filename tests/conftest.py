@@ -50,16 +50,6 @@ def toy_arrays():
 
 # --- torch caches: pretrained weights present or absent, without touching the user's ---
 
-def torch_home_with(root, state_dicts: dict):
-    """``root`` as a TORCH_HOME holding ``{file name: state dict}`` in hub/checkpoints/."""
-    import torch
-
-    (root / "hub" / "checkpoints").mkdir(parents=True, exist_ok=True)
-    for name, state in state_dicts.items():
-        torch.save(state, root / "hub" / "checkpoints" / name)
-    return root
-
-
 @pytest.fixture
 def empty_torch_home(tmp_path, monkeypatch):
     """TORCH_HOME set to an empty folder, with the once-per-process log memories cleared
@@ -71,3 +61,41 @@ def empty_torch_home(tmp_path, monkeypatch):
     monkeypatch.setattr(weights, "_logged", set())
     monkeypatch.setattr(encoder, "_fallback_logged", set())
     return tmp_path
+
+
+# --- shared scenes: the posed default body with its analytic field, a tiny synthetic capture ---
+
+@pytest.fixture(scope="module")
+def body():
+    """Posed default body ('walk'), its analytic field, shell and a 64² synthetic view."""
+    import torch  # imported here: conftest stays light for the tests that need neither
+    from render_cases import DELTA
+
+    from texvocab.body import default_body
+    from texvocab.body.poses import preset
+    from texvocab.capture.synth import SynthSettings, default_cameras
+    from texvocab.render import ShellGeometry
+    from texvocab.render.analytic import MeshSDFField
+
+    model = default_body()
+    pose, trans = preset("walk")
+    out = model.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
+    v, f = out.vertices[0], model.faces
+    return {"v": v, "f": f, "joints": out.joints[0],
+            "field": MeshSDFField(v, f, beta=0.003, voxel=0.015),
+            "shell": ShellGeometry.build(v, f, DELTA),
+            "camera": default_cameras(SynthSettings())[1].scaled(0.25)}
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """A tiny synthetic capture: 5 frames (4 train) of walk and arm raise, 6 ring views, 64²."""
+    from texvocab.body import default_body
+    from texvocab.capture.motion import make_sequence
+    from texvocab.capture.synth import SynthSettings, synthesize
+
+    poses, trans = make_sequence([("walk", 3), ("arm_raise", 2)], seed=5)
+    root = synthesize(tmp_path_factory.mktemp("e2e") / "cap", poses, trans, 4, default_body(),
+                      SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=256),
+                      progress=False)
+    return root

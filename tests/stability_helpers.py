@@ -1,4 +1,4 @@
-"""Builders and checks shared by tests/test_stability.py: a small real avatar (default
+"""Builders and checks shared by tests/pipeline/test_stability.py: a small real avatar (default
 body, a vocabulary of a few random training poses, 32² texture maps, a small encoder and
 field), cameras around a posed body, and finiteness checks for values and gradients."""
 from __future__ import annotations

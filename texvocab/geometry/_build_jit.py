@@ -2,7 +2,7 @@
 ``cache`` keeps the machine code in ``__pycache__``): the faces' centroids, the slot of
 each face by a top-down median split, the per-slot face table with the box hierarchy,
 and the pseudo-normals of faces, edges and vertices. The same arithmetic, in the same
-order, as the numpy formulation each replaced (kept in tests/test_surface_build.py as the
+order, as the numpy formulation each replaced (kept in tests/geometry/test_surface_build.py as the
 reference). The median split selects each half instead of sorting the segment (ties by
 face id instead of by the previous order, a leaf's faces by id): where no two centroids
 share a coordinate (any posed body), every node holds the faces it held with the sort

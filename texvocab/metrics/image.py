@@ -97,7 +97,7 @@ def ssim(pred: ArrayLike, gt: ArrayLike) -> float:
     from the border, i.e. scikit-image's ``structural_similarity(pred, gt,
     gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1,
     channel_axis=-1)`` computed in float64 (checked against scikit-image 0.26.0 in
-    tests/test_metrics.py). Only windows that lie inside the image enter the mean, so
+    tests/metrics/test_metrics.py). Only windows that lie inside the image enter the mean, so
     the border handling of the filter does not matter. scikit-image's *defaults*
     (7x7 uniform window, sample covariance) and its float32 path give other numbers,
     and they have changed between versions (0.19 vs 0.23): quote this convention.

@@ -4,9 +4,8 @@ import dataclasses
 
 import pytest
 import torch
+from render_cases import GUIDED, SHELL, psnr
 
-from tests.test_guided import GUIDED, SHELL
-from tests.test_render import body, psnr  # noqa: F401
 from texvocab.render import render_image
 from texvocab.render.analytic import MeshResidualField
 from texvocab.render.band import composite_linear_sdf
@@ -16,13 +15,13 @@ DENSE = dataclasses.replace(SHELL, coarse_samples=96, fine_samples=48, early_sto
 MARCHED = dataclasses.replace(GUIDED, residual_rays=False, band_newton=False)
 
 
-def renders(body, field, *settings):  # noqa: F811
+def renders(body, field, *settings):
     with torch.no_grad():
         return [render_image(field, body["camera"], body["v"], body["f"], s,
                              shell=body["shell"]) for s in settings]
 
 
-def test_smooth_residual_rays_match_a_dense_march_with_few_evaluations(body):  # noqa: F811
+def test_smooth_residual_rays_match_a_dense_march_with_few_evaluations(body):
     """A residual of 2 mm varying over 30 cm (the avatar's kind): the silhouette
     fringe, grazing hits and occlusion edges take 3 evaluations each instead of a
     march, the band 3 instead of 5, and the image stays within 50 dB of a dense march."""
@@ -40,7 +39,7 @@ def test_smooth_residual_rays_match_a_dense_march_with_few_evaluations(body):  #
     assert float((guided.rgb - dense.rgb).abs()[band].max()) < 0.05
 
 
-def test_rough_residual_rays_are_marched(body):  # noqa: F811
+def test_rough_residual_rays_are_marched(body):
     """A residual of 1 cm varying over 3 cm breaks the slowly-varying premise: the
     residuals at the evaluations disagree by more than ``residual_tolerance`` β on most
     rays, which are then marched, so the image stays as close to the dense march as the
@@ -53,13 +52,13 @@ def test_rough_residual_rays_are_marched(body):  # noqa: F811
     assert psnr(guided.rgb, dense.rgb) > psnr(marched.rgb, dense.rgb) - 1.0
 
 
-def test_residual_step_changes_the_quadrature(body):  # noqa: F811
+def test_residual_step_changes_the_quadrature(body):
     field = MeshResidualField(body["v"], body["f"], beta=0.003)
     base, fine = renders(body, field, GUIDED, dataclasses.replace(GUIDED, residual_step=0.5))
     assert not torch.equal(base.rgb, fine.rgb) and psnr(base.rgb, fine.rgb) > 45
 
 
-def test_residual_spread_moves_the_evaluations(body):  # noqa: F811
+def test_residual_spread_moves_the_evaluations(body):
     field = MeshResidualField(body["v"], body["f"], beta=0.003)
     base, wide = renders(body, field, GUIDED, dataclasses.replace(GUIDED, residual_spread=0.3))
     assert not torch.equal(base.rgb, wide.rgb) and psnr(base.rgb, wide.rgb) > 40
@@ -101,7 +100,7 @@ def test_composite_without_the_front_part_ignores_a_flat_first_interval():
 
 
 @pytest.mark.parametrize("where", ["behind", "grazing"])
-def test_residual_rays_stay_finite_from_inside_and_at_grazing_views(body, where):  # noqa: F811
+def test_residual_rays_stay_finite_from_inside_and_at_grazing_views(body, where):
     """Rays that start inside the body or graze it along a limb: finite, in range."""
     import numpy as np
 

@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 import torch
 
-from tests.test_render import body  # noqa: F401
 from texvocab.render import ShellGeometry
 from texvocab.render._balls_jit import surface_balls
 from texvocab.render.shell import _bounding_balls, surface_samples
@@ -16,7 +15,7 @@ def reference(v, f, spacing, width):
 
 
 @pytest.mark.parametrize("spacing,width", [(0.0075, 0.025), (0.005, 0.04), (0.02, 0.01)])
-def test_compiled_balls_are_the_binned_samples_balls(body, spacing, width):  # noqa: F811
+def test_compiled_balls_are_the_binned_samples_balls(body, spacing, width):
     v, f = body["v"].double().numpy(), body["f"].numpy()
     got, want = surface_balls(v, f, spacing, width), reference(v, f, spacing, width)
     assert got[0].shape == want[0].shape
@@ -36,7 +35,7 @@ def test_compiled_balls_on_a_random_mesh_with_large_and_degenerate_faces():
         assert np.allclose(got[0], want[0], atol=1e-12) and np.allclose(got[1], want[1], atol=1e-12)
 
 
-def test_too_many_cells_bins_sparsely(body, monkeypatch):  # noqa: F811
+def test_too_many_cells_bins_sparsely(body, monkeypatch):
     import texvocab.render._balls_jit as jit
 
     v, f = body["v"].double().numpy(), body["f"].numpy()
@@ -45,7 +44,7 @@ def test_too_many_cells_bins_sparsely(body, monkeypatch):  # noqa: F811
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 
-def test_a_balls_only_shell_bounds_the_image_as_the_full_one(body):  # noqa: F811
+def test_a_balls_only_shell_bounds_the_image_as_the_full_one(body):
     v, f, cam = body["v"], body["f"], body["camera"]
     full = ShellGeometry.build(v, f, 0.025, 0.015, exact=False)
     balls = ShellGeometry.build(v, f, 0.025, 0.015, exact=False, grid=False)

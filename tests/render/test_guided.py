@@ -6,15 +6,11 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from render_cases import GUIDED, SHELL, looking_away, psnr
 
-from tests.test_render import DELTA, body, looking_away, psnr  # noqa: F401
 from texvocab.capture.camera import Camera
-from texvocab.render import MarchSettings, render_image
+from texvocab.render import render_image
 from texvocab.render.band import composite_linear_sdf, interval_optical_depth
-
-SHELL = MarchSettings(shell_width=DELTA, coarse_samples=36, fine_samples=16,
-                      early_stop_eps=1e-4)
-GUIDED = dataclasses.replace(SHELL, guide="raster")
 
 
 def density(s: torch.Tensor, beta: float) -> torch.Tensor:
@@ -65,7 +61,7 @@ def test_closed_form_compositing_matches_dense_sampling_of_a_plane():
     assert float(depth) == pytest.approx(float((w * u).sum()), abs=2e-3)
 
 
-def test_guided_matches_the_shell_marcher_with_fewer_evaluations(body):  # noqa: F811
+def test_guided_matches_the_shell_marcher_with_fewer_evaluations(body):
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
     with torch.no_grad():
         shell = render_image(field, cam, v, f, SHELL, shell=body["shell"])
@@ -83,7 +79,7 @@ def test_guided_matches_the_shell_marcher_with_fewer_evaluations(body):  # noqa:
     assert (guided.rgb[band] - shell.rgb[band]).abs().max() < 0.05
 
 
-def test_guided_rays_that_miss_everything_cost_nothing(body):  # noqa: F811
+def test_guided_rays_that_miss_everything_cost_nothing(body):
     bg = (0.2, 0.4, 0.6)
     result = render_image(body["field"], looking_away(body["camera"]), body["v"], body["f"],
                           GUIDED, background=bg)
@@ -92,7 +88,7 @@ def test_guided_rays_that_miss_everything_cost_nothing(body):  # noqa: F811
 
 
 @pytest.mark.parametrize("where", ["inside", "surface_in"])
-def test_guided_camera_inside_the_body_is_finite(body, where):  # noqa: F811
+def test_guided_camera_inside_the_body_is_finite(body, where):
     v, f = body["v"], body["f"]
     if where == "inside":
         centre, R = body["joints"][0].double().numpy(), np.eye(3)
@@ -118,7 +114,7 @@ def test_guided_camera_inside_the_body_is_finite(body, where):  # noqa: F811
     assert all(torch.isfinite(img).all() for _, img, _ in levels)
 
 
-def test_guided_progressive_levels_of_rays_that_all_miss(body):  # noqa: F811
+def test_guided_progressive_levels_of_rays_that_all_miss(body):
     from texvocab.render import progressive_render
 
     bg = (0.2, 0.4, 0.6)
@@ -128,7 +124,7 @@ def test_guided_progressive_levels_of_rays_that_all_miss(body):  # noqa: F811
     assert torch.equal(levels[-1][1], torch.tensor(bg).expand(64, 64, 3))
 
 
-def test_unknown_guide_is_refused(body):  # noqa: F811
+def test_unknown_guide_is_refused(body):
     with pytest.raises(ValueError, match="guide"):
         render_image(body["field"], body["camera"], body["v"], body["f"],
                      dataclasses.replace(SHELL, guide="mesh"))
@@ -146,7 +142,7 @@ def test_guide_is_a_render_knob_that_training_never_uses():
         Settings(guide="mesh")
 
 
-def test_a_one_point_field_call_works(body):  # noqa: F811
+def test_a_one_point_field_call_works(body):
     """The guided marcher and the viewer's smallest levels call the field with single
     points (the viewer used to pad such calls)."""
     field = body["field"]
@@ -161,7 +157,7 @@ def test_a_one_point_field_call_works(body):  # noqa: F811
                                         ("band_leftover", 1e-6), ("fallback_segment", 64),
                                         ("fallback_scout", None), ("residual_rays", False),
                                         ("residual_tolerance", 0.1), ("band_newton", False)])
-def test_every_guided_knob_changes_the_render(body, knob, value):  # noqa: F811
+def test_every_guided_knob_changes_the_render(body, knob, value):
     """Each documented knob of the guided marcher changes what it evaluates (the ones
     that only act on the 4-sample band or on marched rays, with those in use)."""
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
@@ -177,7 +173,7 @@ def test_every_guided_knob_changes_the_render(body, knob, value):  # noqa: F811
     assert psnr(other.rgb, base.rgb) > 35  # a trade, not a different image
 
 
-def test_guided_progressive_levels_render_each_pixel_once(body):  # noqa: F811
+def test_guided_progressive_levels_render_each_pixel_once(body):
     """Levels are the full image's pixel grids [::L, ::L]; after the preview they cost
     one full render together (same field evaluations) and the last level is that render.
     The preview (its own camera of every 8th pixel, fallback rays at their probe's
@@ -232,7 +228,7 @@ def test_level_owners_split_each_level_once_and_give_the_preview_to_shard_0():
 
 
 @pytest.mark.parametrize("guide", ["raster", "shell"])
-def test_shards_together_render_the_image_of_one_render(body, guide):  # noqa: F811
+def test_shards_together_render_the_image_of_one_render(body, guide):
     """Two shards of a view (the viewer's two render processes), merged by their owned
     pixels, give the progressive render's levels."""
     from texvocab.render import progressive_render, progressive_shard

@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 from PIL import Image
-from test_pose_files import amass_file
+from pose_file_cases import amass_file
 from tiny_runs import smallest_run
 
 from texvocab.pipeline.clip import read_video_info

@@ -13,9 +13,8 @@ import pytest
 import scipy.ndimage as ndi
 import torch
 import trimesh
+from render_cases import DELTA, looking_away, psnr
 
-from texvocab.body import default_body
-from texvocab.body.poses import preset
 from texvocab.capture.camera import Camera
 from texvocab.capture.synth import SynthSettings, default_cameras
 from texvocab.geometry.raster import rasterize_mesh
@@ -35,29 +34,9 @@ from texvocab.render import (
     sample_pdf,
     trace_path,
 )
-from texvocab.render.analytic import MeshSDFField, SphereField
+from texvocab.render.analytic import SphereField
 from texvocab.render.samples import midpoint_intervals, stratified_positions
 from texvocab.render.shell import _bounded_edt2
-
-DELTA = 0.04
-
-
-def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
-    mse = float(((a - b) ** 2).mean())
-    return float("inf") if mse == 0 else -10 * np.log10(mse)
-
-
-@pytest.fixture(scope="module")
-def body():
-    """Posed default body ('walk'), its analytic field, shell and a 64² synthetic view."""
-    model = default_body()
-    pose, trans = preset("walk")
-    out = model.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
-    v, f = out.vertices[0], model.faces
-    return {"v": v, "f": f, "joints": out.joints[0],
-            "field": MeshSDFField(v, f, beta=0.003, voxel=0.015),
-            "shell": ShellGeometry.build(v, f, DELTA),
-            "camera": default_cameras(SynthSettings())[1].scaled(0.25)}
 
 
 @pytest.fixture(scope="module")
@@ -69,12 +48,6 @@ def sphere():
     K = np.array([[100.0, 0, 23.5], [0, 100.0, 23.5], [0, 0, 1]])
     camera = Camera(K, np.eye(3), np.array([0.0, 0.0, 2.0]), 48, 48)
     return {"v": v, "f": f, "shell": ShellGeometry.build(v, f, DELTA), "camera": camera}
-
-
-def looking_away(camera: Camera) -> Camera:
-    """The same camera centre, turned by 180° about its y axis."""
-    R = np.diag([-1.0, 1.0, -1.0]) @ camera.R
-    return Camera(camera.K, R, -R @ camera.center, camera.width, camera.height)
 
 
 # --- quadrature --------------------------------------------------------------------------

@@ -7,10 +7,9 @@ import dataclasses
 
 import pytest
 import torch
+from render_cases import MARCH, psnr, rays_of
+from train_cases import tiny_settings
 
-from tests.test_band import MARCH, rays_of
-from tests.test_render import DELTA, body, psnr  # noqa: F401
-from tests.test_train import capture, tiny_settings  # noqa: F401
 from texvocab.capture import open as open_capture
 from texvocab.errors import TexvocabError
 from texvocab.geometry.surface import SurfaceIndex
@@ -23,11 +22,11 @@ from texvocab.render.residual import newton_band, render_residual
 OLD_BAND = dataclasses.replace(MARCH, band_newton=False)
 
 
-def _index(body):  # noqa: F811
+def _index(body):
     return SurfaceIndex(body["v"], body["f"])
 
 
-def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):  # noqa: F811
+def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
     field = body["field"]
     with torch.no_grad():
@@ -52,7 +51,7 @@ def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):  # noqa: F
     assert (resid.opacity - ref.opacity).abs().max() < 0.15
 
 
-def test_residual_rays_carry_gradients_to_the_colour_and_beta(body):  # noqa: F811
+def test_residual_rays_carry_gradients_to_the_colour_and_beta(body):
     """Only the rays that are not band rays (passing close, grazing, failed bands): the
     colour's gradient matches the marcher's, and β gets one."""
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
@@ -76,7 +75,7 @@ def test_residual_rays_carry_gradients_to_the_colour_and_beta(body):  # noqa: F8
     assert abs(float(gb) - float(mb)) < 0.1 * abs(float(mb))
 
 
-def test_per_ray_origins_give_what_one_origin_gives(body):  # noqa: F811
+def test_per_ray_origins_give_what_one_origin_gives(body):
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
     field = body["field"]
     band = torch.nonzero(torch.isfinite(t_band)).squeeze(1)[:100]
@@ -98,7 +97,7 @@ def test_per_ray_origins_give_what_one_origin_gives(body):  # noqa: F811
     assert one[3].any() and r_one[3].any()
 
 
-def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):  # noqa: F811
+def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):
     o, d, near, far, t_band, cos, _ = rays_of(body, body["camera"])
     keep = torch.isfinite(t_band)
     o, d, near, far, t_band, cos = (x[keep] for x in (o, d, near, far, t_band, cos))
@@ -125,7 +124,7 @@ def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):  # noq
 
 @pytest.mark.parametrize("knobs", [{}, {"train_residual": "hits"}, {"train_residual": "off"},
                                    {"train_residual": "off", "train_band_newton": False}])
-def test_training_uses_residual_and_newton_rays_by_their_knobs(capture, tmp_path, knobs):  # noqa: F811
+def test_training_uses_residual_and_newton_rays_by_their_knobs(capture, tmp_path, knobs):
     cap = open_capture(capture)
     trainer = Trainer(cap, tiny_settings(iterations=3, **knobs), tmp_path / "run",
                       progress=False)
@@ -157,7 +156,7 @@ def test_old_runs_marched_and_used_the_five_sample_band():
         Settings(train_residual="some")
 
 
-def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):  # noqa: F811
+def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):
     cap = open_capture(capture)
     shells = {}
     for voxel in (0.01, 0.015):

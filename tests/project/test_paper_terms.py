@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
-from conftest import torch_home_with
-from test_train import capture, tiny_settings  # noqa: F401 - module fixture reused
+from train_cases import tiny_settings
+from weights_cases import torch_home_with
 
 from texvocab.capture import open as open_capture
 from texvocab.errors import AssetError, TexvocabError
@@ -32,7 +32,7 @@ def _field_grads(trainer, loss):
                       for p, g in zip(params, grads, strict=True)])
 
 
-def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, tmp_path,  # noqa: F811
+def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, tmp_path,
                                                                       empty_torch_home):
     cap = open_capture(capture)
     s = tiny_settings(perceptual="inception", lambda_perceptual=1.0, patch_size=16)
@@ -54,7 +54,7 @@ def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, 
     assert (g_on - g_off).abs().max() > 0.1 * g_perc.abs().max()
 
 
-def test_perceptual_choice_is_logged_and_zero_weight_turns_it_off(capture, tmp_path,  # noqa: F811
+def test_perceptual_choice_is_logged_and_zero_weight_turns_it_off(capture, tmp_path,
                                                                  empty_torch_home, caplog):
     cap = open_capture(capture)
     with caplog.at_level(logging.INFO, logger="texvocab"):
@@ -69,7 +69,7 @@ def test_perceptual_choice_is_logged_and_zero_weight_turns_it_off(capture, tmp_p
         Trainer(cap, tiny_settings(perceptual="lpips-vgg"), tmp_path / "c", progress=False)
 
 
-def test_auto_perceptual_is_lpips_vgg_when_its_weights_are_present(capture, tmp_path,  # noqa: F811
+def test_auto_perceptual_is_lpips_vgg_when_its_weights_are_present(capture, tmp_path,
                                                                   monkeypatch, caplog):
     from texvocab.metrics.perceptual import LPIPS, _heads_layout, _vgg16_layout
 
@@ -135,7 +135,7 @@ def test_sample_maps_equals_grid_sample_for_channels_last_and_plain_maps():
         assert torch.allclose(ga, gb, atol=1e-10)
 
 
-def test_cosine_view_weighting_favours_head_on_views(capture, tmp_path):  # noqa: F811
+def test_cosine_view_weighting_favours_head_on_views(capture, tmp_path):
     cap = open_capture(capture)
     mean = build_texture_map(cap, 0, TexmapSettings(size=64))
     cos = build_texture_map(cap, 0, TexmapSettings(size=64, view_weighting="cosine"))

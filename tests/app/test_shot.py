@@ -12,7 +12,7 @@ from tiny_runs import smallest_run
 from texvocab.cli.main import main
 from texvocab.io.images import save_png
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parent.parent / "data"
 MEAN_TOL = 2.0 / 255  # mean absolute difference, per channel
 PIXEL_TOL, PIXEL_SHARE = 32, 0.01  # under 1 % of pixels may differ by more than 32/255
 

@@ -5,7 +5,6 @@ z-buffer's rules (nearest wins, faces behind the camera skipped, empty pixels)."
 import numpy as np
 import torch
 
-from tests.test_render import body  # noqa: F401
 from texvocab.geometry.raster import rasterize, rasterize_mesh
 
 
@@ -55,7 +54,7 @@ def assert_same(r, ref, width, height, max_tie_share=0.01):
     assert torch.allclose(r.bary.view(-1, 3)[same], bary[same], atol=1e-6)
 
 
-def test_compiled_rasteriser_matches_the_torch_reference_on_the_body(body):  # noqa: F811
+def test_compiled_rasteriser_matches_the_torch_reference_on_the_body(body):
     for cam in (body["camera"].scaled(4.0), body["camera"].scaled(2.0)):  # 256², 128²
         r = rasterize_mesh(body["v"], body["f"], cam)
         pix, z = cam.project(body["v"].numpy())

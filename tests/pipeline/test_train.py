@@ -8,34 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from train_cases import tiny_settings
 
-from texvocab.body import default_body
 from texvocab.capture import open as open_capture
-from texvocab.capture.motion import make_sequence
-from texvocab.capture.synth import SynthSettings, synthesize
-from texvocab.method.field import FieldSettings
-from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.train import Trainer
 
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
-
-
-def tiny_settings(**kw) -> Settings:
-    base = dict(texture_size=64, num_keys=3, k=2, encoder="small", rays_per_batch=256,
-                coarse_samples=8, fine_samples=8, iterations=40, checkpoint_every=10,
-                field=FieldSettings(hidden=48, sdf_layers=2, color_layers=1, pos_freqs=4),
-                lr=2e-3)
-    base.update(kw)
-    return Settings(**base)
-
-
-@pytest.fixture(scope="module")
-def capture(tmp_path_factory):
-    poses, trans = make_sequence([("walk", 3), ("arm_raise", 2)], seed=5)
-    root = synthesize(tmp_path_factory.mktemp("e2e") / "cap", poses, trans, 4, default_body(),
-                      SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=256),
-                      progress=False)
-    return root
 
 
 def test_loss_falls_and_psnr_rises(capture, tmp_path):

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 import torch
-from test_train import capture, tiny_settings  # noqa: F401 - module fixture reused
+from train_cases import tiny_settings
 
 from texvocab.capture import open as open_capture
 from texvocab.cli.main import main
@@ -38,7 +38,7 @@ def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(tmp_path)
     assert (tmp_path / "notes.txt").read_text() == "the user's"
 
 
-def test_resume_extends_a_run_and_overwrite_replaces_it(capture, tmp_path, capsys):  # noqa: F811
+def test_resume_extends_a_run_and_overwrite_replaces_it(capture, tmp_path, capsys):
     run = tmp_path / "run"
     sets = ["--set", "texture_size=64", "--set", "num_keys=3", "--set", "k=2", "--set",
             "encoder=small", "--set", "rays_per_batch=128", "--set", "perceptual=off",
@@ -58,7 +58,7 @@ def test_resume_extends_a_run_and_overwrite_replaces_it(capture, tmp_path, capsy
     assert not (run / LOCK_NAME).exists()
 
 
-def test_a_non_finite_loss_stops_training_naming_step_and_term(capture, tmp_path):  # noqa: F811
+def test_a_non_finite_loss_stops_training_naming_step_and_term(capture, tmp_path):
     trainer = Trainer(open_capture(capture), tiny_settings(iterations=6, checkpoint_every=2,
                                                            perceptual="off"),
                       tmp_path / "run", progress=False)
@@ -75,7 +75,7 @@ def test_a_non_finite_loss_stops_training_naming_step_and_term(capture, tmp_path
     assert not (tmp_path / "run" / LOCK_NAME).exists()  # released on the way out
 
 
-def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_path,  # noqa: F811
+def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_path,
                                                                    monkeypatch):
     project = tmp_path / "project"
     (project / "runs" / "a").mkdir(parents=True)
@@ -93,7 +93,7 @@ def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_
     assert avatar.capture.root.resolve() == (project / "cap").resolve()
 
 
-def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):  # noqa: F811
+def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):
     from texvocab.pipeline.train import load_textures
 
     cap = open_capture(capture)
@@ -110,7 +110,7 @@ def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):
     assert any("damaged texture-map cache" in r.getMessage() for r in caplog.records)
 
 
-def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, tmp_path):  # noqa: F811
+def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, tmp_path):
     """A real SIGKILL (no cleanup runs): the checkpoint stays loadable, the dead writer's
     lock is taken over, and the resumed run ends where an uninterrupted one does."""
     import signal
@@ -152,7 +152,7 @@ def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, t
         assert torch.allclose(value, b["model"][key], atol=1e-5), key
 
 
-def test_a_moved_capture_is_named_and_capture_points_to_it(capture, tmp_path, capsys):  # noqa: F811
+def test_a_moved_capture_is_named_and_capture_points_to_it(capture, tmp_path, capsys):
     import shutil
 
     from app.state import load_viewer_data

@@ -7,9 +7,9 @@ import string
 
 import numpy as np
 import torch
+from disk_snapshot import snapshot
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_cli_bad_input import snapshot, world  # noqa: F401 - module fixture reused
 
 from texvocab.capture import open as open_capture
 from texvocab.capture.synth import load_pose_file
@@ -74,7 +74,7 @@ JUNK = st.recursive(st.one_of(st.none(), st.integers(-3, 10**9), st.floats(), st
 
 @FUZZ
 @given(st.sampled_from(["cams", "ims", "K", "R", "T", "D", "ims.0", "ims.0.ims"]), JUNK)
-def test_capture_reader(world, tmp_path_factory, where, junk):  # noqa: F811
+def test_capture_reader(world, tmp_path_factory, where, junk):
     root = tmp_path_factory.mktemp("cap") / "cap"
     shutil.copytree(world / "cap", root, ignore=shutil.ignore_patterns("texvocab_cache"))
     annots = np.load(root / "annots.npy", allow_pickle=True).item()
@@ -106,7 +106,7 @@ CKPT_PARTS = ["settings", "vocab", "model", "num_train", "capture", "step"]
 
 @FUZZ
 @given(st.sampled_from(CKPT_PARTS), JUNK, st.booleans())
-def test_checkpoint_loader(world, tmp_path_factory, part, junk, nested):  # noqa: F811
+def test_checkpoint_loader(world, tmp_path_factory, part, junk, nested):
     ck = torch.load(world / "run" / "checkpoint.pt", weights_only=True)
     if nested and isinstance(ck[part], dict) and ck[part]:
         ck[part][next(iter(ck[part]))] = junk

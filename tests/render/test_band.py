@@ -6,35 +6,17 @@ import dataclasses
 
 import pytest
 import torch
+from render_cases import MARCH, psnr, rays_of
+from train_cases import tiny_settings
 
-from tests.test_render import DELTA, body, looking_away, psnr  # noqa: F401
-from tests.test_train import capture, tiny_settings  # noqa: F401
 from texvocab.capture import open as open_capture
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.train import Trainer
-from texvocab.render import MarchSettings, render_rays
-from texvocab.render.band import plan_surface, render_rays_banded
-
-MARCH = MarchSettings(shell_width=DELTA, coarse_samples=36, fine_samples=16, early_stop_eps=0,
-                      segment=512, scout_threshold=None)
+from texvocab.render import render_rays
+from texvocab.render.band import render_rays_banded
 
 
-def rays_of(body, camera):  # noqa: F811
-    """Every pixel ray of ``camera`` that meets the shell: origins, dirs, near, far, and the
-    plan's band hits and passing probes (inf where a ray is neither)."""
-    bounds = body["shell"].image_bounds(camera)
-    pix = torch.nonzero(bounds.hit.view(-1)).squeeze(1)
-    o, d = camera.pixel_rays()
-    plan = plan_surface(body["v"], body["f"], camera, d, DELTA, DELTA, MARCH.min_cos)
-    t_band = torch.where(plan.band, plan.t_hit, torch.inf)
-    passing = plan.passby & ~plan.hit
-    t_pass = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind], 1),
-                         torch.inf)
-    return (o[pix], d[pix], bounds.near.view(-1)[pix], bounds.far.view(-1)[pix], t_band[pix],
-            plan.cos[pix], t_pass[pix])
-
-
-def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):  # noqa: F811
+def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
     field = body["field"]
     with torch.no_grad():
@@ -51,7 +33,7 @@ def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):  #
 
 
 @pytest.mark.parametrize("newton", [True, False])
-def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body, newton):  # noqa: F811
+def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body, newton):
     """Both band kinds: the probe and the Newton point, or band_samples samples."""
     march = dataclasses.replace(MARCH, band_newton=newton)
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
@@ -74,7 +56,7 @@ def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body, newto
     assert torch.isfinite(gb) and float(gb) != 0.0
 
 
-def test_passing_rays_cost_two_probes_and_show_the_background(body):  # noqa: F811
+def test_passing_rays_cost_two_probes_and_show_the_background(body):
     """Rays that pass the body farther than miss_margin β read the background for two
     evaluations each; rays that pass close are marched."""
     cam = body["camera"]
@@ -98,7 +80,7 @@ def test_passing_rays_cost_two_probes_and_show_the_background(body):  # noqa: F8
     assert torch.allclose(out.rgb[~far_away], marched.rgb, atol=1e-6)
 
 
-def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(body):  # noqa: F811
+def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(body):
     """A band ray that also passes a surface (behind an occlusion edge) is banded when both
     passing probes read beyond miss_margin β, and marched as the shell marcher does when
     one of them reads close."""
@@ -128,7 +110,7 @@ def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(
 
 
 @pytest.mark.parametrize("guide", ["raster", "shell"])
-def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path, guide):  # noqa: F811
+def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path, guide):
     cap = open_capture(capture)
     trainer = Trainer(cap, tiny_settings(train_guide=guide, iterations=3), tmp_path / "run",
                       progress=False)

@@ -9,7 +9,7 @@ import os
 import numpy as np
 import pytest
 import torch
-from conftest import torch_home_with
+from weights_cases import torch_home_with
 
 import texvocab.io.inception as inception_io
 from texvocab.errors import AssetError
@@ -108,7 +108,7 @@ def ssim_case(name):
 # (channel_axis=None for "noise_gray"). To regenerate, in any env with numpy and
 # scikit-image (torch not needed), from the repository root:
 #   python -c "import ast, numpy as np; from skimage.metrics import structural_similarity as S
-#   t = ast.parse(open('tests/test_metrics.py').read()); ns = {'np': np}
+#   t = ast.parse(open('tests/metrics/test_metrics.py').read()); ns = {'np': np}
 #   exec(compile(ast.Module([f for f in t.body if getattr(f, 'name', '') in
 #        ('hash_noise', 'ssim_case')], []), 'c', 'exec'), ns)
 #   for n in ('noise', 'contrast', 'blur_shift', 'odd_small', 'noise_gray'):

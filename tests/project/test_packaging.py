@@ -14,7 +14,7 @@ import pytest
 from PIL import Image
 from smpl_files import write_official_pickle
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SKIP = shutil.ignore_patterns(".git", ".venv", "out", "build", "*.egg-info", "__pycache__",
                               ".pytest_cache", ".hypothesis", "runs")
 

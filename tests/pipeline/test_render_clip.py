@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from test_pose_files import amass_file
+from pose_file_cases import amass_file
 from tiny_runs import smallest_run
 
 from texvocab.cli.main import main

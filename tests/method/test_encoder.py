@@ -6,7 +6,7 @@ import os
 
 import pytest
 import torch
-from conftest import torch_home_with
+from weights_cases import torch_home_with
 
 from texvocab.errors import AssetError
 from texvocab.method.encoder import ResNet34, build_encoder, find_resnet34_weights
