@@ -16,7 +16,7 @@ same field, for the ratio.
 
     .venv/bin/python bench/render_speed.py [CKPT] [--capture DIR] [--frames 3]
         [--variant "12+4:coarse_samples=12,fine_samples=4"] [--reference 1]
-    .venv/bin/python bench/render_speed.py CKPT --compare [--frames 3]
+    .venv/bin/python bench/render_speed.py CKPT --compare [--frames 3] [--save DIR]
 
 ``--compare`` renders the same frames four ways in one run — ``new``: the surface-guided
 marcher (guide=raster) at the ``fast`` preset's knobs; ``previous``: the shell marcher
@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import tempfile
 import time
@@ -199,8 +200,11 @@ def reference_render(model, item, coarse: int, fine: int):
         "cpu": time.process_time() - cpu0}
 
 
-def compare(model, settings, items, what: str, repeats: int = 1) -> int:
-    """The four-way comparison of ``--compare``; prints a table and the summary line."""
+def compare(model, settings, items, what: str, repeats: int = 1, save: Path | None = None) -> int:
+    """The four-way comparison of ``--compare``; prints a table and the summary line. With
+    ``save``, each path's images go there as ``<path>_<frame>.npy`` (float32 (H, W, 3)) and
+    the field evaluations per path and frame as ``evals.json``, so two runs (e.g. before and
+    after a change to the marchers) can be compared exactly."""
     from texvocab.metrics import evaluate_pair, psnr
     from texvocab.metrics.image import crop_to_bbox, mask_bbox
     from texvocab.pipeline.settings import PRESETS, march_settings
@@ -218,7 +222,7 @@ def compare(model, settings, items, what: str, repeats: int = 1) -> int:
     print("| path | frame | seconds | field evals | PSNR vs truth | PSNR vs reference |")
     print("|---|---|---|---|---|---|")
     rows = {name: [] for name in (*paths, "reference")}
-    for item in items:
+    for i, item in enumerate(items):
         box = mask_bbox(item[5])
         ref_img, ref_row = reference_render(model, item, 64, 32)
         results = {"reference": (ref_img, ref_row)}
@@ -233,8 +237,13 @@ def compare(model, settings, items, what: str, repeats: int = 1) -> int:
             p_gt = evaluate_pair(img, item[4], item[5])["psnr_bbox"]
             p_ref = psnr(crop_to_bbox(img, box), crop_to_bbox(ref_img, box))
             rows[name].append((row["total"], row["evals"], p_gt, p_ref))
+            if save is not None:
+                np.save(save / f"{name}_{i}.npy", img)
             print(f"| {name} | {item[0]} | {row['total']:.3f} | {int(row['evals']):,} | "
                   f"{p_gt:.3f} | {min(p_ref, 99.0):.2f} |", flush=True)
+    if save is not None:
+        (save / "evals.json").write_text(json.dumps(
+            {n: [int(r[1]) for r in rs] for n, rs in rows.items()}, indent=1) + "\n")
     mean = {n: np.mean(np.array(r, dtype=np.float64), 0) for n, r in rows.items()}
     print()
     for n, (sec, ev, p_gt, p_ref) in mean.items():
@@ -282,13 +291,18 @@ def main(argv=None) -> int:
     ap.add_argument("--compare", action="store_true",
                     help="new (guided, fast knobs) vs previous (shell, fast) vs quality vs "
                     "the uniform 64+32 reference; ends with a summary line")
+    ap.add_argument("--save", type=Path, default=None, metavar="DIR",
+                    help="with --compare: write each path's images (.npy) and field "
+                    "evaluations (evals.json) to DIR")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
     if args.compare:
         model, settings, cap, what = load(args)
+        if args.save is not None:
+            args.save.mkdir(parents=True, exist_ok=True)
         return compare(model, settings, items_of(cap, settings, args.frames), what,
-                       args.repeats)
+                       args.repeats, args.save)
 
     from texvocab.metrics import evaluate_pair
     from texvocab.pipeline.settings import march_settings
