@@ -40,17 +40,18 @@ from texvocab.render import MarchSettings, mesh_bbox, ray_box, render_image, ren
 from texvocab.render.analytic import MeshSDFField
 
 # the marcher configuration the 10x / 0.3 dB target is checked on (see TARGET)
-HEADLINE = ("shell 13+8, δ = 2.5 cm", MarchSettings(shell_width=0.025, coarse_samples=13))
+HEADLINE = ("shell 13+8, δ = 2.5 cm",
+            MarchSettings.from_flat(shell_width=0.025, coarse_samples=13))
 VARIANTS: list[tuple[str, MarchSettings]] = [
     HEADLINE,
     ("shell 18+8 (default)", MarchSettings()),
-    ("shell 12+8", MarchSettings(coarse_samples=12)),
-    ("shell 24+16", MarchSettings(coarse_samples=24, fine_samples=16)),
-    ("shell 18+8, no early stop", MarchSettings(early_stop_eps=0.0)),
-    ("shell 18+8, no scouting", MarchSettings(scout_threshold=None)),
-    ("shell 18+8, no empty-space skip", MarchSettings(skip_empty=False)),
-    ("shell 18+8, loose grid (no exact)", MarchSettings(shell_exact=False)),
-    ("shell 18+8, δ = 3 cm", MarchSettings(shell_width=0.03)),
+    ("shell 12+8", MarchSettings.from_flat(coarse_samples=12)),
+    ("shell 24+16", MarchSettings.from_flat(coarse_samples=24, fine_samples=16)),
+    ("shell 18+8, no early stop", MarchSettings.from_flat(early_stop_eps=0.0)),
+    ("shell 18+8, no scouting", MarchSettings.from_flat(scout_threshold=None)),
+    ("shell 18+8, no empty-space skip", MarchSettings.from_flat(skip_empty=False)),
+    ("shell 18+8, loose grid (no exact)", MarchSettings.from_flat(shell_exact=False)),
+    ("shell 18+8, δ = 3 cm", MarchSettings.from_flat(shell_width=0.03)),
 ]
 
 

@@ -36,7 +36,6 @@ waiting made a frame ~10x slower (measured 22-28 s instead of 2.7 s per frame).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import tempfile
@@ -53,10 +52,10 @@ from texvocab.blas import budget_blas_threads  # noqa: E402
 
 def parse_variant(text: str):
     """'name:key=value,key=value' -> (name, {key: value}) for MarchSettings fields."""
-    from texvocab.render import MarchSettings
+    from texvocab.render.settings import FLAT_NAMES
 
     name, _, body = text.partition(":")
-    known = {f.name: f.type for f in dataclasses.fields(MarchSettings)}
+    known = FLAT_NAMES
     kw = {}
     for item in filter(None, body.split(",")):
         key, eq, value = item.partition("=")
@@ -161,7 +160,7 @@ class Timed:
 
 def timed_render(model, item, march):
     """Render one item with the time split; returns (image (H, W, 3) numpy, row dict)."""
-    from texvocab.render import ShellGeometry, render_image
+    from texvocab.render import prepare_shell, render_image
 
     _, pose, trans, cam, _, _ = item
     spent = {"field": 0.0, "evals": 0}
@@ -170,9 +169,7 @@ def timed_render(model, item, march):
         ctx = model.pose_feature.context(pose, trans)
         t1 = time.perf_counter()
         # the surface-guided marcher builds what it needs of the shell itself
-        shell = None if march.guide == "raster" else ShellGeometry.build(
-            ctx.vertices, model.body.faces, march.shell_width, march.shell_voxel,
-            march.shell_exact, index=ctx.index)
+        shell = prepare_shell(march, ctx.vertices, model.body.faces, index=ctx.index)
         t2 = time.perf_counter()
         out = render_image(Timed(model.for_pose(ctx), spent), cam, ctx.vertices,
                            model.body.faces, march, shell=shell, index=ctx.index)
@@ -320,7 +317,7 @@ def main(argv=None) -> int:
     print("|---" * (len(COLS) + 2) + "|")
     means, rows_of = {}, {}
     for name, kw in variants:
-        march = dataclasses.replace(base, **kw)
+        march = base.replace(**kw)
         rows = []
         for item in items:
             best = None

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,7 @@ from texvocab.io.images import atomic_write_bytes
 from texvocab.metrics import metrics_in_bbox, psnr
 from texvocab.pipeline.evaluate import render_view
 from texvocab.pipeline.settings import PRESETS, RENDER_KNOBS
-from texvocab.render import MarchSettings
+from texvocab.render import MarchSettings, ShellSettings
 
 REFERENCE = {"coarse_samples": 64, "fine_samples": 32, "early_stop_eps": 0.0, "guide": "shell"}
 
@@ -65,10 +64,9 @@ GUIDED_KNOBS = {"residual_rays", "residual_step", "residual_spread", "residual_t
 def march_of(knobs: dict, base: MarchSettings) -> MarchSettings:
     keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width", "guide"} \
         | GUIDED_KNOBS
-    m = replace(base, **{k: v for k, v in knobs.items() if k in keys})
+    m = base.replace(**{k: v for k, v in knobs.items() if k in keys})
     if m.guide == "shell" and base.guide != "shell":  # the shell marcher's own shell grid
-        m = replace(m, shell_voxel=MarchSettings.shell_voxel,
-                    shell_exact=MarchSettings.shell_exact)
+        m = m.replace(shell_voxel=ShellSettings.voxel, shell_exact=ShellSettings.exact)
     return m
 
 

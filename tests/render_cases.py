@@ -1,13 +1,10 @@
 """Shared render-test cases: the shell width, PSNR, march settings and pixel rays of a
 camera, used by the render, guided, band, residual and training-ray tests."""
-import dataclasses
-
 import numpy as np
 import torch
 
 from texvocab.capture.camera import Camera
-from texvocab.render import MarchSettings
-from texvocab.render.band import plan_surface
+from texvocab.render import MarchSettings, plan_surface
 
 DELTA = 0.04
 
@@ -23,13 +20,13 @@ def looking_away(camera: Camera) -> Camera:
     return Camera(camera.K, R, -R @ camera.center, camera.width, camera.height)
 
 
-SHELL = MarchSettings(shell_width=DELTA, coarse_samples=36, fine_samples=16,
-                      early_stop_eps=1e-4)
-GUIDED = dataclasses.replace(SHELL, guide="raster")
+SHELL = MarchSettings.from_flat(shell_width=DELTA, coarse_samples=36, fine_samples=16,
+                                early_stop_eps=1e-4)
+GUIDED = SHELL.replace(guide="raster")
 
 
-MARCH = MarchSettings(shell_width=DELTA, coarse_samples=36, fine_samples=16, early_stop_eps=0,
-                      segment=512, scout_threshold=None)
+MARCH = MarchSettings.from_flat(shell_width=DELTA, coarse_samples=36, fine_samples=16,
+                                early_stop_eps=0, segment=512, scout_threshold=None)
 
 
 def rays_of(body, camera):

@@ -22,7 +22,8 @@ TEXTURE_SIZE = 32
 FIELD = FieldSettings(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4, dir_freqs=2,
                       feature_proj=16)
 #: the trainer's march (all coarse samples in one call), small enough for tests
-MARCH = MarchSettings(coarse_samples=8, fine_samples=4, segment=512, scout_threshold=None)
+MARCH = MarchSettings.from_flat(coarse_samples=8, fine_samples=4, segment=512,
+                                scout_threshold=None)
 
 
 class PassThrough(nn.Module):

@@ -15,7 +15,7 @@ from texvocab.capture.camera import Camera
 from texvocab.render import MarchSettings, progressive_render
 from texvocab.render.analytic import SphereField
 
-SETTINGS = MarchSettings(chunk_rays=64, coarse_samples=8, fine_samples=4)
+SETTINGS = MarchSettings.from_flat(chunk_rays=64, coarse_samples=8, fine_samples=4)
 
 
 def sphere_camera(size: int = 64) -> Camera:
@@ -349,8 +349,6 @@ def test_worker_thread_runs_at_the_requested_niceness():
 
 def test_a_job_renders_with_its_own_march_settings():
     """The viewer's preset combo sends the preset's MarchSettings with each job."""
-    from dataclasses import replace
-
     evals = []
     sphere = SphereField(radius=0.3)
 
@@ -361,7 +359,7 @@ def test_a_job_renders_with_its_own_march_settings():
     render = model_renderer(stub_model(lambda: counted), SETTINGS, (1,))
     list(render(job(1, 32), lambda: False))
     own, evals[:] = sum(evals), []
-    cheap = replace(SETTINGS, coarse_samples=max(2, SETTINGS.coarse_samples // 4), fine_samples=0)
+    cheap = SETTINGS.replace(coarse_samples=max(2, SETTINGS.coarse_samples // 4), fine_samples=0)
     base = job(2, 32)
     list(render(RenderJob(2, base.pose, base.trans, base.camera, cheap), lambda: False))
     assert 0 < sum(evals) < 0.6 * own

@@ -131,7 +131,7 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
     # the surface-guided marcher (render time) on the same pose: finite and in range
     with torch.no_grad():
         guided = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces,
-                              MarchSettings(guide="raster"))
+                              MarchSettings.from_flat(guide="raster"))
     assert_finite(guided_rgb=guided.rgb, guided_alpha=guided.alpha, guided_depth=guided.depth)
     assert (guided.alpha >= 0).all() and (guided.alpha <= 1 + 1e-6).all()
     assert (guided.rgb >= 0).all() and (guided.rgb <= 1 + 1e-6).all()

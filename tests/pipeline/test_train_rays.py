@@ -1,9 +1,8 @@
-"""The rays training does not band (texvocab.render.band.render_rays_banded with an
+"""The rays training does not band (texvocab.render.render_rays_banded with an
 ``index``): close silhouette rays and failed bands as residual rays (three evaluations,
 differentiable), band rays from the probe and the Newton point, both with per-ray origins
 (a training batch mixes two views), and the trainer's knobs for them (``train_residual``,
 ``train_band_newton``; runs written before them marched and used the 5-sample band)."""
-import dataclasses
 
 import pytest
 import torch
@@ -15,11 +14,11 @@ from texvocab.errors import TexvocabError
 from texvocab.geometry.surface import SurfaceIndex
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.train import Trainer
-from texvocab.render import render_rays
-from texvocab.render.band import band_composite, render_rays_banded
-from texvocab.render.residual import newton_band, render_residual
+from texvocab.render import render_rays, render_rays_banded
+from texvocab.render.guided.band import newton_band, sample_band
+from texvocab.render.guided.residual import render_residual
 
-OLD_BAND = dataclasses.replace(MARCH, band_newton=False)
+OLD_BAND = MARCH.replace(band_newton=False)
 
 
 def _index(body):
@@ -36,7 +35,7 @@ def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):
         resid = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
                                    None, body["shell"], t_passing=t_pass, index=_index(body))
         off = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos,
-                                 dataclasses.replace(MARCH, residual_rays=False), None,
+                                 MARCH.replace(residual_rays=False), None,
                                  body["shell"], t_passing=t_pass, index=_index(body))
         hits = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
                                   None, body["shell"], t_passing=t_pass, index=_index(body),
@@ -92,7 +91,7 @@ def test_per_ray_origins_give_what_one_origin_gives(body):
         r_each = render_residual(field, _index(body), o[band], d[band], near[band], far[band],
                                  probes, sdfs, field.beta, MARCH)
     assert torch.equal(o[band], o[0].expand(len(band), 3))  # one camera
-    for a, b in zip(one + r_one[:4], each + r_each[:4], strict=True):
+    for a, b in zip(one[:4] + r_one[:4], each[:4] + r_each[:4], strict=True):
         assert torch.allclose(a.float(), b.float(), atol=1e-6)
     assert one[3].any() and r_one[3].any()
 
@@ -111,7 +110,7 @@ def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):
                                      body["shell"])
             ok = (newton_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m)
                   if m.band_newton else
-                  band_composite(field, m, field.beta, o, d, t_band, cos, sdf0, rgb0))[3]
+                  sample_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m))[3]
             rest = render_rays(field, o[~ok], d[~ok], near[~ok], far[~ok], m, None,
                                body["shell"])
             per_ray = 3 if m.band_newton else 1 + m.band_samples

@@ -1,8 +1,7 @@
 """The surface band shared by the guided renderer and training
-(texvocab.render.band.render_rays_banded): the same colours as the shell marcher for far
+(texvocab.render.render_rays_banded): the same colours as the shell marcher for far
 fewer evaluations, gradients that reach the field and β, passing rays that cost two probes,
 and the trainer's use of it (``train_guide``)."""
-import dataclasses
 
 import pytest
 import torch
@@ -12,8 +11,7 @@ from train_cases import tiny_settings
 from texvocab.capture import open as open_capture
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.train import Trainer
-from texvocab.render import render_rays
-from texvocab.render.band import render_rays_banded
+from texvocab.render import render_rays, render_rays_banded
 
 
 def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):
@@ -35,7 +33,7 @@ def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):
 @pytest.mark.parametrize("newton", [True, False])
 def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body, newton):
     """Both band kinds: the probe and the Newton point, or band_samples samples."""
-    march = dataclasses.replace(MARCH, band_newton=newton)
+    march = MARCH.replace(band_newton=newton)
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
     band = torch.isfinite(t_band)
     o, d, near, far, t_band, cos = (x[band] for x in (o, d, near, far, t_band, cos))

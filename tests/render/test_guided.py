@@ -1,7 +1,6 @@
 """The surface-guided marcher (texvocab.render.guided): its closed-form VolSDF
 quadrature, its agreement with the shell marcher on the body's own SDF, what it costs,
 and the extremes (camera inside the body, rays that miss, a one-point field call)."""
-import dataclasses
 
 import numpy as np
 import pytest
@@ -10,7 +9,7 @@ from render_cases import GUIDED, SHELL, looking_away, psnr
 
 from texvocab.capture.camera import Camera
 from texvocab.render import render_image
-from texvocab.render.band import composite_linear_sdf, interval_optical_depth
+from texvocab.render.volume.volsdf import composite_linear_sdf, interval_optical_depth
 
 
 def density(s: torch.Tensor, beta: float) -> torch.Tensor:
@@ -127,7 +126,7 @@ def test_guided_progressive_levels_of_rays_that_all_miss(body):
 def test_unknown_guide_is_refused(body):
     with pytest.raises(ValueError, match="guide"):
         render_image(body["field"], body["camera"], body["v"], body["f"],
-                     dataclasses.replace(SHELL, guide="mesh"))
+                     SHELL.replace(guide="mesh"))
 
 
 def test_guide_is_a_render_knob_that_training_never_uses():
@@ -162,11 +161,11 @@ def test_every_guided_knob_changes_the_render(body, knob, value):
     that only act on the 4-sample band or on marched rays, with those in use)."""
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
     marched = {"band_samples", "fallback_segment", "fallback_scout"}
-    start = dataclasses.replace(GUIDED, band_newton=False, residual_rays=False) \
+    start = GUIDED.replace(band_newton=False, residual_rays=False) \
         if knob in marched else GUIDED
     with torch.no_grad():
         base = render_image(field, cam, v, f, start, shell=body["shell"])
-        other = render_image(field, cam, v, f, dataclasses.replace(start, **{knob: value}),
+        other = render_image(field, cam, v, f, start.replace(**{knob: value}),
                              shell=body["shell"])
     assert (other.stats.field_evals, other.stats.paths) != (base.stats.field_evals,
                                                             base.stats.paths)
@@ -233,7 +232,7 @@ def test_shards_together_render_the_image_of_one_render(body, guide):
     pixels, give the progressive render's levels."""
     from texvocab.render import progressive_render, progressive_shard
 
-    s = dataclasses.replace(SHELL, guide=guide)
+    s = SHELL.replace(guide=guide)
     args = (body["field"], body["camera"], body["v"], body["f"], s)
     whole = list(progressive_render(*args, shell=body["shell"]))
     shards = [list(progressive_shard(*args, shell=body["shell"], shard=(k, 2)))

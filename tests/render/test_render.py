@@ -35,8 +35,8 @@ from texvocab.render import (
     trace_path,
 )
 from texvocab.render.analytic import SphereField
-from texvocab.render.samples import midpoint_intervals, stratified_positions
-from texvocab.render.shell import _bounded_edt2
+from texvocab.render.shell.geometry import _bounded_edt2
+from texvocab.render.volume.samples import midpoint_intervals, stratified_positions
 
 
 @pytest.fixture(scope="module")
@@ -256,7 +256,7 @@ def test_early_termination_saves_evaluations(body):
     args = (body["field"], body["camera"], body["v"], body["f"])
     with torch.no_grad():
         stop = render_image(*args, MarchSettings(), shell=body["shell"])
-        full = render_image(*args, MarchSettings(early_stop_eps=0.0), shell=body["shell"])
+        full = render_image(*args, MarchSettings.from_flat(early_stop_eps=0.0), shell=body["shell"])
     assert stop.stats.field_evals < 0.85 * full.stats.field_evals
     assert (stop.rgb - full.rgb).abs().max() < 1e-2
     assert (stop.alpha - full.alpha).abs().max() < 1e-2
@@ -267,7 +267,7 @@ def test_scouting_and_empty_space_skipping_save_evaluations(body, change):
     args = (body["field"], body["camera"], body["v"], body["f"])
     with torch.no_grad():
         default = render_image(*args, MarchSettings(), shell=body["shell"])
-        without = render_image(*args, MarchSettings(**change), shell=body["shell"])
+        without = render_image(*args, MarchSettings.from_flat(**change), shell=body["shell"])
     assert default.stats.field_evals < 0.9 * without.stats.field_evals
     assert psnr(default.rgb, without.rgb) > 45
 
@@ -305,7 +305,7 @@ def test_cancel_between_ray_chunks(body):
         calls.append(1)
         return len(calls) > 2
 
-    settings = MarchSettings(chunk_rays=64)
+    settings = MarchSettings.from_flat(chunk_rays=64)
     with pytest.raises(RenderCancelled):
         render_image(body["field"], body["camera"], body["v"], body["f"], settings,
                      shell=body["shell"], cancelled=cancelled)

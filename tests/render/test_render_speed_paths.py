@@ -70,7 +70,8 @@ def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
     cam = default_cameras(SynthSettings(size=256))[1].scaled(1 / 8)
     # no thresholds (scouting, early stop, empty rays): a float-rounding difference in
     # the field cannot flip a marching decision, so the images must agree to rounding
-    settings = MarchSettings(scout_threshold=None, early_stop_eps=0.0, empty_opacity=0.0)
+    settings = MarchSettings.from_flat(scout_threshold=None, early_stop_eps=0.0,
+                                       empty_opacity=0.0)
     with torch.no_grad():
         ctx = field.pose_feature.context(pose, trans)
         shell = ShellGeometry.build(ctx.vertices, field.body.faces, settings.shell_width,

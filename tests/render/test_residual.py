@@ -1,6 +1,6 @@
-"""Residual rays and the Newton band (texvocab.render.residual): the mesh's distance plus
-the field's residual from a few evaluations, against a dense march of the same field."""
-import dataclasses
+"""Residual rays and the Newton band (texvocab.render.guided.residual, .band): the mesh's
+distance plus the field's residual from a few evaluations, against a dense march of the same
+field."""
 
 import pytest
 import torch
@@ -8,11 +8,11 @@ from render_cases import GUIDED, SHELL, psnr
 
 from texvocab.render import render_image
 from texvocab.render.analytic import MeshResidualField
-from texvocab.render.band import composite_linear_sdf
-from texvocab.render.residual import _part_that_matters
+from texvocab.render.guided.residual import _part_that_matters
+from texvocab.render.volume.volsdf import composite_linear_sdf
 
-DENSE = dataclasses.replace(SHELL, coarse_samples=96, fine_samples=48, early_stop_eps=0.0)
-MARCHED = dataclasses.replace(GUIDED, residual_rays=False, band_newton=False)
+DENSE = SHELL.replace(coarse_samples=96, fine_samples=48, early_stop_eps=0.0)
+MARCHED = GUIDED.replace(residual_rays=False, band_newton=False)
 
 
 def renders(body, field, *settings):
@@ -54,20 +54,20 @@ def test_rough_residual_rays_are_marched(body):
 
 def test_residual_step_changes_the_quadrature(body):
     field = MeshResidualField(body["v"], body["f"], beta=0.003)
-    base, fine = renders(body, field, GUIDED, dataclasses.replace(GUIDED, residual_step=0.5))
+    base, fine = renders(body, field, GUIDED, GUIDED.replace(residual_step=0.5))
     assert not torch.equal(base.rgb, fine.rgb) and psnr(base.rgb, fine.rgb) > 45
 
 
 def test_residual_spread_moves_the_evaluations(body):
     field = MeshResidualField(body["v"], body["f"], beta=0.003)
-    base, wide = renders(body, field, GUIDED, dataclasses.replace(GUIDED, residual_spread=0.3))
+    base, wide = renders(body, field, GUIDED, GUIDED.replace(residual_spread=0.3))
     assert not torch.equal(base.rgb, wide.rgb) and psnr(base.rgb, wide.rgb) > 40
 
 
 def test_the_part_that_matters_holds_every_low_point():
     """On random 1-Lipschitz profiles sampled every `step`: every point of the fine
     profile within _KEEP β of max(least, 0) lies in the part, up to the opaque cut."""
-    from texvocab.render.residual import _KEEP
+    from texvocab.render.guided.residual import _KEEP
 
     g = torch.Generator().manual_seed(0)
     beta, fine = 0.002, 64  # coarse samples every 8 mm (fine = 64 profile points apart)

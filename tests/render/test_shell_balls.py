@@ -1,17 +1,17 @@
-"""The shell's bounding balls: the compiled build (texvocab.render._balls_jit) against
+"""The shell's bounding balls: the compiled build (texvocab.render.shell.balls) against
 binning the surface samples in numpy, and the balls-only shell the guided marcher uses."""
 import numpy as np
 import pytest
 import torch
 
 from texvocab.render import ShellGeometry
-from texvocab.render._balls_jit import surface_balls
-from texvocab.render.shell import _bounding_balls, surface_samples
+from texvocab.render.shell import balls
+from texvocab.render.shell.balls import bounding_balls, surface_balls, surface_samples
 
 
 def reference(v, f, spacing, width):
     samples, r0 = surface_samples(v, f, spacing)
-    return (*_bounding_balls(samples, r0, width), r0)
+    return (*bounding_balls(samples, r0, width), r0)
 
 
 @pytest.mark.parametrize("spacing,width", [(0.0075, 0.025), (0.005, 0.04), (0.02, 0.01)])
@@ -36,11 +36,9 @@ def test_compiled_balls_on_a_random_mesh_with_large_and_degenerate_faces():
 
 
 def test_too_many_cells_bins_sparsely(body, monkeypatch):
-    import texvocab.render._balls_jit as jit
-
     v, f = body["v"].double().numpy(), body["f"].numpy()
-    monkeypatch.setattr(jit, "_MAX_CELLS", 10)
-    got, want = jit.surface_balls(v, f, 0.01, 0.03), reference(v, f, 0.01, 0.03)
+    monkeypatch.setattr(balls, "_MAX_CELLS", 10)
+    got, want = surface_balls(v, f, 0.01, 0.03), reference(v, f, 0.01, 0.03)
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
 
 

@@ -300,9 +300,10 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     sampling costs a dense pass over the feature maps, so few large calls are far cheaper
     than the many small ones that early termination favours at render time."""
     width = s.field.shell_width if training or s.shell_width is None else s.shell_width
-    m = MarchSettings(shell_width=width, coarse_samples=s.coarse_samples,
-                      fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps,
-                      guide=s.guide, residual_rays=s.residual_rays, band_newton=s.band_newton)
+    m = MarchSettings.from_flat(shell_width=width, coarse_samples=s.coarse_samples,
+                                fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps,
+                                guide=s.guide, residual_rays=s.residual_rays,
+                                band_newton=s.band_newton)
     if training:
         m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
         m.coarse_samples = s.train_coarse_samples or s.coarse_samples

@@ -3,7 +3,7 @@
 Each step picks a training frame and views, draws rays inside the shell around the posed
 body (``fg_fraction`` of them inside the mask), renders them — with the surface band
 where the posed mesh's rasterisation allows (``train_guide=raster``,
-:func:`~texvocab.render.band.render_rays_banded`), else with the coarse-to-fine shell
+:func:`~texvocab.render.guided.triage.render_rays_banded`), else with the coarse-to-fine shell
 marcher — and minimises λ_c·MSE(colour) + λ_m·MAE(opacity, mask) + λ_e·eikonal
 + λ_p·perceptual. For the perceptual term one ``patch_size``² patch of contiguous pixels,
 placed at random inside the mask's bounding box of the first view, is rendered as part of
@@ -37,7 +37,7 @@ from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
-from texvocab.render.band import render_rays_banded
+from texvocab.render import render_rays_banded
 
 log = logging.getLogger("texvocab")
 SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --resume

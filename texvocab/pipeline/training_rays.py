@@ -12,8 +12,7 @@ from typing import NamedTuple
 
 import torch
 
-from texvocab.render import ShellGeometry
-from texvocab.render.band import plan_surface
+from texvocab.render import ShellGeometry, plan_surface
 
 
 class ViewData(NamedTuple):
@@ -74,7 +73,7 @@ class TrainingRays:
         behind it can contribute, and training then evaluates no samples there. With
         ``train_guide=raster`` the band rays inside the mask keep their mesh hit and the
         rays outside it that miss the mesh their two probe places
-        (:func:`~texvocab.render.band.plan_surface`), as do the band rays behind an
+        (:func:`~texvocab.render.guided.plan.plan_surface`), as do the band rays behind an
         occlusion edge; the band cannot lower a ray's opacity (it ends inside), so rays
         outside the mask never take it."""
         if v not in fd.views:

@@ -1,24 +1,53 @@
-"""CPU volume renderer: shell bounds around the posed body, coarse-to-fine marcher with
-early termination, progressive levels, and a uniform reference marcher."""
-from texvocab.render.coarse import Field, Marched, coarse_pass, evaluate_field, march_until_opaque
-from texvocab.render.marcher import (
-    GUIDES,
-    MarchSettings,
-    RayResult,
-    RenderCancelled,
-    RenderResult,
-    RenderStats,
-    render_image,
-    render_rays,
-)
-from texvocab.render.progressive import level_owners, progressive_render, progressive_shard
-from texvocab.render.reference import composite_reference, mesh_bbox, ray_box, render_image_uniform
-from texvocab.render.samples import RaySamples, composite, sample_pdf
-from texvocab.render.shell import ShellBounds, ShellGeometry, ShellPath, shell_bounds, trace_path
+"""CPU volume renderer, in layers (each imports only those below it; a contract in
+pyproject.toml keeps it so):
 
-__all__ = ["GUIDES", "Field", "MarchSettings", "Marched", "RayResult", "RaySamples", "RenderCancelled",
-           "RenderResult", "RenderStats", "ShellBounds", "ShellGeometry", "ShellPath",
-           "coarse_pass", "composite", "composite_reference", "evaluate_field", "level_owners",
-           "march_until_opaque", "mesh_bbox", "progressive_render", "progressive_shard",
-           "ray_box", "render_image",
-           "render_image_uniform", "render_rays", "sample_pdf", "shell_bounds", "trace_path"]
+* :mod:`.progressive` — the same view coarse to fine, split over processes;
+  :mod:`.reference` (a uniform marcher) and :mod:`.analytic` (fields without a network),
+  for tests and benchmarks;
+* :mod:`.paths` — the render paths by name (``MarchSettings.guide``) and
+  :func:`render_image`;
+* :mod:`.guided` — the surface-guided marcher: the surface plan, the band, the residual
+  rays and the one triage of a ray that rendering and training share;
+* :mod:`.shell` — the shell marcher: shell bounds around the posed body and the
+  coarse-to-fine march with early termination;
+* :mod:`.volume` (samples, quadrature, VolSDF's closed forms, field calls) and
+  :mod:`.kernels` (compiled loops);
+* :mod:`.settings` (the knobs, grouped) and :mod:`.results` (what a render returns).
+"""
+from texvocab.render.guided import GuidedImage, plan_surface, render_rays_banded
+from texvocab.render.guided.levels import level_owners
+from texvocab.render.paths import (
+    GUIDES,
+    RenderPath,
+    prepare_shell,
+    register_path,
+    render_image,
+    render_path,
+    render_paths,
+)
+from texvocab.render.progressive import progressive_render, progressive_shard
+from texvocab.render.reference import composite_reference, mesh_bbox, ray_box, render_image_uniform
+from texvocab.render.results import RayKind, RayResult, RenderCancelled, RenderResult, RenderStats
+from texvocab.render.settings import (
+    BandSettings,
+    ChunkSettings,
+    FallbackSettings,
+    MarchSettings,
+    ResidualSettings,
+    ShellSettings,
+)
+from texvocab.render.shell import ShellBounds, ShellGeometry, ShellPath, shell_bounds, trace_path
+from texvocab.render.shell.coarse import Marched, coarse_pass, march_until_opaque
+from texvocab.render.shell.march import render_rays
+from texvocab.render.volume.field import Field, evaluate_field
+from texvocab.render.volume.samples import RaySamples, composite, sample_pdf
+
+__all__ = ["GUIDES", "BandSettings", "ChunkSettings", "FallbackSettings", "Field",
+           "GuidedImage", "MarchSettings", "Marched", "RayKind", "RayResult", "RaySamples",
+           "RenderCancelled", "RenderPath", "RenderResult", "RenderStats", "ResidualSettings",
+           "ShellBounds", "ShellGeometry", "ShellPath", "ShellSettings", "coarse_pass",
+           "composite", "composite_reference", "evaluate_field", "level_owners",
+           "march_until_opaque", "mesh_bbox", "plan_surface", "prepare_shell",
+           "progressive_render", "progressive_shard", "ray_box", "register_path",
+           "render_image", "render_image_uniform", "render_path", "render_paths",
+           "render_rays", "render_rays_banded", "sample_pdf", "shell_bounds", "trace_path"]

@@ -3,7 +3,7 @@
 Every pixel's ray is clipped to an axis-aligned box around the body; ``coarse``
 uniform (stratified) samples, then ``fine`` importance samples from the coarse weights;
 no shell, no early termination. Compositing is written out independently of
-:func:`texvocab.render.samples.composite` (a product of (1 - alpha) instead of an
+:func:`texvocab.render.volume.samples.composite` (a product of (1 - alpha) instead of an
 exponential of summed optical depth), so the two can be compared.
 """
 from __future__ import annotations
@@ -13,9 +13,9 @@ import time
 import numpy as np
 import torch
 
-from texvocab.render.coarse import Field, evaluate_field
-from texvocab.render.marcher import RenderResult, RenderStats
-from texvocab.render.samples import midpoint_intervals, sample_pdf, stratified_positions
+from texvocab.render.results import RenderResult, RenderStats
+from texvocab.render.volume.field import Field, evaluate_field
+from texvocab.render.volume.samples import midpoint_intervals, sample_pdf, stratified_positions
 
 
 def mesh_bbox(vertices, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:

@@ -24,7 +24,7 @@ spread of 0.1 β median, 0.3 β at the 90th percentile). So per ray:
    of those weights.
 3. The SDF d + r with r (and the colour) interpolated linearly between the three, its
    opacity the closed-form VolSDF integral over the dense samples
-   (:func:`~texvocab.render.band.composite_linear_sdf`).
+   (:func:`~texvocab.render.volume.volsdf.composite_linear_sdf`).
 
 A ray is left to the marcher (``ok`` False) when no part of it comes close enough, or
 when the weights of the final SDF have their median outside the span of the three
@@ -37,10 +37,12 @@ import math
 import numpy as np
 import torch
 
-from texvocab.render.band import (
+from texvocab.render.guided.band import interpolate_knots, no_rays
+from texvocab.render.settings import MarchSettings
+from texvocab.render.volume.field import evaluate_sdf, points_along
+from texvocab.render.volume.volsdf import (
     beta_value,
     composite_linear_sdf,
-    evaluate_sdf,
     interval_optical_depth,
     linear_sdf_weights,
 )
@@ -64,20 +66,6 @@ def _estimate(d: torch.Tensor, r0: torch.Tensor, cap: float) -> torch.Tensor:
     return torch.where(d < cap, d + r0, cap)
 
 
-def _along(origin: torch.Tensor, dirs: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-    """Points (R, ..., 3) at distances t (R, ...) along rays from origin (3,) or (R, 3)
-    in directions dirs (R, 3)."""
-    lead = (len(dirs),) + (1,) * (t.dim() - 1) + (3,)
-    o = origin if origin.dim() == 1 else origin.view(lead)
-    return o + t[..., None] * dirs.view(lead)
-
-
-def _nothing(dirs: torch.Tensor):
-    """The (opacity, colour, depth, ok) of no rays."""
-    z = dirs.new_zeros(0)
-    return z, dirs.new_zeros(0, 3), z, torch.zeros(0, dtype=torch.bool)
-
-
 def _samples(index, origin, dirs, near, far, step: float, cap: float):
     """d every ``step`` over [near, far] (R,): t, d (R, M) and ``inside`` (R, M) (columns
     past far repeat the last one)."""
@@ -87,7 +75,7 @@ def _samples(index, origin, dirs, near, far, step: float, cap: float):
     t = torch.minimum(near[:, None] + col * step, far[:, None])
     inside = col <= last[:, None]
     d = torch.full(t.shape, cap, dtype=dirs.dtype)
-    d[inside] = mesh_distance(index, _along(origin, dirs, t)[inside], cap)
+    d[inside] = mesh_distance(index, points_along(origin, dirs, t)[inside], cap)
     return t, torch.where(inside, d, d.gather(1, last[:, None])), inside
 
 
@@ -127,7 +115,7 @@ def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
     keep = part[..., None] & ((k == 0) | low[..., None])
     d = d_c[:, :-1, None].expand_as(t).clone()
     new = keep & (k > 0)
-    d[new] = mesh_distance(index, _along(origin, dirs, t)[new], cap)
+    d[new] = mesh_distance(index, points_along(origin, dirs, t)[new], cap)
     t = torch.cat([t.reshape(R, -1), t_c.gather(1, end[:, None])], 1)
     d = torch.cat([d.reshape(R, -1), d_c.gather(1, end[:, None])], 1)
     keep = torch.cat([keep.reshape(R, -1), torch.ones(R, 1, dtype=torch.bool)], 1)
@@ -154,18 +142,6 @@ def _quantile_columns(weights: torch.Tensor, qs: tuple[float, ...]) -> torch.Ten
     return torch.searchsorted(cum, q).clamp(max=cum.shape[1] - 1)
 
 
-def _piecewise(t: torch.Tensor, knots: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
-    """Linear interpolation at t (R, M) through 3 sorted knots (R, 3) with values (R, 3)
-    or (R, 3, C), constant beyond the ends: (R, M) or (R, M, C)."""
-    lo, mid, hi = knots[:, 0:1], knots[:, 1:2], knots[:, 2:3]
-    a = ((t - lo) / (mid - lo).clamp(min=1e-12)).clamp(0, 1)  # 0 at lo, 1 at mid
-    b = ((t - mid) / (hi - mid).clamp(min=1e-12)).clamp(0, 1)  # 0 at mid, 1 at hi
-    w = torch.stack([1 - a, a - b, b], -1)  # the three knots' shares, summing to 1
-    if values.dim() == 2:
-        return (w * values[:, None, :]).sum(-1)
-    return torch.einsum("rmk,rkc->rmc", w, values)
-
-
 def _column_weights(t: torch.Tensor, s: torch.Tensor, beta: float) -> torch.Tensor:
     """The linear-SDF quadrature's weights per column (R, M), without the part in front
     of the first sample: each interval's to its far end, what the last absorbs to it."""
@@ -176,7 +152,7 @@ def _column_weights(t: torch.Tensor, s: torch.Tensor, beta: float) -> torch.Tens
 
 def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
                     near: torch.Tensor, far: torch.Tensor, t_probe: torch.Tensor,
-                    sdf_probe: torch.Tensor, beta, settings):
+                    sdf_probe: torch.Tensor, beta, settings: MarchSettings):
     """Residual rays (R,) from origin (3,) or origins (R, 3) along dirs (R, 3), in the
     shell over [near, far] (R,), with probes at t_probe (R, P) that read field SDF
     sdf_probe (R, P) (inf where a ray has fewer probes; every ray has one).
@@ -187,22 +163,22 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
 
     ``field.sdf_rgb`` is evaluated at 3 points per ray; ``index`` is the posed mesh's
     :class:`~texvocab.geometry.surface.SurfaceIndex`. Knobs from ``settings``
-    (:class:`~texvocab.render.marcher.MarchSettings`): residual_step, residual_spread,
-    residual_tolerance, shell_width (distances beyond it read as it), chunk_points.
+    (:class:`~texvocab.render.settings.MarchSettings`): the residual group, the shell's
+    width (distances beyond it read as it) and the field call's chunk.
 
     Returns opacity (R,), colour (R, 3) (not over a background), depth (R,), ok (R,)
     (rays resolved; the others must be marched) and the number of field evaluations.
     """
     R = len(dirs)
     if R == 0:
-        return (*_nothing(dirs), 0)
+        return (*no_rays(dirs), 0)
     b = beta_value(beta)
-    cap, h = float(settings.shell_width), settings.residual_step * b
+    cap, h = float(settings.shell.width), settings.residual.step * b
     sdf_probe = sdf_probe.detach()
     # the residual at the probe nearest the surface (a hit's own surface before an edge
     # it passes) stands for the ray's until the field is evaluated
     has = torch.isfinite(sdf_probe)
-    pts = _along(origin, dirs, torch.where(has, t_probe, 0.0))
+    pts = points_along(origin, dirs, torch.where(has, t_probe, 0.0))
     d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
@@ -210,72 +186,18 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, b)
     t, d = _refine(index, origin, dirs, t, d, low, first, end, cap)
     s_hat = _estimate(d, r0, cap)
-    spread = settings.residual_spread
+    spread = settings.residual.spread
     cols = _quantile_columns(_column_weights(t, s_hat, b), (spread, 0.5, 1 - spread))
     knots = t.gather(1, cols)
-    sdf3, rgb3 = evaluate_sdf(field, _along(origin, dirs, knots).reshape(-1, 3),
-                              dirs.repeat_interleave(3, 0), settings.chunk_points)
+    sdf3, rgb3 = evaluate_sdf(field, points_along(origin, dirs, knots).reshape(-1, 3),
+                              dirs.repeat_interleave(3, 0), settings.chunks.points)
     resid = sdf3.view(R, 3) - d.gather(1, cols)
-    sdf = torch.where(d < cap, d + _piecewise(t, knots, resid), cap)
-    acc, color, depth, _ = composite_linear_sdf(t, sdf, _piecewise(t, knots, rgb3.view(R, 3, 3)),
+    sdf = torch.where(d < cap, d + interpolate_knots(t, knots, resid), cap)
+    acc, color, depth, _ = composite_linear_sdf(t, sdf, interpolate_knots(t, knots, rgb3.view(R, 3, 3)),
                                                 beta, front=False)
     median = _quantile_columns(_column_weights(t, sdf.detach(), b), (0.5,))[:, 0]
     faint = acc.detach() < 1e-4  # shows nothing: where its weight sits does not matter
     spread_r = torch.cat([resid.detach(), r0], 1)
-    smooth = spread_r.amax(1) - spread_r.amin(1) <= settings.residual_tolerance * b
+    smooth = spread_r.amax(1) - spread_r.amin(1) <= settings.residual.tolerance * b
     ok = found & (faint | (smooth & (median >= cols[:, 0]) & (median <= cols[:, 2])))
     return acc, color, depth, ok, 3 * R
-
-
-def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Tensor,
-                cos: torch.Tensor, sdf0: torch.Tensor, rgb0: torch.Tensor, beta,
-                settings):
-    """Band rays (R,) (they meet the mesh at t_hit (R,) at a cosine cos (R,) and pass no
-    close surface before) from their probe there (SDF sdf0 (R,), colour rgb0 (R, 3)) and
-    two more evaluations: at the Newton point t* = t_hit + sdf0 / cos and ``band_spacing``
-    β / cos behind it, inside.
-
-    Near the hit the mesh is the hit face's plane, whose signed distance along the ray
-    is cos (t_hit - t); the SDF is that plus the residual, interpolated linearly between
-    the three points (constant beyond), and so is the colour. The SDF is then piecewise
-    linear with corners at the three, and its opacity is integrated in closed form
-    (:func:`~texvocab.render.band.composite_linear_sdf`) over t_hit and seven points
-    ``residual_step`` β / cos apart around t* (no field evaluations: they place the
-    colour, which each interval takes as the mean of its ends). Measured on a trained
-    avatar, the plane gives the same image as the exact mesh distance (within 0.05 dB),
-    and the point behind t* matters: with the probe and t* alone the image is 1-2 dB
-    further from the 64+32 reference, with it 0.3 dB nearer than the 4-sample band.
-
-    Returns opacity (R,), colour (R, 3) (not over a background), depth (R,) and ok (R,):
-    the points bracket the surface (first SDF > 0 > last), leave at most
-    ``band_leftover`` transmittance, t* is within the shell width of the hit and the
-    three residuals differ by at most ``residual_tolerance`` β (the others are not
-    resolved).
-    """
-    R = len(dirs)
-    if R == 0:
-        return _nothing(dirs)
-    cap, b = float(settings.shell_width), beta_value(beta)
-    step = sdf0.detach() / cos  # the sample places carry no gradient
-    t_star = t_hit + step.clamp(-cap, cap)
-    inner = t_star + settings.band_spacing * b / cos
-    tq = torch.stack([t_star, inner], 1)
-    sdfq, rgbq = evaluate_sdf(field, _along(origin, dirs, tq).reshape(-1, 3),
-                              dirs.repeat_interleave(2, 0), settings.chunk_points)
-    k = torch.arange(-3, 4, dtype=t_hit.dtype)
-    t = t_star[:, None] + k * (settings.residual_step * b / cos)[:, None]
-    t = torch.cat([t, t_hit[:, None]], 1).sort(1).values
-    plane = cos[:, None] * (t_hit[:, None] - t)
-    knots = torch.cat([t_hit[:, None], tq], 1)  # (R, 3): residual and colour known there
-    resid = torch.cat([sdf0[:, None], sdfq.view(R, 2) - cos[:, None] * (t_hit[:, None] - tq)], 1)
-    colour = torch.cat([rgb0[:, None], rgbq.view(R, 2, 3)], 1)
-    order = knots.argsort(1)
-    knots, resid = knots.gather(1, order), resid.gather(1, order)
-    colour = colour.gather(1, order[..., None].expand(-1, -1, 3))
-    sdf = plane + _piecewise(t, knots, resid)
-    rgb = _piecewise(t, knots, colour)
-    acc, color, depth, rest = composite_linear_sdf(t, sdf, rgb, beta)
-    r = resid.detach()
-    ok = (step.abs() <= cap) & (sdf[:, 0] > 0) & (sdf[:, -1] < 0) & \
-        (rest <= settings.band_leftover) & (r.amax(1) - r.amin(1) <= settings.residual_tolerance * b)
-    return acc, color, depth, ok.detach()

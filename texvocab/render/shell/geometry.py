@@ -23,8 +23,8 @@ within δ of the surface is ever skipped. Two structures, built once per posed m
   bracketed by a Euclidean distance transform of the voxels holding surface samples
   (error at most h√3/2 + r0); the voxels it cannot decide get the exact distance of
   their centre (:class:`~texvocab.geometry.surface.SurfaceIndex`), or are all marked when
-  ``exact=False``. :func:`trace_path` walks each ray from near to far and returns its
-  *path*: the kept steps, gaps removed.
+  ``exact=False``. :func:`~texvocab.render.shell.path.trace_path` walks each ray from near to
+  far and returns its *path*: the kept steps, gaps removed.
 """
 from __future__ import annotations
 
@@ -34,8 +34,8 @@ import numpy as np
 import torch
 
 from texvocab.geometry.surface import SurfaceIndex
-from texvocab.render._balls_jit import surface_balls
-from texvocab.render._splat_jit import splat_balls, stamp_distance
+from texvocab.render.kernels.splat import splat_balls, stamp_distance
+from texvocab.render.shell.balls import surface_balls, surface_samples
 
 
 @dataclass
@@ -46,27 +46,6 @@ class ShellBounds:
     hit: torch.Tensor
     near: torch.Tensor
     far: torch.Tensor
-
-
-def surface_samples(vertices: np.ndarray, faces: np.ndarray,
-                    spacing: float) -> tuple[np.ndarray, float]:
-    """Points (P, 3) on the mesh and r0 such that every surface point is within r0 of
-    one; r0 <= ``spacing`` unless a face is wider than 32 spacings (faces are cut into
-    n² congruent sub-triangles whose centroids are the samples; r0 is the largest
-    sub-triangle's centroid-to-corner distance)."""
-    tri = vertices[faces]  # (F, 3, 3)
-    centroid = tri.mean(1)
-    radius = np.sqrt(((tri - centroid[:, None]) ** 2).sum(-1).max(1))
-    n_sub = np.clip(np.ceil(radius / spacing), 1, 32).astype(np.int64)
-    points = []
-    for n in np.unique(n_sub):
-        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-        up, down = i + j <= n - 1, i + j <= n - 2
-        vw = np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], 1),
-                             np.stack([i[down] + 2 / 3, j[down] + 2 / 3], 1)]) / n
-        bary = np.column_stack([1 - vw.sum(1), vw])
-        points.append(np.einsum("sk,fkd->fsd", bary, tri[n_sub == n]).reshape(-1, 3))
-    return np.concatenate(points), float((radius / n_sub).max(initial=0.0))
 
 
 @dataclass
@@ -178,24 +157,6 @@ class ShellGeometry:
                            torch.from_numpy(f).view(H, W))
 
 
-def _bounding_balls(samples: np.ndarray, r0: float, width: float
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """Centres (B, 3) and radii (B,) of balls covering the δ-shell (``width``) of a
-    surface sampled by ``samples`` (P, 3) to within r0: the samples binned into cubes of
-    side δ, each bin's ball at its mean with radius δ + r0 + its farthest sample. (The
-    reference for the compiled :func:`surface_balls`, which the build uses.)"""
-    key = np.floor((samples - samples.min(0)) / width).astype(np.int64)
-    span = key.max(0) + 1
-    _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2],
-                           return_inverse=True)
-    count = np.bincount(inverse)
-    centers = np.stack([np.bincount(inverse, samples[:, k]) for k in range(3)], 1)
-    centers /= count[:, None]
-    spread = np.zeros(len(count))
-    np.maximum.at(spread, inverse, np.linalg.norm(samples - centers[inverse], axis=1))
-    return centers, spread + r0 + width
-
-
 def _occupancy(v: np.ndarray, f: np.ndarray, samples: np.ndarray, r0: float, width: float,
                h: float, exact: bool, index: SurfaceIndex | None
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -275,49 +236,3 @@ def _tangent_range(a: np.ndarray, z: np.ndarray, rho: np.ndarray) -> tuple[np.nd
     angle = np.arctan2(a, z)
     half = np.arcsin(np.clip(rho / np.hypot(a, z), 0, 1))
     return np.tan(angle - half), np.tan(angle + half)
-
-
-@dataclass
-class ShellPath:
-    """The part of each ray that lies in the shell, as a map from the path coordinate u
-    (metres of in-shell ray, gaps removed) to the ray distance t.
-
-    near: (R,) where the walk starts. cell: (R,) step length. u_end: (R, M) path length
-    up to the end of each step (steps outside the shell add nothing).
-    """
-
-    near: torch.Tensor
-    cell: torch.Tensor
-    u_end: torch.Tensor
-
-    @property
-    def length(self) -> torch.Tensor:
-        """(R,) in-shell path length of each ray."""
-        return self.u_end[:, -1]
-
-    def rows(self, index: torch.Tensor) -> "ShellPath":
-        """The paths of rays ``index`` (K,)."""
-        return ShellPath(self.near[index], self.cell[index], self.u_end[index])
-
-    def to_t(self, u: torch.Tensor) -> torch.Tensor:
-        """Ray distances (R, K) of path positions u (R, K) in [0, length]."""
-        j = torch.searchsorted(self.u_end, u.contiguous()).clamp(max=self.u_end.shape[1] - 1)
-        cell_end = self.near[:, None] + (j + 1).to(u.dtype) * self.cell[:, None]
-        return cell_end - (self.u_end.gather(1, j) - u)
-
-
-def trace_path(shell: ShellGeometry | None, origins: torch.Tensor, dirs: torch.Tensor,
-               near: torch.Tensor, far: torch.Tensor) -> ShellPath:
-    """Walk rays (origins, dirs (R, 3)) from near to far (R,) and keep the steps inside
-    the shell's occupancy grid. ``shell=None`` keeps all of [near, far] (one step)."""
-    span = (far - near).clamp(min=0)
-    if shell is None:
-        return ShellPath(near, span, span[:, None])
-    s = shell.step
-    m = torch.ceil(span / s).long()
-    j = torch.arange(max(int(m.max()) if len(m) else 0, 1))
-    rows, cols = torch.nonzero(j < m[:, None], as_tuple=True)
-    t = near[rows] + (cols.to(near.dtype) + 0.5) * s
-    occ = torch.zeros((len(near), len(j)), dtype=near.dtype)
-    occ[rows, cols] = shell.contains(origins[rows] + t[:, None] * dirs[rows]).to(near.dtype)
-    return ShellPath(near, torch.full_like(near, s), torch.cumsum(occ * s, 1))

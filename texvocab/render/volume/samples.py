@@ -3,7 +3,7 @@
 Positions along a ray are measured in a *path coordinate* ``u`` (metres): for the
 uniform marcher ``u = t - near``; for the shell marcher ``u`` counts only the part of
 the ray inside the shell, so gaps between limbs have zero length and cost nothing (see
-:class:`texvocab.render.shell.ShellPath`). Each sample stands for an interval
+:class:`texvocab.render.shell.path.ShellPath`). Each sample stands for an interval
 ``[start, end]`` of ``u`` (nerfacc's ``t_starts``/``t_ends``); its ``delta`` is the
 interval's length.
 """

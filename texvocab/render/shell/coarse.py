@@ -6,31 +6,12 @@ where the scouts see density).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 
-from texvocab.render.samples import RaySamples, midpoint_intervals
-
-Field = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
-
-
-def evaluate_field(field: Field, points: torch.Tensor, dirs: torch.Tensor,
-                   chunk: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Call ``field`` on points, dirs (N, 3) in chunks; returns density (N,), rgb (N, 3)."""
-    sigmas, rgbs = [], []
-    for s in range(0, len(points), chunk):
-        sigma, rgb = field(points[s:s + chunk], dirs[s:s + chunk])
-        n = len(points[s:s + chunk])
-        if sigma.shape != (n,) or rgb.shape != (n, 3):
-            raise ValueError(f"field must return density ({n},) and rgb ({n}, 3), got "
-                             f"{tuple(sigma.shape)} and {tuple(rgb.shape)}")
-        sigmas.append(sigma)
-        rgbs.append(rgb)
-    if not sigmas:
-        return points.new_zeros(0), points.new_zeros(0, 3)
-    return torch.cat(sigmas), torch.cat(rgbs)
+from texvocab.render.volume.field import Field, evaluate_field
+from texvocab.render.volume.samples import RaySamples, midpoint_intervals
 
 
 @dataclass

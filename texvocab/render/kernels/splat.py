@@ -1,7 +1,8 @@
-"""Compiled inner loop of :meth:`texvocab.render.shell.ShellGeometry.image_bounds`: every
-pixel inside each bounding ball's projected box gets the exact ray-sphere entry and exit
-distance, min/max-reduced per pixel (numba; ``cache`` keeps the machine code in
-``__pycache__``)."""
+"""Compiled inner loops of the shell geometry: the splat of
+:meth:`texvocab.render.shell.geometry.ShellGeometry.image_bounds` (every pixel inside each
+bounding ball's projected box gets the exact ray-sphere entry and exit distance,
+min/max-reduced per pixel) and the occupancy grid's bounded distance transform (numba;
+``cache`` keeps the machine code in ``__pycache__``)."""
 from __future__ import annotations
 
 import math

@@ -1,7 +1,7 @@
-"""Compiled bounding balls of :meth:`texvocab.render.shell.ShellGeometry.build`: the same
-balls as binning :func:`~texvocab.render.shell.surface_samples` into cubes of side δ
-(:func:`~texvocab.render.shell._bounding_balls`, kept as the reference), without
-materialising the samples (numba; ``cache`` keeps the machine code in ``__pycache__``)."""
+"""Compiled loops of the shell's bounding balls
+(:func:`texvocab.render.shell.balls.surface_balls`): every sub-triangle centroid of the
+surface sampling visited without materialising the samples (numba; ``cache`` keeps the
+machine code in ``__pycache__``)."""
 from __future__ import annotations
 
 import math
@@ -9,11 +9,9 @@ import math
 import numpy as np
 from numba import njit
 
-_MAX_CELLS = 1 << 22  # dense cube arrays up to 4M cells (100 MB)
-
 
 @njit(cache=True, nogil=True)
-def _subdivisions(v, f, spacing):
+def subdivisions(v, f, spacing):
     """Per face (F,): n, the sub-triangles per side (radius / spacing rounded up, 1..32),
     and the face's radius (largest centroid-to-corner distance)."""
     F = f.shape[0]
@@ -33,7 +31,7 @@ def _subdivisions(v, f, spacing):
 
 
 @njit(cache=True, nogil=True)
-def _visit(v, f, n_sub, mode, lo, width, span, acc, count, centre, spread):
+def visit(v, f, n_sub, mode, lo, width, span, acc, count, centre, spread):
     """One pass over every sub-triangle centroid (surface_samples' samples): mode 0
     min-reduces them into lo (3,); mode 1 adds each into its cube's acc (C, 3) and count
     (C,); mode 2 max-reduces its distance to its cube's centre (C, 3) into spread (C,)."""
@@ -64,34 +62,3 @@ def _visit(v, f, n_sub, mode, lo, width, span, acc, count, centre, spread):
                     else:
                         dx, dy, dz = x - centre[cell, 0], y - centre[cell, 1], z - centre[cell, 2]
                         spread[cell] = max(spread[cell], math.sqrt(dx * dx + dy * dy + dz * dz))
-
-
-def surface_balls(vertices: np.ndarray, faces: np.ndarray, spacing: float, width: float
-                  ) -> tuple[np.ndarray, np.ndarray, float]:
-    """(centres (B, 3), radii (B,), r0): the bounding balls of the ``width``-shell of the
-    mesh sampled as :func:`~texvocab.render.shell.surface_samples` at ``spacing`` does,
-    balls in the order of their cubes' flat index (as ``np.unique`` gives them)."""
-    v = np.ascontiguousarray(vertices, dtype=np.float64)
-    f = np.ascontiguousarray(faces, dtype=np.int64)
-    n_sub, radius = _subdivisions(v, f, float(spacing))
-    r0 = float((radius / n_sub).max(initial=0.0))
-    lo = np.full(3, np.inf)
-    empty2, empty1 = np.zeros((0, 3)), np.zeros(0)
-    dummy_span = np.ones(3, np.int64)
-    _visit(v, f, n_sub, 0, lo, width, dummy_span, empty2, np.zeros(0, np.int64), empty2, empty1)
-    hi = v.max(0) + width  # every cube index of a sample is below (hi - lo) / width
-    span = np.floor((hi - lo) / width).astype(np.int64) + 1
-    C = int(span.prod())
-    if C > _MAX_CELLS:  # a tiny width on a large mesh: bin the samples sparsely instead
-        from texvocab.render.shell import _bounding_balls, surface_samples
-
-        samples, r0 = surface_samples(v, f, spacing)
-        return (*_bounding_balls(samples, r0, width), r0)
-    acc, count = np.zeros((C, 3)), np.zeros(C, np.int64)
-    _visit(v, f, n_sub, 1, lo, width, span, acc, count, empty2, empty1)
-    used = np.flatnonzero(count)
-    centre = np.zeros((C, 3))
-    centre[used] = acc[used] / count[used, None]
-    spread = np.zeros(C)
-    _visit(v, f, n_sub, 2, lo, width, span, acc, count, centre, spread)
-    return centre[used], spread[used] + r0 + width, r0
