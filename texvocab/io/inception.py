@@ -25,7 +25,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from texvocab.errors import AssetError
@@ -116,10 +115,3 @@ class InceptionTaps(nn.Module):
                 if name in self.taps:
                     out.append(x)
         return out
-
-
-def upsample_to(maps: list[torch.Tensor], size: tuple[int, int]) -> torch.Tensor:
-    """Maps of several resolutions upsampled bilinearly (``align_corners=True``, as
-    PixelNeRF) to ``size`` and concatenated over channels: ``(B, ΣC, *size)``."""
-    return torch.cat([F.interpolate(m, size=size, mode="bilinear", align_corners=True)
-                      for m in maps], dim=1)

@@ -45,11 +45,6 @@ KID_SUBSET_SIZE = 1000
 Images = Sequence[np.ndarray | torch.Tensor] | np.ndarray | torch.Tensor  # N of (H, W, 3)
 
 
-def find_fid_extractor() -> Path | None:
-    """The installed extractor file (:func:`texvocab.io.inception.find_inception`)."""
-    return find_inception()
-
-
 def fid_available() -> bool:
     """Whether the default Inception feature extractor file is installed."""
     return find_inception() is not None
