@@ -15,6 +15,8 @@ from PIL import Image
 from tiny_runs import smallest_run
 from window_runs import PYTHON, run_window
 
+pytestmark = pytest.mark.slow  # Xvfb windows
+
 TEXVOCAB = str(Path(PYTHON).parent / "texvocab")
 
 

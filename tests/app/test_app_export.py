@@ -10,11 +10,14 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from PIL import Image
 from pose_file_cases import amass_file
 from tiny_runs import smallest_run
 
 from texvocab.pipeline.clip import read_video_info
+
+pytestmark = pytest.mark.slow  # Xvfb windows
 
 XVFB = shutil.which("xvfb-run")
 

@@ -14,6 +14,8 @@ from PIL import Image
 from tiny_runs import tiny_run
 from window_runs import PYTHON, ROOT, run_window
 
+pytestmark = pytest.mark.slow  # Xvfb windows
+
 
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tmp_path_factory):

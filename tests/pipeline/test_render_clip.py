@@ -91,6 +91,7 @@ def test_follow_camera_keeps_the_root_where_the_capture_had_it():
                                                                  [0, 0, 3.0], atol=1e-9)
 
 
+@pytest.mark.slow  # a local Ray cluster
 def test_ray_frames_equal_the_serial_render(checkpoint, tmp_path):
     """`--ray` on a local 2-worker Ray: the same frames as the serial render (to one 8-bit
     level: the workers run 1 torch thread, the serial render the process's)."""

@@ -110,6 +110,7 @@ def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):
     assert any("damaged texture-map cache" in r.getMessage() for r in caplog.records)
 
 
+@pytest.mark.slow  # kill -9 of a training process
 def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, tmp_path):
     """A real SIGKILL (no cleanup runs): the checkpoint stays loadable, the dead writer's
     lock is taken over, and the resumed run ends where an uninterrupted one does."""

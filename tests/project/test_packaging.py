@@ -14,6 +14,8 @@ import pytest
 from PIL import Image
 from smpl_files import write_official_pickle
 
+pytestmark = pytest.mark.slow  # builds and installs the wheel
+
 ROOT = Path(__file__).resolve().parents[2]
 SKIP = shutil.ignore_patterns(".git", ".venv", "out", "build", "*.egg-info", "__pycache__",
                               ".pytest_cache", ".hypothesis", "runs")
