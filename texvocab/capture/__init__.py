@@ -1,5 +1,6 @@
 """Multi-view captures: cameras, the Capture container, ZJU-MoCap / THUman4.0 readers and
-writers, and synthetic captures with ground truth at any pose."""
+writers, the HumanNeRF (one camera) reader, and synthetic captures with ground truth at
+any pose."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,13 +11,15 @@ import torch
 from texvocab.body import load_body
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META, Capture, read_synth_meta
+from texvocab.capture.humannerf import is_humannerf, read_humannerf
 from texvocab.capture.thuman import is_thuman, read_thuman
 from texvocab.capture.zju import is_zju, read_zju
 from texvocab.errors import AssetError, PoseError
 
 
 def detect_layout(path: str | Path) -> str:
-    """``zju`` or ``thuman`` for a capture folder; raises AssetError naming what is missing."""
+    """``zju``, ``thuman`` or ``humannerf`` for a capture folder; raises AssetError naming
+    what is missing."""
     root = Path(path)
     if not root.is_dir():
         raise AssetError(f"capture folder not found: {root}")
@@ -24,18 +27,26 @@ def detect_layout(path: str | Path) -> str:
         return "zju"
     if is_thuman(root):
         return "thuman"
-    raise AssetError(f"{root}: not a capture folder: expected annots.npy (ZJU-MoCap) or "
-                     "calibration.json (THUman4.0); see assets_spec/captures.md")
+    if is_humannerf(root):
+        return "humannerf"
+    raise AssetError(f"{root}: not a capture folder: expected annots.npy (ZJU-MoCap), "
+                     "calibration.json (THUman4.0) or cameras.pkl + mesh_infos.pkl (HumanNeRF); "
+                     "see assets_spec/captures.md")
+
+
+READERS = {"zju": read_zju, "thuman": read_thuman, "humannerf": read_humannerf}
 
 
 def open(path: str | Path, body=None, num_train: int | None = None) -> Capture:  # noqa: A001
     """Open a capture folder, choosing the reader from its layout.
 
     Args:
-        path: a ZJU-MoCap or THUman4.0-style folder (or one written by ``texvocab synth``).
+        path: a ZJU-MoCap, THUman4.0 or HumanNeRF-style folder (or one written by
+            ``texvocab synth``).
         body: the body model its poses drive; default: the embedded default body.
         num_train: number of leading training frames; default: the synthetic capture's
-            recorded split, else 70 % of the frames.
+            recorded split, else 70 % of the frames (80 % with one camera: its last
+            frames are the held-out set).
     """
     root = Path(path)
     layout = detect_layout(root)
@@ -46,8 +57,7 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
             raise AssetError(f"{root / SYNTH_META}: num_train={num_train!r}; expected an "
                              "integer >= 0")
     body = body if body is not None else load_body(None)
-    reader = read_zju if layout == "zju" else read_thuman
-    cap = reader(root, body, num_train)
+    cap = READERS[layout](root, body, num_train)
     try:  # finite and within the stated bounds (texvocab.body.model), before any work
         body.check_pose(torch.as_tensor(np.asarray(cap.poses)), torch.as_tensor(
             np.asarray(cap.trans)))

@@ -1,7 +1,9 @@
 """Capture: calibrated views × frames of one person, with per-frame SMPL poses.
 
 Images and masks load lazily from disk (undistorted with each camera's distortion); the
-training / novel-pose split is by frame, as in the paper (first frames train).
+training / novel-pose split is by frame, as in the paper (first frames train): by default
+70 % of the frames train, or 80 % for a one-camera capture, which has no held-out view
+and so holds out its last frames (:func:`default_num_train`).
 """
 from __future__ import annotations
 
@@ -17,6 +19,13 @@ from texvocab.capture.camera import Camera
 from texvocab.errors import AssetError
 
 SYNTH_META = "texvocab_synth.json"
+
+
+def default_num_train(num_frames: int, num_views: int) -> int:
+    """Leading training frames of a capture without a recorded split: 70 % of the frames,
+    or ⌊0.8·T⌋ with one camera (the last 20 % are its novel poses); at least 1."""
+    share = 0.8 if num_views == 1 else 0.7
+    return max(1, int(share * num_frames))
 
 
 def read_image(path: Path) -> np.ndarray:
@@ -46,7 +55,7 @@ class Capture:
     """A multi-view capture.
 
     Attributes:
-        root: folder on disk; layout: ``zju`` or ``thuman``.
+        root: folder on disk; layout: ``zju``, ``thuman`` or ``humannerf``.
         cameras: one :class:`Camera` per view.
         poses: (T, 24, 3) axis-angle per frame (SMPL order, root orientation at joint 0).
         trans: (T, 3) root translation in the project's convention (body.forward's trans).
@@ -55,6 +64,9 @@ class Capture:
         num_train: frames [0, num_train) are training poses, the rest novel poses.
         body: the :class:`~texvocab.body.BodyModel` the poses drive.
         betas: (S,) shape coefficients for SMPL bodies, or None.
+        rest_joints: (24, 3) the subject's own rest (T-pose) joints in the body frame,
+            metres, when the capture gives them (HumanNeRF's ``tpose_joints``), else None:
+            what a body fit to this subject starts from.
     """
 
     root: Path
@@ -69,6 +81,7 @@ class Capture:
     body: object
     betas: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    rest_joints: np.ndarray | None = None
 
     def __post_init__(self):
         t = len(self.image_paths)
@@ -80,6 +93,10 @@ class Capture:
                                  np.isfinite(self.trans).all(1)))[0][0])
             raise AssetError(f"{self.root}: non-finite pose or translation at frame "
                              f"{self.frame_ids[f]}")
+        if self.rest_joints is not None and (np.shape(self.rest_joints) != (24, 3) or
+                                             not np.isfinite(self.rest_joints).all()):
+            raise AssetError(f"{self.root}: rest joints {np.shape(self.rest_joints)}; expected "
+                             "(24, 3) finite")
         self.num_train = int(min(max(self.num_train, 0), t))  # 0: every frame is a novel pose
 
     @property

@@ -145,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check-assets", help="check SMPL files or a capture against assets_spec/",
                        description="Say exactly what is wrong with an SMPL model file, UV file, "
                                    "a folder of them, or a capture folder (ZJU-MoCap / "
-                                   "THUman4.0), or that all is well.")
+                                   "THUman4.0 / HumanNeRF), or that all is well.")
     p.add_argument("path", help="a .pkl/.npz model, a smpl_uv.obj, a folder of them, or a "
                                 "capture folder")
     p.set_defaults(func=cmd_check_assets)

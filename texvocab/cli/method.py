@@ -237,6 +237,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from texvocab.pipeline.avatar import load_avatar
     from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
     from texvocab.pipeline.settings import march_settings, render_overrides
+    from texvocab.pipeline.split import split_note
 
     if args.per_set is not None and args.per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {args.per_set}")
@@ -250,7 +251,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     paths = write_report(out, table, records, grids,
                          {"checkpoint": str(args.checkpoint), "step": int(ck["step"]),
-                          "capture": str(args.capture), "settings": settings.to_dict()})
+                          "capture": str(args.capture), "settings": settings.to_dict(),
+                          "split": split_note(avatar.capture)})
     print(paths[0].read_text())
     print(f"evaluated {sum(len(v) for v in sets.values())} images in "
           f"{time.perf_counter() - t0:.1f} s; report in {out.resolve()}")

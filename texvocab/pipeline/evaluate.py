@@ -26,6 +26,7 @@ from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 from texvocab.metrics import evaluate_pair, frechet
 from texvocab.metrics.image import SSIM_WINDOW
+from texvocab.pipeline.split import one_camera, scored_views
 from texvocab.render import ShellGeometry, render_image
 
 #: Per-image metrics whose set mean is reported with its standard error.
@@ -155,6 +156,8 @@ def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=Non
                 bar.update()
             bar.set_postfix_str(f"{name}: FID/KID")
             table[name] = {**summarise(per), **feats.scores(), "images": len(per)}
+            if getattr(items, "label", None):  # e.g. "seen view" (texvocab.pipeline.split)
+                table[name]["views"] = items.label
             grids[name] = rows
     return table, records, grids
 
@@ -177,8 +180,10 @@ def _score_cell(row: dict, key: str, need: int, digits: int) -> str:
     return f"{v:.{digits}f}" + ("" if std is None else f" (sd {std:.{digits}f})")
 
 
-def format_table(table: dict[str, dict], checkpoint: str = "") -> str:
-    """metrics.md: the header says what ± means; one row per set with its image count."""
+def format_table(table: dict[str, dict], checkpoint: str = "", split: str = "") -> str:
+    """metrics.md: the header says what ± means (and ``split``, what is held out); one
+    row per set with its image count, labelled with its views when they are not held out
+    (``views``: "seen view" ...)."""
     lines = [f"# texvocab eval: {checkpoint} (mean ± standard error of the mean, std/√n)", "",
              "Each cell is the mean over the set's n images ± its standard error (sample std "
              "with ddof 1 / √n; it treats the images as independent, but the views of one frame "
@@ -189,6 +194,7 @@ def format_table(table: dict[str, dict], checkpoint: str = "") -> str:
              "from 2 images; sd = std over random subsets when the set is subsampled) between "
              "the set's true and rendered images when the Inception extractor is installed, "
              "else n/a; seconds: mean render time per image.", "",
+             *([f"Split: {split}.", ""] if split else []),
              "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | fid | kid "
              "| seconds |", "|---" * 10 + "|"]
     for name, row in table.items():
@@ -196,7 +202,8 @@ def format_table(table: dict[str, dict], checkpoint: str = "") -> str:
                  _cell(row, "psnr_full", 2), _cell(row, "ssim_full", 4), _cell(row, "lpips", 4),
                  _score_cell(row, "fid", frechet.FID_MIN_IMAGES, 2), _score_cell(row, "kid", 2, 4),
                  _cell(row, "seconds", 2)]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        shown = f"{name} ({row['views']})" if row.get("views") else name
+        lines.append(f"| {shown} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -205,7 +212,7 @@ def write_report(out_dir: Path, table: dict, records: list, grids: dict, meta: d
     grid_<set>.png under ``out_dir``; returns their paths, metrics.md first."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    md = format_table(table, str(meta.get("checkpoint", "")))
+    md = format_table(table, str(meta.get("checkpoint", "")), str(meta.get("split", "")))
     paths = [atomic_write_bytes(out_dir / "metrics.md", lambda t: Path(t).write_text(md))]
     protocol = {"sem": "std(ddof=1) / sqrt(images), in <metric>_sem",
                 "fid_min_images": frechet.FID_MIN_IMAGES,
@@ -223,10 +230,12 @@ def write_report(out_dir: Path, table: dict, records: list, grids: dict, meta: d
 
 class CaptureItems(Sequence):
     """Evaluation items of a capture's (frame, view) ``pairs``, read from disk when indexed
-    (a full test split of a real capture is never held in memory at once)."""
+    (a full test split of a real capture is never held in memory at once). ``label``: what
+    the views are when they are not held out ("seen view"), for the report."""
 
-    def __init__(self, capture, pairs: Sequence[tuple[int, int]]):
+    def __init__(self, capture, pairs: Sequence[tuple[int, int]], label: str | None = None):
         self.capture, self.pairs = capture, [(int(t), int(v)) for t, v in pairs]
+        self.label = label
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -251,7 +260,8 @@ def spread(frames: Sequence[int], n: int) -> list[int]:
 def build_sets(capture, settings, per_set: int | None = None,
                generated: tuple[str, ...] = GENERATED_POSES) -> dict[str, Sequence[Item]]:
     """Evaluation sets of items (pose, trans, camera, gt (H, W, 3), mask (H, W)), each frame
-    seen from every view of ``settings.eval_views``:
+    seen from every view of ``settings.eval_views`` (a one-camera capture: from its camera,
+    the training poses labelled "seen view"; :mod:`texvocab.pipeline.split`):
 
     - ``novel_poses``: every novel frame (``per_set``: that many, evenly spread);
     - ``training_poses``: as many training frames as novel ones, evenly spread over the
@@ -264,11 +274,9 @@ def build_sets(capture, settings, per_set: int | None = None,
     """
     if per_set is not None and per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {per_set}")
-    views = list(settings.eval_views)
-    missing = [v for v in views if v >= capture.num_views]
-    if missing:
-        raise TexvocabError(f"eval_views {views}: {capture.root} has views 0.."
-                            f"{capture.num_views - 1} (the checkpoint holds out views it lacks)")
+    views = scored_views(capture, settings.eval_views)
+    labels = ({"training_poses": "seen view", "novel_poses": "capture camera, held-out frames"}
+              if one_camera(capture) else {})
     small = [v for v in views if min(capture.cameras[v].width, capture.cameras[v].height)
              < SSIM_WINDOW]
     if small:
@@ -289,7 +297,7 @@ def build_sets(capture, settings, per_set: int | None = None,
                         len(pairs), capture.frame_ids[empty[0][0]], empty[0][1])
             pairs = [p for p in pairs if p not in empty]
         if pairs:
-            sets[name] = CaptureItems(capture, pairs)
+            sets[name] = CaptureItems(capture, pairs, labels.get(name))
     if capture.synthetic and generated:
         renderer, cams = ground_truth_renderer(capture)
         items = []

@@ -36,6 +36,7 @@ from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.pipeline.split import one_camera, one_camera_train_views
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
 from texvocab.render.band import render_rays_banded
 
@@ -45,7 +46,10 @@ SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --
 
 def train_views(capture, s: Settings) -> list[int]:
     """The views a run trains on: ``train_views``, or every view not held out. The held-out
-    ``eval_views`` must exist in the capture (the defaults need views 1 and 5)."""
+    ``eval_views`` must exist in the capture (the defaults need views 1 and 5); a
+    one-camera capture trains on its camera and holds out frames only."""
+    if one_camera(capture):
+        return one_camera_train_views(capture, s.train_views)
     last = capture.num_views - 1
     bad_eval = [v for v in s.eval_views if v > last]
     if bad_eval:
