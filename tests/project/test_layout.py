@@ -71,7 +71,7 @@ def _docstrings():
 
 
 def test_docstrings_cite_the_papers_own_equation_numbers_and_nothing_outside_the_repo():
-    """The paper numbers its equations 1-10 in LaTeX source order (README's paper map);
+    """The paper numbers its equations 1-10 in LaTeX source order (docs/method.md's equation map);
     a LaTeX label (eqA, eqNA0, ...) or a path outside the repository means nothing to a
     reader of the installed package."""
     bad = []
@@ -84,12 +84,12 @@ def test_docstrings_cite_the_papers_own_equation_numbers_and_nothing_outside_the
     assert not bad, bad
 
 
-def test_readme_paper_map_names_functions_that_exist():
-    """Every `module.function` in README's equation table resolves."""
+def test_the_manuals_equation_map_names_functions_that_exist():
+    """Every `module.function` in docs/method.md's equation table resolves."""
     import importlib
 
-    text = (ROOT / "README.md").read_text()
-    table = text[text.index("### The paper's equations"):].split("\n## ")[0]
+    text = (ROOT / "docs" / "method.md").read_text()
+    table = text[text.index("## The paper's equations"):].split("\n## ")[0]
     refs = re.findall(r"`(texvocab\.[\w.]+)`", table)
     assert len(refs) >= 10
     for ref in refs:
