@@ -7,6 +7,7 @@ and so holds out its last frames (:func:`default_num_train`).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,6 +68,9 @@ class Capture:
         rest_joints: (24, 3) the subject's own rest (T-pose) joints in the body frame,
             metres, when the capture gives them (HumanNeRF's ``tpose_joints``), else None:
             what a body fit to this subject starts from.
+        image_scale: images and masks are resized by this factor on load (``cameras`` are
+            the resized ones; :meth:`scaled`); 1: as on disk.
+        source_cameras: the cameras of the images on disk when ``image_scale`` != 1.
     """
 
     root: Path
@@ -82,6 +86,8 @@ class Capture:
     betas: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     rest_joints: np.ndarray | None = None
+    image_scale: float = 1.0
+    source_cameras: list[Camera] | None = None
 
     def __post_init__(self):
         t = len(self.image_paths)
@@ -115,20 +121,52 @@ class Capture:
     def novel_frames(self) -> range:
         return range(self.num_train, self.num_frames)
 
+    def scaled(self, factor: float) -> Capture:
+        """This capture with its images and masks resized by ``factor`` on load (area
+        average; a mask pixel is foreground where more than half of its area is) and its
+        cameras scaled to match; ``factor`` is relative to the images on disk. A 1024²
+        capture at 0.5 trains and evaluates at 512²."""
+        if not (0.0 < factor <= 1.0) or not np.isfinite(factor):
+            raise AssetError(f"image scale {factor!r}: expected 0 < scale <= 1")
+        source = self.source_cameras or self.cameras
+        if factor == 1.0:
+            return dataclasses.replace(self, cameras=list(source), source_cameras=None,
+                                       image_scale=1.0)
+        cams = [dataclasses.replace(c.scaled(factor), dist=np.zeros_like(c.dist))
+                for c in source]  # images are undistorted before they are resized
+        return dataclasses.replace(self, cameras=cams, source_cameras=list(source),
+                                   image_scale=float(factor))
+
+    def _source(self, view: int) -> Camera:
+        return (self.source_cameras or self.cameras)[view]
+
+    def _resized(self, image: np.ndarray, view: int) -> np.ndarray:
+        """(H, W[, C]) float32 at the source size -> this capture's size for ``view``."""
+        if self.source_cameras is None:
+            return image
+        cam = self.cameras[view]
+        chans = image.reshape(image.shape[0], image.shape[1], -1)
+        out = [np.asarray(Image.fromarray(chans[..., c]).resize(
+            (cam.width, cam.height), Image.Resampling.BOX)) for c in range(chans.shape[2])]
+        return np.stack(out, -1).reshape(cam.height, cam.width, *image.shape[2:])
+
     def image(self, view: int, frame: int) -> np.ndarray:
-        """(H, W, 3) float32 RGB, undistorted."""
+        """(H, W, 3) float32 RGB, undistorted (and resized to ``image_scale``)."""
         img = read_image(self.image_paths[frame][view])
         self._check_size(self.image_paths[frame][view], img.shape, view)
-        return self.cameras[view].undistort_image(img)
+        return self._resized(self._source(view).undistort_image(img), view)
 
     def mask(self, view: int, frame: int) -> np.ndarray:
-        """(H, W) bool foreground, undistorted."""
+        """(H, W) bool foreground, undistorted (and resized to ``image_scale``)."""
         m = read_mask(self.mask_paths[frame][view])
         self._check_size(self.mask_paths[frame][view], m.shape, view)
-        return self.cameras[view].undistort_image(m.astype(np.uint8), nearest=True) > 0
+        m = self._source(view).undistort_image(m.astype(np.uint8), nearest=True) > 0
+        if self.source_cameras is None:
+            return m
+        return self._resized(m.astype(np.float32), view) > 0.5
 
     def _check_size(self, path: Path, shape: tuple, view: int) -> None:
-        cam = self.cameras[view]
+        cam = self._source(view)
         if tuple(shape[:2]) != (cam.height, cam.width):
             raise AssetError(f"{path}: image is {shape[1]}x{shape[0]}, but view {view}'s "
                              f"calibration (and its other images) say {cam.width}x{cam.height}")

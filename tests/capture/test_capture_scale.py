@@ -1,0 +1,33 @@
+"""Capture.scaled: images, masks and cameras resized together (a 1024² capture at 512²)."""
+import numpy as np
+import pytest
+
+from texvocab.capture import open as open_capture
+from texvocab.errors import AssetError
+
+
+def test_half_scale_averages_pixels_and_keeps_the_cameras_aligned(capture):
+    full = open_capture(capture)
+    half = full.scaled(0.5)
+    v, t = 1, 2
+    img, small = full.image(v, t), half.image(v, t)
+    assert small.shape == (full.cameras[v].height // 2, full.cameras[v].width // 2, 3)
+    boxed = img.reshape(small.shape[0], 2, small.shape[1], 2, 3).mean((1, 3))
+    assert np.abs(small - boxed).max() < 1e-5
+    m, sm = full.mask(v, t), half.mask(v, t)
+    assert sm.shape == small.shape[:2] and sm.dtype == bool
+    share = m.reshape(sm.shape[0], 2, sm.shape[1], 2).mean((1, 3))
+    assert (sm == (share > 0.5)).all()
+    # the same world point lands on the same place of the scene in both images
+    joints = full.posed_body(t).joints[0].numpy()
+    px_full, _ = full.cameras[v].project(joints)
+    px_half, _ = half.cameras[v].project(joints)
+    assert np.abs((px_full + 0.5) * 0.5 - (px_half + 0.5)).max() < 1e-6
+    assert half.scaled(1.0).cameras[v].width == full.cameras[v].width  # relative to disk
+    assert half.scaled(0.25).image(v, t).shape[0] == full.cameras[v].height // 4
+
+
+@pytest.mark.parametrize("factor", [0.0, -0.5, 1.5, float("nan")])
+def test_a_scale_outside_0_1_is_refused(capture, factor):
+    with pytest.raises(AssetError, match="image scale"):
+        open_capture(capture).scaled(factor)
