@@ -214,10 +214,14 @@ class ViewerState:
 
     def set_part_to_key(self, part: str | int, key_index: int) -> bool:
         """Move the part's joints to the pose of one of its keys (not clamped: keys are
-        training poses), making that key the part's nearest (distance ~0)."""
+        training poses), making that key the part's nearest (distance ~0). Joints the
+        vocabulary does not see (the root under a root-relative condition: its keys hold
+        no facing) keep their rotation, so the body keeps facing where it faced."""
         joints, rotvecs = self.key_pose(part, key_index)
+        ignored = self.data.vocab.ignored_joints
+        seen = [i for i, j in enumerate(joints) if j not in ignored]
         pose = self.pose.copy()
-        pose[list(joints)] = rotvecs
+        pose[[joints[i] for i in seen]] = rotvecs[seen]
         name = self.data.vocab.part_names[part] if isinstance(part, int) else part
         return self._changed(pose, change=f"{name.replace('_', ' ')} to key {key_index}")
 

@@ -117,6 +117,25 @@ def test_set_part_to_key_makes_that_key_nearest(body):
         state.set_part_to_key("left_arm", 6)
 
 
+def test_moving_the_main_body_to_a_key_keeps_the_way_the_body_faces(body):
+    """The vocabulary reads the root-relative pose: a body facing away (143° about y) is
+    as near its keys as one facing forward, and moving its main body to a key keeps the
+    root's orientation (the key holds none)."""
+    data = make_data(body)
+    state = ViewerState(data)
+    main = list(BODY_PARTS).index("main_body")
+    pose = training_poses()[int(data.vocab.key_frames[main][1])].copy()  # a main-body key
+    pose[0] = [0.0, np.radians(143.0), 0.0]
+    state.set_pose(pose)
+    assert state.novelty()[main] == pytest.approx(0.0, abs=1e-12)
+    state.set_joint(9, (25.0, 0.0, 0.0))  # spine3 bends: away from every key
+    assert state.novelty()[main] > 1e-3
+    assert state.set_part_to_key("main_body", 2)
+    assert state.novelty()[main] == pytest.approx(0.0, abs=1e-12)
+    assert state.query()[main].key_ids[0] == 2
+    np.testing.assert_array_equal(state.pose[0], pose[0])
+
+
 def test_blended_texture_is_the_key_texture_where_its_weight_is_one(body):
     data = make_data(body, weighting="inverse")
     state = ViewerState(data)

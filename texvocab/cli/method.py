@@ -46,6 +46,11 @@ def add_method_parsers(sub, add_smpl) -> None:
     p.add_argument("--min-distance", type=float, default=0.0,
                    help="adaptive M: stop adding keys to a part once every training pose of "
                         "it is within this Eq. 4 distance of a key (default 0: always M)")
+    p.add_argument("--pose-condition", choices=("root-relative", "global"),
+                   default="root-relative",
+                   help="the pose keys and queries read: root-relative (default: joint 0's "
+                        "rotation, which way the body faces, removed) or global (as "
+                        "checkpoints trained before it)")
     p.add_argument("--train-frames", type=int, default=None)
     add_smpl(p)
     p.set_defaults(func=cmd_vocab)
@@ -123,7 +128,7 @@ def cmd_vocab(args: argparse.Namespace) -> int:
         raise TexvocabError(f"{args.capture}: no training frames to build a vocabulary from")
     pose = parse_pose(args.pose, cap)
     vocab = Vocabulary.build(cap.poses[: cap.num_train], args.strategy, args.keys, args.k,
-                             args.weighting, args.min_distance)
+                             args.weighting, args.min_distance, args.pose_condition)
     print(f"pose: {args.pose}   training frames: {cap.num_train}")
     print(vocab.format_query(pose))
     return 0

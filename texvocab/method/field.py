@@ -7,6 +7,9 @@ density (Yariv et al. 2021).
   learned residual whose last layer starts at zero — the geometric initialisation is the
   body surface itself (for a clothed person the residual is small), which is what makes
   short CPU training converge.
+* Θ is the pose's condition (:attr:`~texvocab.method.feature.PoseContext.condition`), the
+  vocabulary's: root-relative in new models, so x_c, f and Θ, and with them the SDF, do
+  not change when the whole body turns; γ(d) reads the viewing direction in the world.
 * density σ = α Ψ_β(−SDF), α = 1/β, Ψ_β the Laplace CDF, evaluated with exponentials of
   non-positive arguments only, so σ stays finite as β → 0 (β is clamped at ``beta_min``).
 """
@@ -59,8 +62,10 @@ def laplace_density(sdf: torch.Tensor, beta: torch.Tensor) -> torch.Tensor:
     return psi / beta
 
 
-def pose_condition(pose: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
-    """The field's pose input Θ: per joint the unit quaternion of its rotation, signed so
+def pose_input(pose: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
+    """The field's pose input Θ from the pose its context conditions the field on
+    (:attr:`~texvocab.method.feature.PoseContext.condition`: root-relative, or global in
+    old checkpoints): per joint the unit quaternion of its rotation, signed so
     that q and -q (the same rotation, e.g. θ and θ - 2π about one axis) give one input:
     w > 0, or for |w| <= eps (θ ≈ π) the first of x, y, z beyond eps positive. Identical
     to ``rotvec_to_quat`` for rotation vectors of norm < π (w > 0 already), so weights
@@ -121,7 +126,7 @@ class AvatarField(nn.Module):
         rounding; returns (N, 1 + hidden)."""
         first = self.sdf_net[0]
         d = x.shape[1]
-        pose = pose_condition(ctx.pose.to(x.dtype)).reshape(-1)
+        pose = pose_input(ctx.condition.to(x.dtype)).reshape(-1)
         bias = first.bias + first.weight[:, d:].contiguous() @ pose
         # contiguous copies: row-aligned operands keep BLAS results bitwise reproducible
         return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))

@@ -263,6 +263,12 @@ class Trainer:
             raise TexvocabError(f"{self.checkpoint_path}: written with {k}={theirs.get(k)!r}, "
                                 f"this run asks for {k}={ours[k]!r}; resume with the same "
                                 "settings or choose another --out")
+        theirs = ck["vocab"].get("pose_condition", "global")  # absent: written before it
+        ours = self.model.pose_feature.vocab.pose_condition  # existed, so global
+        if theirs != ours:
+            raise TexvocabError(f"{self.checkpoint_path}: written with pose_condition="
+                                f"{theirs!r} (the pose its vocabulary and field read), this "
+                                f"run builds pose_condition={ours!r}; choose another --out")
         if int(ck["step"]) > self.s.iterations:
             raise TexvocabError(f"{self.checkpoint_path}: already at step {ck['step']}, past "
                                 f"iterations={self.s.iterations}; pass --iterations N > "
