@@ -31,3 +31,14 @@ def test_half_scale_averages_pixels_and_keeps_the_cameras_aligned(capture):
 def test_a_scale_outside_0_1_is_refused(capture, factor):
     with pytest.raises(AssetError, match="image scale"):
         open_capture(capture).scaled(factor)
+
+
+def test_large_captures_open_at_half_size_by_default(capture):
+    from texvocab.capture import auto_image_scale
+
+    cams = open_capture(capture).cameras
+    assert auto_image_scale(cams) == 1.0  # 64²: as on disk
+    big = [c.scaled(16.0) for c in cams]  # 1024²
+    assert auto_image_scale(big) == 0.5
+    assert auto_image_scale([c.scaled(30.0) for c in cams]) == 0.25  # 1920² -> 480²
+    assert open_capture(capture, image_scale=0.5).cameras[0].width == cams[0].width // 2

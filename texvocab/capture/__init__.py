@@ -35,9 +35,21 @@ def detect_layout(path: str | Path) -> str:
 
 
 READERS = {"zju": read_zju, "thuman": read_thuman, "humannerf": read_humannerf}
+MAX_AUTO_SIDE = 768  # the automatic image scale halves images until no side exceeds this
 
 
-def open(path: str | Path, body=None, num_train: int | None = None) -> Capture:  # noqa: A001
+def auto_image_scale(cameras) -> float:
+    """The image scale a capture trains and evaluates at by default: 1, halved until every
+    view's longest side is at most ``MAX_AUTO_SIDE`` px (a 1024² capture: 0.5, i.e. 512²;
+    the synthetic captures' 256²: 1). Power-of-two factors keep the area average exact."""
+    side, scale = max(max(c.width, c.height) for c in cameras), 1.0
+    while side * scale > MAX_AUTO_SIDE:
+        scale *= 0.5
+    return scale
+
+
+def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A001
+         image_scale: float | None = None) -> Capture:
     """Open a capture folder, choosing the reader from its layout.
 
     Args:
@@ -47,6 +59,8 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
         num_train: number of leading training frames; default: the synthetic capture's
             recorded split, else 70 % of the frames (80 % with one camera: its last
             frames are the held-out set).
+        image_scale: resize images, masks and cameras by this factor on load
+            (:meth:`Capture.scaled`); default :func:`auto_image_scale` (1024² -> 512²).
     """
     root = Path(path)
     layout = detect_layout(root)
@@ -63,7 +77,8 @@ def open(path: str | Path, body=None, num_train: int | None = None) -> Capture: 
             np.asarray(cap.trans)))
     except PoseError as e:
         raise AssetError(f"{root}: its SMPL parameters: {e}") from None
-    return cap
+    scale = auto_image_scale(cap.cameras) if image_scale is None else float(image_scale)
+    return cap if scale == 1.0 else cap.scaled(scale)
 
 
-__all__ = ["Camera", "Capture", "detect_layout", "open"]
+__all__ = ["Camera", "Capture", "auto_image_scale", "detect_layout", "open"]
