@@ -292,3 +292,33 @@ def test_one_camera_capture_trains_and_evaluates(standin, tmp_path, capsys):
     assert "| novel_poses (capture camera, held-out frames) | 1 |" in md
     assert "Split: one camera, no held-out view: novel_poses are the last 2 of 10 frames" in md
     capsys.readouterr()
+
+
+def test_the_body_is_fitted_to_the_subjects_rest_joints(tmp_path, body, truth):
+    """A subject with longer shins and a lower pelvis: open() fits the default body's
+    skeleton to tpose_joints, keeps its pelvis on the subject's, and keys the texture-map
+    cache by the fit."""
+    from texvocab.method.texmap import TexmapSettings, cache_dir
+
+    root = write_standin(tmp_path / "s", body, truth, pelvis_offset=(0.0, -0.02, 0.0))
+    with open(root / "mesh_infos.pkl", "rb") as fh:
+        infos = pickle.load(fh)
+    rest = next(iter(infos.values()))["tpose_joints"].copy()
+    for knee, ankle in ((4, 7), (5, 8)):
+        rest[ankle] = rest[knee] + 1.12 * (rest[ankle] - rest[knee])
+    for info in infos.values():
+        info["tpose_joints"] = rest
+    with open(root / "mesh_infos.pkl", "wb") as fh:
+        pickle.dump(infos, fh)
+    plain = open_capture(root, body=body, fit_body=False)
+    fitted = open_capture(root, body=body)
+    assert np.abs(plain.body.rest_joints.numpy() - rest).max() > 0.02
+    np.testing.assert_allclose(fitted.body.rest_joints.numpy(), rest, atol=1e-5)
+    assert fitted.meta["body_fit"].startswith("skeleton-") and "body_fit" not in plain.meta
+    for t in (0, 7):
+        info = infos[f"frame_{t:06d}"]
+        R = rotvec_to_rotmat(torch.as_tensor(info["Rh"].astype(np.float64))).numpy()
+        np.testing.assert_allclose(fitted.posed_body(t).joints[0, 0].numpy(),
+                                   R @ rest[0] + info["Th"], atol=1e-5)
+    s = TexmapSettings()
+    assert cache_dir(fitted, s) != cache_dir(plain, s)

@@ -12,6 +12,7 @@ from texvocab.body import load_body
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META, Capture, read_synth_meta
 from texvocab.capture.humannerf import is_humannerf, read_humannerf
+from texvocab.capture.subject import fit_subject_body
 from texvocab.capture.thuman import is_thuman, read_thuman
 from texvocab.capture.zju import is_zju, read_zju
 from texvocab.errors import AssetError, PoseError
@@ -49,7 +50,7 @@ def auto_image_scale(cameras) -> float:
 
 
 def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A001
-         image_scale: float | None = None) -> Capture:
+         image_scale: float | None = None, fit_body: bool = True) -> Capture:
     """Open a capture folder, choosing the reader from its layout.
 
     Args:
@@ -59,6 +60,8 @@ def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A00
         num_train: number of leading training frames; default: the synthetic capture's
             recorded split, else 70 % of the frames (80 % with one camera: its last
             frames are the held-out set).
+        fit_body: fit the body to the subject's rest joints when the capture gives them
+            (:func:`~texvocab.capture.subject.fit_subject_body`).
         image_scale: resize images, masks and cameras by this factor on load
             (:meth:`Capture.scaled`); default :func:`auto_image_scale` (1024² -> 512²).
     """
@@ -77,6 +80,8 @@ def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A00
             np.asarray(cap.trans)))
     except PoseError as e:
         raise AssetError(f"{root}: its SMPL parameters: {e}") from None
+    if fit_body:
+        cap = fit_subject_body(cap)
     scale = auto_image_scale(cap.cameras) if image_scale is None else float(image_scale)
     return cap if scale == 1.0 else cap.scaled(scale)
 
