@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from app.posing import BodyPoser
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import (
     BODY_PARTS,
@@ -25,6 +24,7 @@ from texvocab.pipeline import (
 )
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 from texvocab.pipeline import pose_preset as preset
+from texvocab_viewer.posing import BodyPoser
 
 
 @dataclass

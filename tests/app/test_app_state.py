@@ -4,13 +4,13 @@ and random texture maps, no images)."""
 import numpy as np
 import pytest
 
-from app.state import ViewerData, ViewerState, load_viewer_data
 from texvocab.body import default_body
 from texvocab.body.parts import BODY_PARTS
 from texvocab.errors import TexvocabError
 from texvocab.geometry.uv import texel_map
 from texvocab.method.vocab import Vocabulary
 from texvocab.method.vocab_texture import VocabTexture
+from texvocab_viewer.state import ViewerData, ViewerState, load_viewer_data
 
 TEX = 32
 LEFT_SHOULDER, LEFT_KNEE = 16, 4
@@ -183,13 +183,13 @@ def test_no_vocabulary_and_bad_sources(tmp_path):
 
 
 def test_numpy_posing_equals_the_body_model(body, toy_arrays):
-    """app.posing (NumPy LBS for display) against BodyModel.forward, with and without
+    """texvocab_viewer.posing (NumPy LBS for display) against BodyModel.forward, with and without
     pose correctives."""
     import torch
 
-    from app.posing import BodyPoser
     from texvocab.body import BodyModel
     from texvocab.body.smpl_io import parents_from_kintree
+    from texvocab_viewer.posing import BodyPoser
 
     toy = BodyModel(v_template=toy_arrays["v_template"], faces=toy_arrays["f"],
                     weights=toy_arrays["weights"],

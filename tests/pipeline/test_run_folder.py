@@ -156,7 +156,7 @@ def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, t
 def test_a_moved_capture_is_named_and_capture_points_to_it(capture, tmp_path, capsys):
     import shutil
 
-    from app.state import load_viewer_data
+    from texvocab_viewer.state import load_viewer_data
 
     moved = tmp_path / "moved_cap"
     shutil.copytree(capture, moved)

@@ -110,7 +110,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--out {out}: exists; pass --overwrite to replace it")
     data = None
     if gl:  # the viewer's data: the avatar plus what its 3D view draws
-        from app.state import load_viewer_data
+        from texvocab_viewer.state import load_viewer_data  # late: torch, only for GL panels
 
         data = load_viewer_data(args.checkpoint, args.smpl, args.capture)
         cap, model, trained = data.capture, data.model, data.settings
@@ -150,7 +150,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         worker = FrameWorker(model, march, settings.image_scale, torch.get_num_threads())
         extra = None
         if gl:
-            from app.clip_panels import GLPanels, side_by_side
+            from texvocab_viewer.export.clip_panels import GLPanels, side_by_side  # late: GL
 
             extra = GLPanels(data, panels)
 

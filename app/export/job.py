@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.pipeline import save_png
+from texvocab.pipeline import FrameWorker, save_png, write_mp4
+from texvocab_viewer.export.shot import render_neural
 
 EXPORT_DIR = Path("exports")
 
@@ -51,16 +52,12 @@ class Export:
         return self.thread.is_alive()
 
     def _run(self) -> None:
-        from texvocab.pipeline import FrameWorker, write_mp4
-
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             if self.total == 1:
                 out = fresh_path(self.folder, self.stem, "")
                 out.mkdir()
                 if self.model is not None:  # as texvocab shot renders it
-                    from app.shot import render_neural
-
                     save_png(out / "neural.png", render_neural(
                         self.model, self.march, self.poses[0], self.trans[0], self.camera,
                         self.background))

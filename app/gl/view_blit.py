@@ -1,6 +1,6 @@
 """The 3D view's image copied straight into the window's framebuffer.
 
-The panel (app/panel_view.py) leaves the view's rectangle empty and says where it is
+The panel (app/panels/view.py) leaves the view's rectangle empty and says where it is
 (:class:`ViewBlit`); just before ImGui draws the frame (``Viewer.before_imgui_render``),
 the scene's framebuffer is copied there with ``glBlitFramebuffer``, one to one, and the
 GUI (caption, legend, popups) is drawn over it. Under Mesa llvmpipe this is a copy, where
@@ -12,11 +12,13 @@ The neural render's preview is drawn the same way, scaled (:func:`image_rects`,
 (``Viewer.before_swap``).
 
 PyOpenGL is imported at the first copy, once the window has chosen its platform
-(app.window._choose_gl_platform).
+(texvocab_viewer.window._choose_gl_platform).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from imgui_bundle import imgui
 
 
 @dataclass
@@ -86,7 +88,7 @@ def image_rects(rect: tuple[float, float, float, float], texture_size: tuple[int
 def blit_image(fbo: int, rects, linear: bool = True) -> None:
     """Copy the (src, dst) ``rects`` (:func:`blit_rects`, :func:`image_rects`) of
     framebuffer ``fbo`` into the window's (GL framebuffer 0), filtered linearly or not."""
-    from OpenGL import GL
+    from OpenGL import GL  # late: after the window chose PyOpenGL's platform
 
     GL.glDisable(GL.GL_SCISSOR_TEST)
     GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fbo)
@@ -113,10 +115,15 @@ def warm_image_blit(ctx, colour: tuple[float, float, float]) -> None:
     ctx.screen.use()
 
 
+def gl_flush() -> None:
+    """Have GL start on the commands issued so far (``glFlush``) without waiting for them."""
+    from OpenGL import GL  # late: after the window chose PyOpenGL's platform
+
+    GL.glFlush()
+
+
 def window_framebuffer() -> tuple[tuple[int, int], tuple[float, float]]:
     """(the window's framebuffer size in pixels, ImGui's display framebuffer scale)."""
-    from imgui_bundle import imgui
-
     io = imgui.get_io()
     scale = (io.display_framebuffer_scale.x, io.display_framebuffer_scale.y)
     return (round(io.display_size.x * scale[0]), round(io.display_size.y * scale[1])), scale

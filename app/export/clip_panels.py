@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.gl_headless import create_headless_context, make_current, release
-from app.scene import SceneOptions, SceneRenderer
-from app.state import ViewerData, ViewerState
+from texvocab_viewer.gl.headless import create_headless_context, make_current, release
+from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer
+from texvocab_viewer.state import ViewerData, ViewerState
 
 PANELS = ("neural", "vocab", "novelty")
 OPTIONS = {"vocab": SceneOptions(textured=True, lighting=False, background=(0.0, 0.0, 0.0)),

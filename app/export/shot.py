@@ -10,11 +10,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from app.arguments import parse_size
-from app.camera import DEFAULT_TARGET, OrbitCamera
-from app.gl_headless import create_headless_context, make_current, release
-from app.scene import SceneOptions, SceneRenderer, as_camera
-from app.state import ViewerData, ViewerState, load_viewer_data
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 from texvocab.pipeline import (
@@ -26,6 +21,11 @@ from texvocab.pipeline import (
     save_png,
     to_uint8,
 )
+from texvocab_viewer.arguments import parse_size
+from texvocab_viewer.gl.camera import DEFAULT_TARGET, OrbitCamera
+from texvocab_viewer.gl.headless import create_headless_context, make_current, release
+from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer, as_camera
+from texvocab_viewer.state import ViewerData, ViewerState, load_viewer_data
 
 DEFAULT_SIZE = (640, 400)
 

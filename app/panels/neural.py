@@ -1,6 +1,7 @@
 """Neural render panel: the trained avatar rendered by the CPU ray marcher in a render
-process (:mod:`app.render_process`; or a thread, :mod:`app.worker`), from the 3D view's
-camera, coarse to fine (1/8 .. 1), with the level shown and how long it took.
+process (:mod:`texvocab_viewer.neural.render_process`; or a thread,
+:mod:`texvocab_viewer.neural.worker`), from the 3D view's camera, coarse to fine (1/8 .. 1),
+with the level shown and how long it took.
 Without a checkpoint it says why it is empty.
 
 Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render now``,
@@ -14,11 +15,11 @@ from collections import deque
 import numpy as np
 from imgui_bundle import imgui
 
-from app.arguments import NEURAL_PREVIEW_WAIT_MS
-from app.render_process import ProcessWorker
-from app.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 from texvocab.pipeline import RENDER_PRESETS as PRESETS
 from texvocab.pipeline import march_settings, render_overrides
+from texvocab_viewer.arguments import NEURAL_PREVIEW_WAIT_MS
+from texvocab_viewer.neural.render_process import ProcessWorker
+from texvocab_viewer.neural.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 
 #: during playback the render follows the timeline at one level: a finer one when a
 #: frame took under half this many seconds, a coarser one when it took more

@@ -1,5 +1,5 @@
-"""3D view panel: the posed body drawn by :class:`app.scene.SceneRenderer` into its own
-framebuffer (copied into the window's, app/view_blit.py), overlay toggles, and the camera:
+"""3D view panel: the posed body drawn by :class:`texvocab_viewer.gl.scene.SceneRenderer` into its own
+framebuffer (copied into the window's, app/gl/view_blit.py), overlay toggles, and the camera:
 orbit (left drag orbits, wheel zooms, right or middle drag pans), the capture's own
 cameras as presets (letterboxed to their aspect; a drag leaves the preset for the nearest
 orbit), a follow mode that moves the camera with the root, and Screenshot (also F12).
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from imgui_bundle import imgui
 
-from app.camera import CaptureViewCamera, fit_aspect
-from app.view_blit import ViewBlit
+from texvocab_viewer.gl.camera import CaptureViewCamera, fit_aspect
+from texvocab_viewer.gl.view_blit import ViewBlit
 
 TOGGLES = (("textured", "Texture"), ("part_colors", "Part colours"), ("novelty", "Novelty"),
            ("wireframe", "Wireframe"), ("skeleton", "Skeleton"))

@@ -15,13 +15,12 @@ import ctypes
 from collections.abc import Callable
 from pathlib import Path
 
+import imgui_bundle
+from imgui_bundle import hello_imgui
+
 
 def _glfw_library():
     """The libglfw imgui_bundle's extension is linked against, or None."""
-    try:
-        import imgui_bundle
-    except ImportError:
-        return None
     folder = Path(imgui_bundle.__file__).parent
     for name in ("libglfw.so.3", "libglfw.so", "libglfw.3.dylib", "libglfw.dylib", "glfw3.dll"):
         if (folder / name).is_file():
@@ -37,8 +36,6 @@ def ui_waker() -> Callable[[], None]:
     lib = _glfw_library()
     post = None if lib is None else getattr(lib, "glfwPostEmptyEvent", None)
     if post is None:
-        from imgui_bundle import hello_imgui
-
         return hello_imgui.request_refresh
     post.restype, post.argtypes = None, []
     return post

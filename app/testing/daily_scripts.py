@@ -1,4 +1,4 @@
-"""Scripted runs of the viewer as a daily tool (ImGui Test Engine, see app/drivers.py):
+"""Scripted runs of the viewer as a daily tool (ImGui Test Engine, as app/testing/scripts.py):
 stale renders, capture-camera presets and follow, playback, the File menu's dialogs and
 its reopen, and ``look-*`` scripts that end in a state worth a screenshot."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ import time
 import numpy as np
 from imgui_bundle import hello_imgui, imgui
 
-from app.drivers import LEFT_ARM_MOVE, wait_export, wait_neural
+from texvocab_viewer.testing.steps import LEFT_ARM_MOVE, wait_export, wait_neural
 
 
 def script_stale(ctx, viewer, report: dict) -> None:

@@ -28,8 +28,3 @@ def heat_color(t) -> np.ndarray:
     t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
     return np.stack([np.interp(t, HEAT_STOPS[:, 0], HEAT_STOPS[:, c]) for c in (1, 2, 3)], -1)
 
-
-def heat_legend(width: int = 256, height: int = 12) -> np.ndarray:
-    """(height, width, 3) float32 legend bar of :func:`heat_color`, 0 on the left."""
-    row = heat_color(np.linspace(0.0, 1.0, width)).astype(np.float32)
-    return np.repeat(row[None], height, 0)

@@ -1,10 +1,10 @@
 """The viewer's neural render worker in a process of its own (the default; the thread
-worker, :class:`app.worker.ProgressiveWorker`, stays selectable with
+worker, :class:`texvocab_viewer.neural.worker.ProgressiveWorker`, stays selectable with
 ``--neural-worker thread``).
 
 Why a process: the render and the UI are both mostly Python between small native
 operations, and in one interpreter they take turns holding the GIL. Measured under
-Xvfb (bench/viewer_ui.py, session 11): outside the window a pose's first level took
+Xvfb (bench/viewer_ui.py): outside the window a pose's first level took
 36-50 ms on one thread, inside it 117-151 ms, and the full level 0.5-0.6 s against
 0.68-0.89 s; the render thread got 0.71 of a core while the UI thread ran. In a process
 of its own the render holds its own interpreter, and the UI thread holds the window's.
@@ -22,7 +22,7 @@ The same protocol as the thread worker, over two pipes and one shared integer:
   still the newest, or if it is the preview of a job newer than the image shown, and
   calls ``on_frame`` to wake the UI.
 - The child loads the renderer from ``factory(*args)`` (pickled: for the viewer,
-  :func:`app.worker.model_renderer` with the trained model), runs torch with
+  :func:`texvocab_viewer.neural.worker.model_renderer` with the trained model), runs torch with
   ``threads`` intra-op threads at niceness +``nice``, and ends when the viewer sends
   None or closes the pipe (the viewer exited or crashed).
 - With ``processes`` > 1, each child renders one share of every job
@@ -47,8 +47,10 @@ from dataclasses import replace
 from multiprocessing.connection import wait
 
 import numpy as np
+import torch
 
-from app.worker import DeliveredLevels, RenderFrame, RenderJob, cpu_seconds, describe
+from texvocab.pipeline import budget_blas_threads
+from texvocab_viewer.neural.worker import DeliveredLevels, RenderFrame, RenderJob, cpu_seconds, describe
 
 #: spawn, not fork: a forked child would inherit the window's GL context and torch's
 #: thread pools in whatever state they are in
@@ -74,10 +76,6 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results,
             os.nice(nice)
         except OSError:
             pass
-    import torch
-
-    from texvocab.pipeline import budget_blas_threads
-
     if threads is not None:
         torch.set_num_threads(threads)
     budget_blas_threads(threads or 1)  # numpy's OpenBLAS threads would spin between calls
@@ -134,11 +132,11 @@ SHARD_NICE = 5
 
 
 class ProcessWorker(DeliveredLevels):
-    """Render processes with the interface of :class:`app.worker.ProgressiveWorker`
+    """Render processes with the interface of :class:`texvocab_viewer.neural.worker.ProgressiveWorker`
     (submit, poll, latest, busy, alive, stop, delivered, errors, last_traceback,
     cpu_seconds).
 
-    ``factory(*args)`` must return a :data:`app.worker.LevelRenderer`; both are pickled
+    ``factory(*args)`` must return a :data:`texvocab_viewer.neural.worker.LevelRenderer`; both are pickled
     into each child (``factory`` by its module path). ``threads``: torch intra-op threads
     of a child; ``nice``: its niceness increment; ``processes``: how many children split
     each job (see the module docstring); ``on_frame``: called from a listener thread

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import imgui
 
-from app.dialogs import POSE_FILTERS
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, JOINT_NAMES, read_pose_sequence
 from texvocab.pipeline import POSE_PRESETS as PRESETS
+from texvocab_viewer.dialogs import POSE_FILTERS
 
 AXES = ("x", "y", "z")
 DEFAULT_FPS = 30.0  # playback rate of a file that states none
@@ -187,7 +187,7 @@ def _sequence(viewer) -> None:
 
 def _export_buttons(viewer) -> None:
     """"Export video": the loaded sequence rendered in the background from the 3D view's
-    camera at the neural panel's resolution (app.export); progress, or the result's
+    camera at the neural panel's resolution (texvocab_viewer.export.job); progress, or the result's
     path or error, underneath (the 3D view's Screenshot job shows here too)."""
     if viewer.neural is None or viewer.sequence is None:
         return

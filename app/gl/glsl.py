@@ -1,5 +1,5 @@
 """GLSL sources live in the repository's ``shaders/`` folder, installed as the package
-``app.shaders`` (a package-dir mapping in pyproject.toml); this finds and compiles them."""
+``texvocab_viewer.shaders`` (a package-dir mapping in pyproject.toml); this finds and compiles them."""
 from __future__ import annotations
 
 from importlib import resources
@@ -9,7 +9,7 @@ import numpy as np
 
 from texvocab.errors import TexvocabError
 
-SHADER_DIR = resources.files("app.shaders")
+SHADER_DIR = resources.files("texvocab_viewer.shaders")
 
 
 def shader_source(name: str) -> str:

@@ -1,4 +1,4 @@
-"""The per-frame driver of bench/viewer_ui.py (``python -m app.window CKPT --script
+"""The per-frame driver of bench/viewer_ui.py (``python -m texvocab_viewer CKPT --script
 bench:SECONDS:RES``). No ImGui Test Engine, so nothing but the viewer draws.
 
 Phases, in order:
@@ -15,10 +15,10 @@ Phases, in order:
   pose change (after the buffer swap of the first frame that drew it), how long the
   frame that changed the pose took, and the UI's CPU share meanwhile.
 - ``after``: 1.5 s after the last render: how many frames the window drew (a delivered
-  level wakes it for one frame, app/wake.py).
+  level wakes it for one frame, app/neural/wake.py).
 - ``dragging``: the left shoulder moves every frame as under a dragged slider, with the
   window at full speed (input keeps it awake): UI frame times and CPU per frame, and
-  the neural images shown meanwhile (each pose's preview is finished, app/worker.py).
+  the neural images shown meanwhile (each pose's preview is finished, app/neural/worker.py).
 """
 from __future__ import annotations
 
@@ -28,9 +28,9 @@ import time
 import numpy as np
 from imgui_bundle import hello_imgui
 
-from app.camera import DEFAULT_TARGET, OrbitCamera
-from app.drivers import Driver
 from texvocab.pipeline import blas_threads
+from texvocab_viewer.gl.camera import DEFAULT_TARGET, OrbitCamera
+from texvocab_viewer.testing.driver import Driver
 
 RENDER_POSES = ("walk", "squat")
 RENDERS = 12  # default; alternating RENDER_POSES (bench:SECONDS:RES:RENDERS)

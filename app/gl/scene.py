@@ -4,7 +4,7 @@ never creates a context.
 
 Colour modes (first that applies): ``novelty`` (each vertex coloured by the distance of
 its vocabulary part(s) to the nearest key, Eq. 4, blended by skinning attention; heat
-scale :func:`app.colors.heat_color` over [0, ``novelty_scale``]), ``part_colors`` (the
+scale :func:`texvocab_viewer.gl.colors.heat_color` over [0, ``novelty_scale``]), ``part_colors`` (the
 five body parts of Table 1), ``textured`` (the blended vocabulary texture of the pose;
 a neutral grey checker without a vocabulary). ``wireframe`` draws triangle edges over
 it and ``skeleton`` the joints and bones on top of everything.
@@ -17,10 +17,10 @@ import moderngl
 import numpy as np
 from scipy import sparse
 
-from app.camera import gl_mvp
-from app.colors import PART_COLORS, heat_color
-from app.glsl import build_program, set_uniform
 from texvocab.pipeline import BODY_PARTS, Camera, outward_orientation, part_attention
+from texvocab_viewer.gl.camera import gl_mvp
+from texvocab_viewer.gl.colors import PART_COLORS, heat_color
+from texvocab_viewer.gl.glsl import build_program, set_uniform
 
 
 @dataclass
@@ -68,11 +68,11 @@ def face_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 class SceneRenderer:
-    """Draws a :class:`~app.state.ViewerState` of ``data`` into its own framebuffer.
+    """Draws a :class:`~texvocab_viewer.state.ViewerState` of ``data`` into its own framebuffer.
 
     Args:
         ctx: a current moderngl context (3.3 core).
-        data: :class:`~app.state.ViewerData` (body, vocabulary, textures).
+        data: :class:`~texvocab_viewer.state.ViewerData` (body, vocabulary, textures).
         samples: MSAA samples (0: none); resolved into the returned texture.
     """
 
@@ -247,7 +247,7 @@ class SceneRenderer:
     # -- drawing ----------------------------------------------------------------------
     def render(self, state, camera, size: tuple[int, int] = (1280, 800),
                options: SceneOptions | None = None) -> moderngl.Texture:
-        """Draw ``state`` seen by ``camera`` (an :class:`~app.camera.OrbitCamera` or a
+        """Draw ``state`` seen by ``camera`` (an :class:`~texvocab_viewer.gl.camera.OrbitCamera` or a
         capture :class:`Camera`) at ``size`` = (width, height); returns the RGBA colour
         texture (rows bottom-up, as GL stores them)."""
         o = options or SceneOptions()

@@ -67,7 +67,7 @@ class RenderJob:
     #: while a slider is dragged, each pose would otherwise be cancelled before anything
     #: of it reached the screen
     finish_preview: bool = True
-    #: this job is share ``shard`` of ``shards`` of the view (app.render_process splits a
+    #: this job is share ``shard`` of ``shards`` of the view (texvocab_viewer.neural.render_process splits a
     #: view over processes; texvocab.render.progressive_shard)
     shard: int = 0
     shards: int = 1
