@@ -25,7 +25,8 @@ log = logging.getLogger(__name__)
 
 def fit_subject_body(cap: Capture) -> Capture:
     """``cap`` with its body fitted to ``cap.rest_joints`` (unchanged when it has none,
-    already has betas, or its body already has those joints); ``meta["body_fit"]`` records how and a fingerprint of the fit."""
+    already has betas, or its body already has those joints); ``meta["body_fit"]`` records
+    how and a fingerprint of the fit."""
     rest = cap.rest_joints
     if rest is None or cap.betas is not None:
         return cap
