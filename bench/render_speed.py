@@ -95,8 +95,8 @@ def small_capture(root: Path) -> Path:
 def load(args):
     """(model, settings, capture) from CKPT or an untrained model on a capture."""
     from texvocab.capture import open as open_capture
+    from texvocab.pipeline.model import build_model, load_textures
     from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import build_model, load_textures
 
     if args.checkpoint:
         from texvocab.pipeline import load_avatar

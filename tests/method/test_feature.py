@@ -141,8 +141,8 @@ def test_a_subjects_shape_is_the_same_mesh_everywhere(tmp_path):
     from texvocab.body.model import BodyModel
     from texvocab.capture.camera import Camera, look_at
     from texvocab.capture.capture import Capture
+    from texvocab.pipeline.model import build_model
     from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import build_model
 
     base = default_body()
     rng = np.random.default_rng(0)

@@ -117,8 +117,8 @@ def test_texel_fill_is_the_nearest_covered_texel():
 
 
 def _maps_of(root, body, **settings):
+    from texvocab.pipeline.model import load_textures
     from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import load_textures
 
     cap = open_capture(root, body=body)
     return load_textures(cap, Settings(texture_size=64, **settings), progress=False).numpy()
@@ -156,8 +156,8 @@ def test_texture_map_cache_is_keyed_by_view_set(unlit_capture, tmp_path):
     """A cache built from other views (e.g. every view, as before held-out views were
     excluded) is never reused: another view set gets its own folder."""
     from texvocab.method.texmap import cache_dir
+    from texvocab.pipeline.model import texmap_settings
     from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import texmap_settings
 
     cap = unlit_capture
     all_views = cache_dir(cap, TexmapSettings(size=64))

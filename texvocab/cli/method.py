@@ -63,8 +63,8 @@ def _open(args):
 def cmd_prepare(args: argparse.Namespace) -> int:
     # late: torch (module docstring)
     from texvocab.method.texmap import cache_dir, prepare_texture_maps
+    from texvocab.pipeline.model import texmap_settings
     from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import texmap_settings
 
     cap = _open(args)
     if cap.num_train == 0:

@@ -44,7 +44,8 @@ _API: dict[str, tuple[str, str]] = {
     "RENDER_PRESETS": ("texvocab.pipeline.settings", "PRESETS"),
     "march_settings": ("texvocab.pipeline.settings", "march_settings"),
     "render_overrides": ("texvocab.pipeline.settings", "render_overrides"),
-    "load_textures": ("texvocab.pipeline.train", "load_textures"),
+    "load_textures": ("texvocab.pipeline.model", "load_textures"),
+    "build_vocabulary": ("texvocab.pipeline.model", "build_vocabulary"),
     "Avatar": ("texvocab.pipeline.avatar", "Avatar"),
     "load_avatar": ("texvocab.pipeline.avatar", "load_avatar"),
     # clips (texvocab render, the viewer's export)

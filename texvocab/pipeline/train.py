@@ -27,13 +27,9 @@ from tqdm import tqdm
 
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
-from texvocab.method.encoder import build_encoder
-from texvocab.method.feature import PoseFeature
-from texvocab.method.field import AvatarField
-from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
-from texvocab.method.vocab import Vocabulary
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
+from texvocab.pipeline.model import build_model, load_textures, train_views
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
@@ -41,48 +37,6 @@ from texvocab.render.band import render_rays_banded
 
 log = logging.getLogger("texvocab")
 SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --resume
-
-
-def train_views(capture, s: Settings) -> list[int]:
-    """The views a run trains on: ``train_views``, or every view not held out. The held-out
-    ``eval_views`` must exist in the capture (the defaults need views 1 and 5)."""
-    last = capture.num_views - 1
-    bad_eval = [v for v in s.eval_views if v > last]
-    if bad_eval:
-        raise TexvocabError(f"setting eval_views={list(s.eval_views)}: {capture.root} has views "
-                            f"0..{last}; choose held-out views that exist (--set eval_views=...)")
-    if s.train_views is not None:
-        views = list(s.train_views)
-    else:
-        views = [v for v in range(capture.num_views) if v not in s.eval_views]
-    bad = [v for v in views if not 0 <= v <= last]
-    if bad or not views:
-        raise TexvocabError(f"setting train_views={views}: {capture.root} has views 0..{last} "
-                            f"and eval_views {list(s.eval_views)} are held out")
-    return views
-
-
-def texmap_settings(capture, s: Settings) -> TexmapSettings:
-    """Texture-map settings of a run: its texture size and its training views."""
-    return TexmapSettings(size=s.texture_size, views=tuple(train_views(capture, s)),
-                          view_weighting=s.view_weighting)
-
-
-def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
-    """(T, 3, S, S) texture maps of the training frames, back-projected from the training
-    views only (prepared and cached if needed)."""
-    paths = prepare_texture_maps(capture, texmap_settings(capture, s), progress=progress)
-    return torch.stack([torch.from_numpy(load_texture_map(p)[0]).permute(2, 0, 1) for p in paths])
-
-
-def build_model(capture, s: Settings, textures: torch.Tensor, vocab: Vocabulary | None = None,
-                encoder_weights=None) -> AvatarField:
-    """The avatar field for a capture's training frames (vocabulary rebuilt unless given)."""
-    vocab = vocab or Vocabulary.build(capture.poses[: capture.num_train], s.strategy,
-                                      s.num_keys, s.k, s.weighting, s.min_key_distance)
-    encoder = build_encoder(s.encoder, weights=encoder_weights)
-    return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()),
-                       s.field)
 
 
 def perceptual_term(s: Settings) -> torch.nn.Module | None:
