@@ -251,7 +251,7 @@ def spread(frames: Sequence[int], n: int) -> list[int]:
 def build_sets(capture, settings, per_set: int | None = None,
                generated: tuple[str, ...] = GENERATED_POSES) -> dict[str, Sequence[Item]]:
     """Evaluation sets of items (pose, trans, camera, gt (H, W, 3), mask (H, W)), each frame
-    seen from every view of ``settings.eval_views``:
+    seen from every view of ``settings.data.eval_views``:
 
     - ``novel_poses``: every novel frame (``per_set``: that many, evenly spread);
     - ``training_poses``: as many training frames as novel ones, evenly spread over the
@@ -264,7 +264,7 @@ def build_sets(capture, settings, per_set: int | None = None,
     """
     if per_set is not None and per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {per_set}")
-    views = list(settings.eval_views)
+    views = list(settings.data.eval_views)
     missing = [v for v in views if v >= capture.num_views]
     if missing:
         raise TexvocabError(f"eval_views {views}: {capture.root} has views 0.."
