@@ -13,9 +13,10 @@ from texvocab.pipeline import (
     BODY_PARTS,
     JOINT_LIMITS_DEG,
     JOINT_NAMES,
+    DataSettings,
     Settings,
     VocabTexture,
-    Vocabulary,
+    build_vocabulary,
     load_avatar,
     load_body,
     load_textures,
@@ -56,9 +57,9 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
         raise TexvocabError(f"{path}: the capture has no training frames to build a vocabulary")
     # the viewer of a bare capture holds out the default evaluation views it has (a
     # capture with fewer views simply has fewer held out); training refuses instead
-    s = Settings(eval_views=tuple(v for v in Settings().eval_views if v < cap.num_views))
-    vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k, s.weighting,
-                             s.min_key_distance)
+    held_out = tuple(v for v in Settings().data.eval_views if v < cap.num_views)
+    s = Settings(data=DataSettings(eval_views=held_out))
+    vocab = build_vocabulary(cap, s)
     textures = load_textures(cap, s, progress=True).permute(0, 2, 3, 1).numpy()
     return ViewerData(cap.body, vocab, textures, None, cap, s,
                       f"capture {path} ({cap.num_train} training frames)")

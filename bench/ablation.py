@@ -109,10 +109,10 @@ def run_settings(job: dict):
     evaluation also takes the preset's render knobs. Before session 9 training took them
     too (its marched rays at the fast preset's coarse 6, fine 2, early stop 1e-2); jobs
     with ``train_with_preset`` still do, to extend the groups run then comparably."""
-    from texvocab.pipeline.settings import Settings, preset_overrides, render_overrides
+    from texvocab.pipeline.settings import Settings, TrainSettings, preset_overrides, render_overrides
 
     pre = preset_overrides(job["preset"], render_only=True) if job["preset"] else []
-    trained = Settings(iterations=job["iterations"]).with_overrides(
+    trained = Settings(train=TrainSettings(iterations=job["iterations"])).with_overrides(
         (pre if job.get("train_with_preset") else []) + job["overrides"]
         + [f"seed={job['seed']}"])
     return trained, render_overrides(trained, job["preset"], [])

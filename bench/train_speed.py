@@ -56,10 +56,10 @@ VARIANTS = {
 
 
 def measure(capture, overrides: list[str], steps: int, warmup: int) -> dict:
-    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.settings import Settings, TrainSettings
     from texvocab.pipeline.train import Trainer
 
-    s = Settings(iterations=steps + warmup).with_overrides(overrides)
+    s = Settings(train=TrainSettings(iterations=steps + warmup)).with_overrides(overrides)
     t0 = time.perf_counter()
     trainer = Trainer(capture, s, Path("/tmp/texvocab_train_speed"), progress=False)
     pf = trainer.model.pose_feature

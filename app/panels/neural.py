@@ -183,7 +183,7 @@ class NeuralView:
             self.march, self.image_scale = None, 1.0
             return
         s = render_overrides(self.settings, name, [])
-        self.march, self.image_scale = march_settings(s), s.image_scale
+        self.march, self.image_scale = march_settings(s), s.render.image_scale
 
     def stale_line(self) -> str:
         """"stale: shows frame 12; rendering frame 15" (or "" when the image is current)."""

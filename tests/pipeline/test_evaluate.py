@@ -52,7 +52,7 @@ class FakeCapture:
     empty_masks: tuple = ()
 
 
-SETTINGS = SimpleNamespace(eval_views=(1, 5))
+SETTINGS = SimpleNamespace(data=SimpleNamespace(eval_views=(1, 5)))
 
 
 def frames_views(items) -> list[tuple[int, int]]:

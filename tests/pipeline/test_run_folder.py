@@ -94,13 +94,13 @@ def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_
 
 
 def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):
-    from texvocab.pipeline.train import load_textures
+    from texvocab.pipeline.model import load_textures
 
     cap = open_capture(capture)
     s = tiny_settings()
     before = load_textures(cap, s, progress=False)
     from texvocab.method.texmap import texture_map_path
-    from texvocab.pipeline.train import texmap_settings
+    from texvocab.pipeline.model import texmap_settings
 
     victim = texture_map_path(cap, 1, texmap_settings(cap, s))
     victim.write_bytes(b"PK\x03\x04 not really a zip")  # truncated / foreign

@@ -52,8 +52,9 @@ def test_the_evaluation_preset_does_not_change_training_unless_asked():
     job = {"preset": "fast", "iterations": 7, "overrides": ["train_coarse_samples=9"],
            "seed": 3}
     trained, shown = mod.run_settings(job)
-    assert (trained.coarse_samples, trained.fine_samples, trained.train_coarse_samples) == (
+    assert (trained.render.coarse_samples, trained.render.fine_samples,
+            trained.train.coarse_samples) == (
         18, 8, 9)
-    assert (shown.coarse_samples, shown.fine_samples, shown.seed) == (6, 2, 3)
+    assert (shown.render.coarse_samples, shown.render.fine_samples, shown.train.seed) == (6, 2, 3)
     old, _ = mod.run_settings({**job, "train_with_preset": True})
-    assert (old.coarse_samples, old.fine_samples) == (6, 2)
+    assert (old.render.coarse_samples, old.render.fine_samples) == (6, 2)

@@ -66,7 +66,7 @@ def _check_content(cap) -> list[str]:
         lines.append(f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(empty)} of "
                      f"{cap.num_frames * cap.num_views} masks are empty); training and "
                      "evaluation need the person in every view")
-    held_out = [v for v in Settings().eval_views if v >= cap.num_views]
+    held_out = [v for v in Settings().data.eval_views if v >= cap.num_views]
     novel = cap.num_frames - cap.num_train
     if cap.num_views == 1:
         held = (f"the last {novel} frames ({cap.frame_ids[cap.num_train]}.."
@@ -76,8 +76,8 @@ def _check_content(cap) -> list[str]:
                      "frames are scored as seen views")
     elif held_out:
         lines.append(f"note {cap.root}: has views 0..{cap.num_views - 1}, but the default "
-                     f"eval_views are {list(Settings().eval_views)}: train and eval with "
-                     "--set eval_views=... (views that exist)")
+                     f"eval_views are {list(Settings().data.eval_views)}: train and eval "
+                     "with --set data.eval_views=... (views that exist)")
     return lines
 
 

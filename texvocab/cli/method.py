@@ -68,14 +68,15 @@ def _open(args):
 def cmd_prepare(args: argparse.Namespace) -> int:
     # late: torch (module docstring)
     from texvocab.method.texmap import cache_dir, prepare_texture_maps
-    from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import texmap_settings
+    from texvocab.pipeline.model import texmap_settings
+    from texvocab.pipeline.settings import DataSettings, Settings
 
     cap = _open(args)
     if cap.num_train == 0:
         raise TexvocabError(f"{args.capture}: no training frames (--train-frames)")
     views = {} if args.eval_views is None else {"eval_views": tuple(args.eval_views)}
-    settings = texmap_settings(cap, Settings(texture_size=args.texture_size, **views))
+    settings = texmap_settings(cap, Settings(data=DataSettings(texture_size=args.texture_size,
+                                                                **views)))
     t0 = time.perf_counter()
     paths = prepare_texture_maps(cap, settings)
     print(f"{len(paths)} texture maps ({settings.size}² texels, views "
@@ -152,7 +153,7 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
                    help="speed/accuracy preset (bench/tradeoff.py); --set applies after it")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a setting, e.g. --set strategy=joint --set field.hidden=64")
+                   help="override a setting, e.g. --set vocab.strategy=joint --set field.hidden=64")
     p.add_argument("--train-frames", type=int, default=None,
                    help="leading training frames (default: the capture's split)")
     add_smpl(p)
@@ -173,7 +174,7 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
                    help="render preset (render knobs only; the rest is in the checkpoint)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a render knob, e.g. --set coarse_samples=24")
+                   help="override a render knob, e.g. --set render.coarse_samples=24")
     add_smpl(p)
     p.set_defaults(func=cmd_eval)
 
@@ -186,7 +187,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.ddp is not None and args.ddp < 1:
         raise TexvocabError(f"--ddp {args.ddp}: expected a number of processes >= 1")
     pre = preset_overrides(args.preset) if args.preset else []
-    steps = [] if args.iterations is None else [f"iterations={args.iterations}"]
+    steps = [] if args.iterations is None else [f"train.iterations={args.iterations}"]
     settings = Settings().with_overrides(pre + args.overrides + steps)
     out = Path(args.out)
     check_run_folder(out, args.resume, args.overwrite)
@@ -252,7 +253,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     sets = build_sets(avatar.capture, settings, args.per_set)
     t0 = time.perf_counter()
     table, records, grids = evaluate_sets(model, sets, march_settings(settings),
-                                          scale=settings.image_scale, progress=True)
+                                          scale=settings.render.image_scale, progress=True)
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     paths = write_report(out, table, records, grids,
                          {"checkpoint": str(args.checkpoint), "step": int(ck["step"]),

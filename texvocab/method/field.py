@@ -16,28 +16,41 @@ density (Yariv et al. 2021).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from texvocab.geometry.rotations import rotvec_to_quat
+from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
 
 
 @dataclass
 class FieldSettings:
-    """Network sizes; each trades speed for capacity."""
+    """The field's network sizes and VolSDF's β (settings group ``field``); each size trades
+    speed for capacity."""
 
-    pos_freqs: int = 6  # γ_x frequencies
-    dir_freqs: int = 4  # γ_d frequencies
-    feature_proj: int = 32  # f(Θ, x) is linearly projected to this many channels
-    hidden: int = 128
-    sdf_layers: int = 3
-    color_layers: int = 2
-    beta_init: float = 0.005
-    beta_min: float = 1e-4
-    shell_width: float = 0.04  # points farther from the body count as empty space
+    GROUP: ClassVar[str] = "field"
+
+    pos_freqs: int = knob(6, count_in(0, 16), doc="γ_x frequencies")
+    dir_freqs: int = knob(4, count_in(0, 16), doc="γ_d frequencies")
+    feature_proj: int = knob(32, at_least(1), doc="f(Θ, x) is linearly projected to this "
+                             "many channels")
+    hidden: int = knob(128, at_least(1), doc="width of the SDF network (the colour network's "
+                       "is half)")
+    sdf_layers: int = knob(3, at_least(1), doc="hidden layers of the SDF network")
+    color_layers: int = knob(2, at_least(0), doc="hidden layers of the colour network")
+    beta_init: float = knob(0.005, Check(lambda v, g: v >= g.beta_min, ">= field.beta_min"),
+                            doc="VolSDF β at the start of training (m)")
+    # float32 VolSDF density and its gradients break down for beta below ~1e-17
+    beta_min: float = knob(1e-4, at_least(1e-8), doc="β is clamped at this (m)")
+    shell_width: float = knob(0.04, within(0, 1, open_low=True, unit=" m"),
+                              doc="points farther from the body count as empty space (m)")
+
+    def __post_init__(self) -> None:
+        check_group(self)
 
     def to_dict(self) -> dict:
         return asdict(self)

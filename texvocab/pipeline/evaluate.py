@@ -260,7 +260,7 @@ def spread(frames: Sequence[int], n: int) -> list[int]:
 def build_sets(capture, settings, per_set: int | None = None,
                generated: tuple[str, ...] = GENERATED_POSES) -> dict[str, Sequence[Item]]:
     """Evaluation sets of items (pose, trans, camera, gt (H, W, 3), mask (H, W)), each frame
-    seen from every view of ``settings.eval_views`` (a one-camera capture: from its camera,
+    seen from every view of ``settings.data.eval_views`` (a one-camera capture: from its camera,
     the training poses labelled "seen view"; :mod:`texvocab.pipeline.split`):
 
     - ``novel_poses``: every novel frame (``per_set``: that many, evenly spread);
@@ -274,7 +274,7 @@ def build_sets(capture, settings, per_set: int | None = None,
     """
     if per_set is not None and per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {per_set}")
-    views = scored_views(capture, settings.eval_views)
+    views = scored_views(capture, settings.data.eval_views)
     labels = ({"training_poses": "seen view", "novel_poses": "capture camera, held-out frames"}
               if one_camera(capture) else {})
     small = [v for v in views if min(capture.cameras[v].width, capture.cameras[v].height)
