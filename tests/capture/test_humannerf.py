@@ -25,8 +25,8 @@ from texvocab.errors import AssetError, TexvocabError
 from texvocab.geometry.rotations import rotvec_to_rotmat
 from texvocab.io.images import save_png
 from texvocab.pipeline.evaluate import build_sets, format_table
-from texvocab.pipeline.settings import Settings
-from texvocab.pipeline.train import texmap_settings, train_views
+from texvocab.pipeline.model import texmap_settings, train_views
+from texvocab.pipeline.settings import DataSettings, Settings
 
 SETTINGS = SynthSettings(ring_views=1, raised_views=0, size=64, texture_size=128)
 FRAMES = 10
@@ -180,7 +180,7 @@ def test_one_camera_split_holds_out_the_last_frames(standin, body):
     s = Settings()  # default eval_views (1, 5): no such views here, and none are needed
     assert train_views(cap, s) == [0] and texmap_settings(cap, s).views == (0,)
     with pytest.raises(TexvocabError, match=r"train_views=\[1\].*one camera"):
-        train_views(cap, Settings(train_views=(1,), eval_views=()))
+        train_views(cap, Settings(data=DataSettings(train_views=(1,), eval_views=())))
     sets = build_sets(cap, s, generated=())
     assert sets["novel_poses"].pairs == [(8, 0), (9, 0)]
     train = sets["training_poses"]

@@ -35,8 +35,8 @@ def test_an_old_checkpoint_reads_the_global_pose_and_is_not_resumed_root_relativ
     assert new.model.pose_feature.vocab.pose_condition == "root-relative"
 
     # the same checkpoint as texvocab wrote it before the record existed: global keys
-    old_vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k,
-                                 s.weighting, pose_condition="global").to_dict()
+    old_vocab = Vocabulary.build(cap.poses[: cap.num_train], s.vocab.strategy, s.vocab.num_keys, s.vocab.k,
+                                 s.vocab.weighting, pose_condition="global").to_dict()
     del old_vocab["pose_condition"]
     ck["vocab"] = old_vocab
     save_checkpoint(path, ck)
