@@ -42,3 +42,25 @@ def test_large_captures_open_at_half_size_by_default(capture):
     assert auto_image_scale(big) == 0.5
     assert auto_image_scale([c.scaled(30.0) for c in cams]) == 0.25  # 1920² -> 480²
     assert open_capture(capture, image_scale=0.5).cameras[0].width == cams[0].width // 2
+
+
+def test_real_captures_are_black_outside_their_masks(capture, tmp_path):
+    """A capture without texvocab's generator record is a real one: its images read black
+    where the mask is not, the synthetic capture's as they are on disk."""
+    import shutil
+
+    from texvocab.capture.capture import SYNTH_META
+
+    real = tmp_path / "real"
+    shutil.copytree(capture, real, ignore=shutil.ignore_patterns("texvocab_cache"))
+    (real / SYNTH_META).unlink()
+    synth, cap = open_capture(capture), open_capture(real, num_train=4)
+    assert not synth.masked and cap.masked
+    img = synth.image(0, 1).copy()
+    img[~synth.mask(0, 1)] = 0.7  # stands for a studio background on disk
+    from texvocab.io.images import save_png
+
+    save_png(cap.image_paths[1][0], img)
+    out = cap.image(0, 1)
+    assert (out[~cap.mask(0, 1)] == 0).all()
+    assert np.abs(out[cap.mask(0, 1)] - img[cap.mask(0, 1)]).max() < 1 / 255 + 1e-6

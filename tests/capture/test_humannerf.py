@@ -3,6 +3,7 @@
 distortion undone on load, the one-camera split (last 20 % novel, training frames scored
 as a seen view), a missing mask, a corrupt image, a malicious pickle, bad fields, and
 check-assets."""
+import dataclasses
 import logging
 import os
 import pickle
@@ -157,7 +158,8 @@ def test_body_pelvis_goes_on_the_subjects_pelvis(tmp_path, body, truth):
 
 def test_distortion_is_undone_on_load(tmp_path, body, truth):
     root = write_standin(tmp_path / "s", body, truth, dist=DIST)
-    cap = open_capture(root, body=body)
+    # the images as on disk: the smoothed truth bleeds past the mask, which masked would cut
+    cap = dataclasses.replace(open_capture(root, body=body), masked=False)
     np.testing.assert_allclose(cap.cameras[0].dist, DIST, atol=1e-6)
     for t in (0, 6):
         rgb, mask = truth[3][t]

@@ -3,6 +3,7 @@ writers, the HumanNeRF (one camera) reader, and synthetic captures with ground t
 any pose."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +83,8 @@ def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A00
         raise AssetError(f"{root}: its SMPL parameters: {e}") from None
     if fit_body:
         cap = fit_subject_body(cap)
+    if meta is None:  # a real capture: its background is not the avatar's
+        cap = dataclasses.replace(cap, masked=True)
     scale = auto_image_scale(cap.cameras) if image_scale is None else float(image_scale)
     return cap if scale == 1.0 else cap.scaled(scale)
 

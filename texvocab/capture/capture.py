@@ -71,6 +71,9 @@ class Capture:
         image_scale: images and masks are resized by this factor on load (``cameras`` are
             the resized ones; :meth:`scaled`); 1: as on disk.
         source_cameras: the cameras of the images on disk when ``image_scale`` != 1.
+        masked: images are black outside their mask (:meth:`image`): a real capture's
+            background (a studio, other people) is not the avatar's to render; synthetic
+            captures are rendered on black already.
     """
 
     root: Path
@@ -88,6 +91,7 @@ class Capture:
     rest_joints: np.ndarray | None = None
     image_scale: float = 1.0
     source_cameras: list[Camera] | None = None
+    masked: bool = False
 
     def __post_init__(self):
         t = len(self.image_paths)
@@ -151,16 +155,24 @@ class Capture:
         return np.stack(out, -1).reshape(cam.height, cam.width, *image.shape[2:])
 
     def image(self, view: int, frame: int) -> np.ndarray:
-        """(H, W, 3) float32 RGB, undistorted (and resized to ``image_scale``)."""
+        """(H, W, 3) float32 RGB, undistorted (black outside the mask when ``masked``;
+        resized to ``image_scale`` after both)."""
         img = read_image(self.image_paths[frame][view])
         self._check_size(self.image_paths[frame][view], img.shape, view)
-        return self._resized(self._source(view).undistort_image(img), view)
+        img = self._source(view).undistort_image(img)
+        if self.masked:
+            img = img * self._source_mask(view, frame)[..., None]
+        return self._resized(img, view)
+
+    def _source_mask(self, view: int, frame: int) -> np.ndarray:
+        """(H, W) bool foreground at the size on disk, undistorted."""
+        m = read_mask(self.mask_paths[frame][view])
+        self._check_size(self.mask_paths[frame][view], m.shape, view)
+        return self._source(view).undistort_image(m.astype(np.uint8), nearest=True) > 0
 
     def mask(self, view: int, frame: int) -> np.ndarray:
         """(H, W) bool foreground, undistorted (and resized to ``image_scale``)."""
-        m = read_mask(self.mask_paths[frame][view])
-        self._check_size(self.mask_paths[frame][view], m.shape, view)
-        m = self._source(view).undistort_image(m.astype(np.uint8), nearest=True) > 0
+        m = self._source_mask(view, frame)
         if self.source_cameras is None:
             return m
         return self._resized(m.astype(np.float32), view) > 0.5
