@@ -30,7 +30,7 @@ from texvocab.pipeline.split import one_camera, scored_views
 from texvocab.render import ShellGeometry, render_image
 
 #: Per-image metrics whose set mean is reported with its standard error.
-SEM_KEYS = ("psnr_bbox", "ssim_bbox", "psnr_full", "ssim_full", "lpips")
+SEM_KEYS = ("psnr_bbox", "ssim_bbox", "psnr_full", "ssim_full", "lpips", "iou")
 #: Default generated novel poses of synthetic captures (texvocab.body.poses presets).
 GENERATED_POSES = ("kick", "squat", "arms_up", "a_pose")
 
@@ -44,6 +44,12 @@ def render_view(model, pose, trans, camera, march, scale: float = 1.0):
 
     ``scale`` < 1 renders ``camera.scaled(scale)`` (the ``image_scale`` knob) and resizes
     the result bilinearly to the camera's full size, as a viewer would show it."""
+    rgb, _, stats = render_view_rgba(model, pose, trans, camera, march, scale)
+    return rgb, stats
+
+
+def render_view_rgba(model, pose, trans, camera, march, scale: float = 1.0):
+    """:func:`render_view` with the opacity: (rgb (H, W, 3), alpha (H, W), RenderStats)."""
     t0 = time.perf_counter()
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
@@ -53,13 +59,22 @@ def render_view(model, pose, trans, camera, march, scale: float = 1.0):
         cam = camera if scale == 1.0 else camera.scaled(scale)
         out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
                            shell=shell, index=ctx.index)
-        rgb = out.rgb
+        rgba = torch.cat([out.rgb, out.alpha[..., None]], -1)
         if scale != 1.0:
-            rgb = torch.nn.functional.interpolate(
-                rgb.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
+            rgba = torch.nn.functional.interpolate(
+                rgba.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
                 align_corners=False)[0].permute(1, 2, 0).clamp(0, 1)
     out.stats.seconds = time.perf_counter() - t0  # incl. pose context and shell
-    return rgb.numpy().astype(np.float32), out.stats
+    rgba = rgba.numpy().astype(np.float32)
+    return rgba[..., :3], rgba[..., 3], out.stats
+
+
+def silhouette_iou(alpha: np.ndarray, mask: np.ndarray) -> float | None:
+    """IoU of the rendered silhouette (opacity > 0.5) (H, W) against the mask (H, W);
+    None when both are empty."""
+    pred, truth = alpha > 0.5, np.asarray(mask, bool)
+    union = int((pred | truth).sum())
+    return None if union == 0 else float((pred & truth).sum() / union)
 
 
 def _error_image(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -144,8 +159,9 @@ def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=Non
             feats = _PairFeatures(extractor if len(items) >= 2 else None)
             per, rows = [], []
             for i, (pose, trans, cam, gt, mask) in enumerate(items):
-                pred, stats = render_view(model, pose, trans, cam, march, scale)
+                pred, alpha, stats = render_view_rgba(model, pose, trans, cam, march, scale)
                 m = evaluate_pair(pred, gt, mask, lpips_model=lpips_model)
+                m["iou"] = silhouette_iou(alpha, mask)
                 m["seconds"] = stats.seconds
                 per.append(m)
                 where = {"frame": int(pairs[i][0]), "view": int(pairs[i][1])} if pairs else {}
@@ -193,15 +209,16 @@ def format_table(table: dict[str, dict], checkpoint: str = "", split: str = "") 
              f"{frechet.FID_MIN_IMAGES} images per set) and KID (unbiased, polynomial kernel, "
              "from 2 images; sd = std over random subsets when the set is subsampled) between "
              "the set's true and rendered images when the Inception extractor is installed, "
-             "else n/a; seconds: mean render time per image.", "",
+             "else n/a; iou: the rendered silhouette (opacity > 0.5) against the mask; "
+             "seconds: mean render time per image.", "",
              *([f"Split: {split}.", ""] if split else []),
              "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | fid | kid "
-             "| seconds |", "|---" * 10 + "|"]
+             "| iou | seconds |", "|---" * 11 + "|"]
     for name, row in table.items():
         cells = [str(row.get("images", 0)), _cell(row, "psnr_bbox", 2), _cell(row, "ssim_bbox", 4),
                  _cell(row, "psnr_full", 2), _cell(row, "ssim_full", 4), _cell(row, "lpips", 4),
                  _score_cell(row, "fid", frechet.FID_MIN_IMAGES, 2), _score_cell(row, "kid", 2, 4),
-                 _cell(row, "seconds", 2)]
+                 _cell(row, "iou", 3), _cell(row, "seconds", 2)]
         shown = f"{name} ({row['views']})" if row.get("views") else name
         lines.append(f"| {shown} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
