@@ -47,7 +47,7 @@ def test_report_pairs_seeds_and_images():
 
 def test_the_evaluation_preset_does_not_change_training_unless_asked():
     """Runs train with their own settings and are evaluated at the preset's render knobs;
-    --train-with-preset trains at the preset's knobs as runs before session 9 did."""
+    --train-with-preset trains at the preset's knobs as earlier runs did."""
     mod = _load()
     job = {"preset": "fast", "iterations": 7, "overrides": ["train_coarse_samples=9"],
            "seed": 3}
