@@ -20,9 +20,9 @@ reference in exactly its own setting; identical settings share one run. ``train_
 (train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster`` (keeping the
 three training-ray items above), ``train_rays``
 (marched, residual rays, residual rays and Newton band rays) with ``--base`` and no
-items (today's defaults). To add seeds to
-a group run when training took the evaluation preset's knobs, pass ``--train-with-preset`` (those runs trained at the
-evaluation preset's marcher knobs).
+items (today's defaults). To add seeds to a group run when training took the evaluation
+preset's knobs, pass ``--train-with-preset`` (those runs trained at the evaluation
+preset's marcher knobs).
 
 Without CAPTURE a compositional synthetic capture is made under OUT (``texvocab synth
 --motion compositional``): its novel frames put part poses seen in training into

@@ -39,7 +39,7 @@ import numpy as np
 from texvocab_viewer.testing.bench import RENDERS  # pose changes timed per worker
 
 ROOT = Path(__file__).resolve().parent.parent
-FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # issue 16's viewer targets
+FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # the viewer's targets: first level, full level
 TEXVOCAB = Path(sys.executable).parent / "texvocab"
 
 
@@ -157,7 +157,7 @@ def _spread(a: np.ndarray, fmt: str) -> str:
 
 def spread_table(runs: dict[str, list[dict]]) -> str:
     """Per worker, over its renders: when the first level and the full level were on
-    screen (median, quartiles, worst; how many within the issue's targets), and when the
+    screen (median, quartiles, worst; how many within the targets), and when the
     frame that changed the pose (the 3D view's) was."""
     lines = ["| worker | renders | first level on screen ms: median (p25-p75, max) | "
              f"within {FIRST_TARGET_MS:g} ms | full level s: median (p25-p75, max) | "

@@ -1,4 +1,4 @@
-"""Numerical stability of the whole query path (issue 7): pose → quaternions → vocabulary
+"""Numerical stability of the whole query path: pose → quaternions → vocabulary
 distance (Eq. 2) → KNN weights (Eqs. 3–4) → pose feature (Eqs. 6–8) → field → render,
 with a small real avatar (default body, 32² textures, small encoder and field).
 
