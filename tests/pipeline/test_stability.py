@@ -1,5 +1,5 @@
 """Numerical stability of the whole query path: pose → quaternions → vocabulary
-distance (Eq. 2) → KNN weights (Eqs. 3–4) → pose feature (Eqs. 6–8) → field → render,
+distance (Eq. 4) → KNN weights (Eqs. 5–6) → pose feature (Eqs. 7–9) → field → render,
 with a small real avatar (default body, 32² textures, small encoder and field).
 
 Cases: rotation angles θ = 0, 1e-8, π, 2π and antipodal quaternions; K > M; all keys at
