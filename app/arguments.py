@@ -1,6 +1,7 @@
 """Command-line arguments of the viewer, shared by ``texvocab view``/``shot`` and
-``python -m app.window``: one size parser, one ``view`` argument set. Light: no GL, no
-torch (the ``texvocab`` parser imports it to build its ``--help``)."""
+``python -m texvocab_viewer``: one size parser, one ``view`` argument set, and the
+defaults the window and its panels start from. Light: no GL, no torch (the ``texvocab``
+parser imports it to build its ``--help``), and the bottom of the package's layers."""
 from __future__ import annotations
 
 import argparse
@@ -13,22 +14,22 @@ from texvocab.errors import TexvocabError
 #: at 0, 1.07-1.08 at 10; but other busy processes then also win over the render.
 NEURAL_NICE = 10
 
-#: where the neural render runs: a process of its own (app/render_process.py; the
-#: default) or a thread of the viewer's (app/worker.py), which shares the interpreter
+#: where the neural render runs: a process of its own (app/neural/render_process.py; the
+#: default) or a thread of the viewer's (app/neural/worker.py), which shares the interpreter
 NEURAL_WORKERS = ("process", "thread")
 
-#: render processes that split each view (app/render_process.py), one per core up to 2:
+#: render processes that split each view (app/neural/render_process.py), one per core up to 2:
 #: the UI idles while a level renders, so the second core is free then
 NEURAL_PROCESSES = min(2, os.cpu_count() or 1)
 
 #: milliseconds from a pose change (after a pause) that its frame waits, once ImGui drew
 #: it and before the swap (llvmpipe rasterises it meanwhile), for the neural render's
 #: preview, which is then drawn over the panel's image: both reach the screen in one
-#: frame instead of the preview a frame later (app.viewer.Viewer.before_swap). In the
+#: frame instead of the preview a frame later (texvocab_viewer.viewer.Viewer.before_swap). In the
 #: 1280x800 window under llvmpipe on 2 cores the preview of a 256-px render arrived
 #: 17-34 ms after the change while the frame waited; with 30 ms about 1 render in 12
 #: missed the wait (then the preview shows a frame later, as without it), with 40 none
-#: of 24 (bench/viewer_ui.py, session 17)
+#: of 24 (bench/viewer_ui.py)
 NEURAL_PREVIEW_WAIT_MS = 40.0
 #: the longest wait accepted: a frame held longer would feel like a stall
 PREVIEW_WAIT_MAX_MS = 200.0
@@ -52,7 +53,7 @@ def parse_size(spec: str, minimum: tuple[int, int] = IMAGE_MIN) -> tuple[int, in
 
 
 def add_view_arguments(p: argparse.ArgumentParser) -> None:
-    """The viewer's arguments (``texvocab view`` and ``python -m app.window``)."""
+    """The viewer's arguments (``texvocab view`` and ``python -m texvocab_viewer``)."""
     p.add_argument("source", nargs="?", default=None,
                    help="checkpoint.pt or capture folder (default: the body alone)")
     p.add_argument("--size", default="1280x800", metavar="WxH",

@@ -8,15 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from app.posing import BodyPoser
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import (
     BODY_PARTS,
     JOINT_LIMITS_DEG,
     JOINT_NAMES,
+    DataSettings,
     Settings,
     VocabTexture,
-    Vocabulary,
+    build_vocabulary,
     load_avatar,
     load_body,
     load_textures,
@@ -25,6 +25,7 @@ from texvocab.pipeline import (
 )
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 from texvocab.pipeline import pose_preset as preset
+from texvocab_viewer.posing import BodyPoser
 
 
 @dataclass
@@ -56,9 +57,9 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
         raise TexvocabError(f"{path}: the capture has no training frames to build a vocabulary")
     # the viewer of a bare capture holds out the default evaluation views it has (a
     # capture with fewer views simply has fewer held out); training refuses instead
-    s = Settings(eval_views=tuple(v for v in Settings().eval_views if v < cap.num_views))
-    vocab = Vocabulary.build(cap.poses[: cap.num_train], s.strategy, s.num_keys, s.k, s.weighting,
-                             s.min_key_distance)
+    held_out = tuple(v for v in Settings().data.eval_views if v < cap.num_views)
+    s = Settings(data=DataSettings(eval_views=held_out))
+    vocab = build_vocabulary(cap, s)
     textures = load_textures(cap, s, progress=True).permute(0, 2, 3, 1).numpy()
     return ViewerData(cap.body, vocab, textures, None, cap, s,
                       f"capture {path} ({cap.num_train} training frames)")
@@ -214,10 +215,14 @@ class ViewerState:
 
     def set_part_to_key(self, part: str | int, key_index: int) -> bool:
         """Move the part's joints to the pose of one of its keys (not clamped: keys are
-        training poses), making that key the part's nearest (distance ~0)."""
+        training poses), making that key the part's nearest (distance ~0). Joints the
+        vocabulary does not see (the root under a root-relative condition: its keys hold
+        no facing) keep their rotation, so the body keeps facing where it faced."""
         joints, rotvecs = self.key_pose(part, key_index)
+        ignored = self.data.vocab.ignored_joints
+        seen = [i for i, j in enumerate(joints) if j not in ignored]
         pose = self.pose.copy()
-        pose[list(joints)] = rotvecs
+        pose[[joints[i] for i in seen]] = rotvecs[seen]
         name = self.data.vocab.part_names[part] if isinstance(part, int) else part
         return self._changed(pose, change=f"{name.replace('_', ' ')} to key {key_index}")
 

@@ -1,10 +1,11 @@
 """The viewer's shared state, one object the panels draw from: the loaded data, the
-edited pose (:class:`app.state.ViewerState`), the camera (orbit, or a capture camera as a
+edited pose (:class:`texvocab_viewer.state.ViewerState`), the camera (orbit, or a capture camera as a
 preset; optionally following the root), scene options, GL resources, the neural render
 worker, screenshots and exports, and the File menu's dialogs. The window around it is
-:mod:`app.window`."""
+:mod:`texvocab_viewer.window`."""
 from __future__ import annotations
 
+import threading
 import time
 from collections import deque
 
@@ -12,26 +13,28 @@ import moderngl
 import numpy as np
 from imgui_bundle import hello_imgui, imgui
 
-from app.arguments import NEURAL_NICE
-from app.camera import CaptureViewCamera, OrbitCamera
-from app.colors import heat_color
-from app.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
-from app.panel_neural import NeuralView, camera_key, late_draw, start_worker
-from app.panel_pose import load_sequence, tick_sequence
-from app.panel_vocab import ThumbnailCache
-from app.scene import SceneOptions, SceneRenderer
-from app.state import ViewerState, load_viewer_data
-from app.view_blit import (
+from texvocab.errors import TexvocabError
+from texvocab.pipeline import follow_camera, march_settings
+from texvocab_viewer.arguments import NEURAL_NICE
+from texvocab_viewer.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
+from texvocab_viewer.export.job import Export
+from texvocab_viewer.gl.camera import CaptureViewCamera, OrbitCamera
+from texvocab_viewer.gl.colors import heat_color
+from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer
+from texvocab_viewer.gl.view_blit import (
     ViewBlit,
     blit_image,
     blit_view,
+    gl_flush,
     image_rects,
     warm_image_blit,
     window_framebuffer,
 )
-from app.wake import ui_waker
-from texvocab.errors import TexvocabError
-from texvocab.pipeline import follow_camera, march_settings
+from texvocab_viewer.neural.wake import ui_waker
+from texvocab_viewer.panels.neural import NeuralView, camera_key, late_draw, start_worker
+from texvocab_viewer.panels.pose import load_sequence, tick_sequence
+from texvocab_viewer.panels.vocab import ThumbnailCache
+from texvocab_viewer.state import ViewerState, load_viewer_data
 
 #: panels whose widgets change the pose: the neural job is submitted as soon as they are
 #: drawn, not when the Neural render panel draws after the 3D view (8 ms later, or more)
@@ -55,7 +58,7 @@ class Viewer:
         self.reset_camera()
         self.options = SceneOptions()
         self.neural_threads, self.neural_nice = neural_threads, neural_nice
-        self.neural_worker = neural_worker  # "process" or "thread" (app.arguments)
+        self.neural_worker = neural_worker  # "process" or "thread" (texvocab_viewer.arguments)
         self.neural_processes = 1  # render processes splitting a view (run_viewer sets it)
         self.neural_preview_wait: float | None = None  # seconds (None: the panel's default)
         self._worker = None  # started by start_neural_worker, handed to the panel
@@ -65,7 +68,7 @@ class Viewer:
         self.preset = ""
         self.sequence = None
         self.sequence_path, self.sequence_error = "", ""
-        self.export = None  # the last app.export.Export job
+        self.export = None  # the last texvocab_viewer.export.job.Export job
         self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
         self.view_blit: ViewBlit | None = None  # where the 3D view's image goes this frame
         self.view_blits = 0  # frames whose 3D view was copied into the window
@@ -89,7 +92,7 @@ class Viewer:
     # -- lifecycle (hello_imgui callbacks) ---------------------------------------------
     def post_init(self) -> None:
         self.ctx = moderngl.create_context()  # attaches to the window's current context
-        # 0 unless the window's own framebuffer is multisampled (app.window.WINDOW_MSAA_SAMPLES)
+        # 0 unless the window's own framebuffer is multisampled (texvocab_viewer.window.WINDOW_MSAA_SAMPLES)
         self.window_sample_buffers = int(self.ctx.info["GL_SAMPLE_BUFFERS"])
         self.scene = SceneRenderer(self.ctx, self.data)
         self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
@@ -173,9 +176,7 @@ class Viewer:
         if rect is None or imgui.is_popup_open("", imgui.PopupFlags_.any_popup_id):
             nv.cancel_wait()
             return
-        from OpenGL import GL
-
-        GL.glFlush()  # the frame so far rasterises while the render process finishes
+        gl_flush()  # the frame so far rasterises while the render process finishes
         if not nv.wait_preview():
             return
         rects = image_rects(rect, nv.texture.size, *window_framebuffer())
@@ -304,10 +305,8 @@ class Viewer:
 
     def start_export(self, poses, trans, stem: str, fps: float, view3d: bool = False) -> None:
         """Render ``poses`` (T, 24, 3) from the 3D view's camera at :meth:`shot_size` in
-        the background (app.export): an MP4, or for one pose neural.png (+ view3d.png, the
+        the background (texvocab_viewer.export.job): an MP4, or for one pose neural.png (+ view3d.png, the
         3D view at the same size, when ``view3d``; only that without a model)."""
-        from app.export import Export
-
         w, h = self.shot_size()
         camera = self.camera.to_texvocab_camera(w, h)
         if self.follow and len(poses) > 1:  # the camera moves with the root, as in the view
@@ -381,8 +380,6 @@ class Viewer:
     def open_source(self, path: str) -> None:
         """Load a checkpoint or capture in the background; when it loaded, the window
         closes and reopens on it (the pose sequence stays); an error stays in the caption."""
-        import threading
-
         def load() -> None:
             try:
                 self.reopen = load_viewer_data(path, self.smpl)

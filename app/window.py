@@ -2,38 +2,28 @@
 docked panels over one moderngl context (the window's own; no other GL context is made
 in this process): Pose (left), 3D view and Neural render (centre), Vocabulary (right).
 
-``python -m app.window [SOURCE] [--size WxH]`` runs the same window; hidden flags
-``--script NAME --report FILE.json [--screenshot FILE.png]`` drive it with the ImGui
-Test Engine or a per-frame driver (app/drivers.py) for tests and benchmarks.
+``python -m texvocab_viewer [SOURCE] [--size WxH]`` runs the same window
+(:mod:`texvocab_viewer.launch`). A test or benchmark drives it with a :data:`Script`
+(:mod:`texvocab_viewer.testing`), which the window knows only by this interface.
 """
 from __future__ import annotations
 
-import argparse
 import os
-import sys
+from collections.abc import Callable
+from typing import Protocol
 
 # None of these imports PyOpenGL (imgui_bundle and moderngl do not), so run_viewer can
 # still choose its platform first (_choose_gl_platform).
+import numpy as np
 from imgui_bundle import hello_imgui, imgui, immapp
 
-from app.arguments import (
-    NEURAL_NICE,
-    NEURAL_PREVIEW_WAIT_MS,
-    NEURAL_PROCESSES,
-    PREVIEW_WAIT_MAX_MS,
-    WINDOW_MIN,
-    add_view_arguments,
-    parse_size,
-)
-from app.drivers import AFTER_REOPEN, make_driver
-from app.panel_neural import draw_neural_panel
-from app.panel_pose import draw_pose_panel, load_sequence
-from app.panel_view import draw_view_panel
-from app.panel_vocab import draw_vocab_panel
-from app.state import load_viewer_data
-from app.viewer import Viewer
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import budget_blas_threads
+from texvocab_viewer.arguments import NEURAL_NICE, NEURAL_PREVIEW_WAIT_MS, NEURAL_PROCESSES
+from texvocab_viewer.panels.pose import load_sequence
+from texvocab_viewer.panels.registry import PANELS, dock_splits
+from texvocab_viewer.state import load_viewer_data
+from texvocab_viewer.viewer import Viewer
 
 #: frames per second while nothing changes (no input, no new render level, no playback):
 #: each frame of this window costs tens of ms of CPU under llvmpipe, which the neural
@@ -47,6 +37,21 @@ IDLE_FPS = 1.0
 #: its resolve at every swap cost an empty 1280x800 window 15.5 ms a frame and 28 ms of
 #: CPU, against 5.2 and 7.7 ms without.
 WINDOW_MSAA_SAMPLES = 0
+
+
+class ScriptedRun(Protocol):
+    """A test's or benchmark's run of one window, set up by a :data:`Script`."""
+
+    def finish(self, shot: np.ndarray | None, reopens: bool) -> tuple[int, Script | None]:
+        """After the window closed, with its last frame ``shot`` (H, W, 4) uint8: the exit
+        code, and the script of the window that reopens (``reopens``: File > Open chose a
+        source), or None to stop there."""
+        ...
+
+
+#: ``script(viewer, runner_params)``, called before each window opens, sets up its run
+#: (hooks into the runner parameters' callbacks, or the ImGui Test Engine)
+Script = Callable[[Viewer, hello_imgui.RunnerParams], ScriptedRun]
 
 
 def _choose_gl_platform() -> None:
@@ -92,23 +97,13 @@ def _runner_params(viewer: Viewer, title: str):
     rp.imgui_window_params.show_menu_bar = True
     rp.imgui_window_params.show_menu_view = False
     rp.callbacks.show_menus = viewer.show_menus
-    splits = [
-        hello_imgui.DockingSplit("MainDockSpace", "PoseSpace", imgui.Dir.left, 0.22),
-        hello_imgui.DockingSplit("MainDockSpace", "VocabSpace", imgui.Dir.right, 0.30),
-    ]
-    neural_space = "VocabSpace"  # without a model the panel only explains: a tab
-    if viewer.data.model is not None:
-        splits.append(hello_imgui.DockingSplit("MainDockSpace", "NeuralSpace", imgui.Dir.right,
-                                               0.5))
-        neural_space = "NeuralSpace"
-    rp.docking_params.docking_splits = splits
+    has_model = viewer.data.model is not None
+    rp.docking_params.docking_splits = dock_splits(has_model)
     windows = []
-    for label, space, fn in (("Pose", "PoseSpace", draw_pose_panel),
-                             ("3D view", "MainDockSpace", draw_view_panel),
-                             ("Neural render", neural_space, draw_neural_panel),
-                             ("Vocabulary", "VocabSpace", draw_vocab_panel)):
-        win = hello_imgui.DockableWindow(label, space,
-                                         (lambda f=fn, name=label: viewer.draw_panel(name, f)))
+    for panel in PANELS:
+        win = hello_imgui.DockableWindow(
+            panel.title, panel.space_for(has_model),
+            (lambda f=panel.draw, name=panel.title: viewer.draw_panel(name, f)))
         win.can_be_closed = False
         windows.append(win)
     rp.docking_params.dockable_windows = windows
@@ -122,18 +117,18 @@ def _runner_params(viewer: Viewer, title: str):
 
 
 def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
-               script: str | None = None, report: str | None = None,
-               screenshot: str | None = None, neural_resolution: int | None = None,
+               script: Script | None = None, neural_resolution: int | None = None,
                neural_threads: int = 1, poses: str | None = None,
                neural_nice: int = NEURAL_NICE, capture: str | None = None,
                neural_worker: str = "process", neural_processes: int = NEURAL_PROCESSES,
                neural_preview_wait_ms: float = NEURAL_PREVIEW_WAIT_MS) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
-    0). ``script``: a driver from app/drivers.py (tests, benchmarks) writing a JSON
-    ``report`` and the last frame to ``screenshot``. ``neural_worker``: "process" or
-    "thread" (app.arguments.NEURAL_WORKERS); ``neural_processes``: how many render processes
-    split each view; ``neural_preview_wait_ms``: app.panel_neural.NeuralView.preview_wait."""
+    0). ``script``: a scripted run of the window (tests, benchmarks; its exit code is
+    returned). ``neural_worker``: "process" or "thread"
+    (texvocab_viewer.arguments.NEURAL_WORKERS); ``neural_processes``: how many render
+    processes split each view; ``neural_preview_wait_ms``:
+    texvocab_viewer.panels.neural.NeuralView.preview_wait."""
     require_display()
     _choose_gl_platform()
     budget_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
@@ -154,45 +149,14 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
             if viewer.sequence_error:
                 raise TexvocabError(viewer.sequence_error)
         rp = _runner_params(viewer, f"texvocab - {data.source}")
-        driver = None
-        if script is not None:
-            driver = make_driver(script, viewer, rp)
+        run = None if script is None else script(viewer, rp)
         immapp.run(rp)
-        if driver is not None:
-            shot = hello_imgui.final_app_window_screenshot()
-            rc = driver.finish(report, screenshot, shot)
-            script = AFTER_REOPEN.get(script) if viewer.reopen is not None else None
+        if run is not None:
+            rc, script = run.finish(hello_imgui.final_app_window_screenshot(),
+                                    viewer.reopen is not None)
             if script is None:
                 return rc
         elif viewer.reopen is None:
             return 0
         data, poses = viewer.reopen, viewer.sequence_path or None  # File > Open
         print(f"opening {data.source}", flush=True)
-
-
-def run_from_args(args: argparse.Namespace) -> int:
-    """Run the viewer from :func:`app.arguments.add_view_arguments`' namespace."""
-    if args.neural_processes < 1:
-        raise TexvocabError(f"--neural-processes {args.neural_processes}: expected at least 1")
-    if not 0 <= args.neural_preview_wait <= PREVIEW_WAIT_MAX_MS:
-        raise TexvocabError(f"--neural-preview-wait {args.neural_preview_wait:g}: expected "
-                            f"0..{PREVIEW_WAIT_MAX_MS:g} milliseconds")
-    return run_viewer(args.source, args.smpl, parse_size(args.size, WINDOW_MIN), args.script,
-                      args.report, args.screenshot, args.neural_resolution,
-                      args.neural_threads, args.poses, args.neural_nice, args.capture,
-                      args.neural_worker, args.neural_processes, args.neural_preview_wait)
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m app.window", description=__doc__.split("\n")[0])
-    add_view_arguments(p)
-    args = p.parse_args(argv)
-    try:
-        return run_from_args(args)
-    except TexvocabError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

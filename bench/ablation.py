@@ -18,11 +18,11 @@ train_residual=off train_band_newton=false train_shell_voxel=0.01``: the project
 this ablation chose its defaults), so a variant differs from its
 reference in exactly its own setting; identical settings share one run. ``train_marcher``
 (train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster`` (keeping the
-three session-14 items above), ``train_rays``
+three training-ray items above), ``train_rays``
 (marched, residual rays, residual rays and Newton band rays) with ``--base`` and no
-items (today's defaults). To add seeds to
-a group run before session 9, pass ``--train-with-preset`` (those runs trained at the
-evaluation preset's marcher knobs).
+items (today's defaults). To add seeds to a group run when training took the evaluation
+preset's knobs, pass ``--train-with-preset`` (those runs trained at the evaluation
+preset's marcher knobs).
 
 Without CAPTURE a compositional synthetic capture is made under OUT (``texvocab synth
 --motion compositional``): its novel frames put part poses seen in training into
@@ -46,12 +46,12 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
 SET = "novel_poses"
-# the training rays before session 14 (marched rest, 5-sample band, shell grid voxel 1 cm)
-BEFORE_14 = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
+# the earlier training rays (marched rest, 5-sample band, shell grid voxel 1 cm)
+EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
 DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean",
-                "train_guide=shell", "train_coarse_samples=none"] + BEFORE_14
+                "train_guide=shell", "train_coarse_samples=none"] + EARLIER_RAYS
 # base settings that name no run folder: every run before the setting existed had them
-UNNAMED = {"train_guide=shell", "train_coarse_samples=none"} | set(BEFORE_14)
+UNNAMED = {"train_guide=shell", "train_coarse_samples=none"} | set(EARLIER_RAYS)
 GROUPS: dict[str, dict[str, list[str]]] = {
     "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
                    "none": ["strategy=none"]},
@@ -67,11 +67,11 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "train_marcher": {"coarse 18": [], "coarse 9": ["train_coarse_samples=9"]},
     # the rays training does not band: marched, or residual rays inside the mask (hits) or
     # everywhere (all); band rays of 5 samples, or from the probe and the Newton point
-    # (session 14; run with --base and no items: today's defaults, the reference; the
-    # others at the shell grid's voxel before session 14)
+    # (run with --base and no items: today's defaults, the reference; the
+    # others at the earlier shell grid voxel, 1 cm)
     "train_rays": {"defaults (newton band, residual hits, shell voxel 0.015)": []} | {
         k: v + ["train_shell_voxel=0.01"] for k, v in {
-            "marched (before session 14)": ["train_residual=off", "train_band_newton=false"],
+            "marched (the earlier default)": ["train_residual=off", "train_band_newton=false"],
             "newton band": ["train_residual=off"],
             "newton band, residual hits": ["train_residual=hits"],
             "newton band, residual all": ["train_residual=all"],
@@ -106,13 +106,13 @@ def run_name(base: list[str], extra: list[str]) -> str:
 
 def run_settings(job: dict):
     """(training settings, evaluation settings) of a job: the run's overrides and seed; the
-    evaluation also takes the preset's render knobs. Before session 9 training took them
+    evaluation also takes the preset's render knobs. Training once took them
     too (its marched rays at the fast preset's coarse 6, fine 2, early stop 1e-2); jobs
     with ``train_with_preset`` still do, to extend the groups run then comparably."""
-    from texvocab.pipeline.settings import Settings, preset_overrides, render_overrides
+    from texvocab.pipeline.settings import Settings, TrainSettings, preset_overrides, render_overrides
 
     pre = preset_overrides(job["preset"], render_only=True) if job["preset"] else []
-    trained = Settings(iterations=job["iterations"]).with_overrides(
+    trained = Settings(train=TrainSettings(iterations=job["iterations"])).with_overrides(
         (pre if job.get("train_with_preset") else []) + job["overrides"]
         + [f"seed={job['seed']}"])
     return trained, render_overrides(trained, job["preset"], [])
@@ -291,7 +291,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/bench/ablation")
     ap.add_argument("--report-only", action="store_true", help="tables from finished runs")
     ap.add_argument("--train-with-preset", action="store_true",
-                    help="train with the preset's render knobs too, as runs before session 9 "
+                    help="train with the preset's render knobs too, as earlier runs "
                          "did (to add seeds to their groups comparably)")
     args = ap.parse_args(argv)
     out = Path(args.out)

@@ -75,7 +75,7 @@ def main(argv=None) -> int:
         for v in VARIANTS[1:]:
             d = np.array(psnr[v]) - base
             diffs.append(f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f}")
-        print(f"| {Path(ckpt).parent.name}/{Path(ckpt).parent.parent.name} | {av.settings.strategy} | "
+        print(f"| {Path(ckpt).parent.name}/{Path(ckpt).parent.parent.name} | {av.settings.vocab.strategy} | "
               f"{len(items)} | " + " | ".join(cells + diffs) + " |", flush=True)
     return 0
 

@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     poses, trans = seq.poses[:args.frames], seq.trans[:args.frames]
     ref = np.asarray(av.capture.trans[:av.capture.num_train], dtype=np.float64).mean(0)
     cams = frame_cameras(av.capture.cameras[0], trans + pelvis, ref + pelvis, True, 0.0)
-    worker = FrameWorker(av.model, march, settings.image_scale, 2)
+    worker = FrameWorker(av.model, march, settings.render.image_scale, 2)
     worker.render(0, poses[0], trans[0], cams[0])  # warm-up (lazy init), not timed
     t0 = time.perf_counter()
     for i in range(len(poses)):
@@ -74,7 +74,7 @@ def main(argv=None) -> int:
     try:
         (tmp / "ray").mkdir()
         t0 = time.perf_counter()
-        render_frames_ray(av.model, dataclasses.replace(march), settings.image_scale, poses,
+        render_frames_ray(av.model, dataclasses.replace(march), settings.render.image_scale, poses,
                           trans, cams, tmp / "ray", workers=args.workers, progress=False)
         parallel = time.perf_counter() - t0
     finally:

@@ -95,8 +95,8 @@ def small_capture(root: Path) -> Path:
 def load(args):
     """(model, settings, capture) from CKPT or an untrained model on a capture."""
     from texvocab.capture import open as open_capture
-    from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import build_model, load_textures
+    from texvocab.pipeline.model import build_model, load_textures
+    from texvocab.pipeline.settings import DataSettings, Settings
 
     if args.checkpoint:
         from texvocab.pipeline import load_avatar
@@ -106,7 +106,7 @@ def load(args):
         return av.model, av.settings, av.capture, f"checkpoint {args.checkpoint}"
     root = Path(args.capture) if args.capture else small_capture(Path(tempfile.mkdtemp()))
     cap = open_capture(root)
-    settings = Settings(eval_views=[v for v in (0, 1) if v < cap.num_views])
+    settings = Settings(data=DataSettings(eval_views=tuple(v for v in (0, 1) if v < cap.num_views)))
     textures = load_textures(cap, settings, progress=False)
     with torch.random.fork_rng():  # seeded weights: PSNR comparable between runs
         torch.manual_seed(0)
@@ -118,7 +118,7 @@ def load(args):
 def items_of(cap, settings, frames: int):
     """[(label, pose, trans, camera, gt (H, W, 3), mask (H, W))]: held-out views of novel
     (else training) frames, plus generated preset poses on a synthetic capture."""
-    views = list(settings.eval_views)[:2]
+    views = list(settings.data.eval_views)[:2]
     pool = list(cap.novel_frames) or list(cap.train_frames)
     picks = sorted({pool[int(i)] for i in np.linspace(0, len(pool) - 1, max(frames - 1, 1))})
     items = [(f"frame {t} view {v}", cap.poses[t], cap.trans[t], cap.cameras[v],

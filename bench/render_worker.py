@@ -1,6 +1,6 @@
 """The viewer's render workers without a window: how much a UI thread's Python work
-slows the render when both share one interpreter (the thread worker, app/worker.py)
-against a render process of its own (app/render_process.py), and the same view split
+slows the render when both share one interpreter (the thread worker, app/neural/worker.py)
+against a render process of its own (app/neural/render_process.py), and the same view split
 over two render processes (``process x2``, the viewer's default on 2 cores).
 
 The "UI" here is a thread in this process that holds the GIL in pure Python for
@@ -29,11 +29,11 @@ import time
 
 import numpy as np
 
-from app.camera import DEFAULT_TARGET, OrbitCamera
-from app.render_process import ProcessWorker
-from app.state import ViewerState, load_viewer_data
-from app.worker import ProgressiveWorker, RenderJob, model_renderer
 from texvocab.pipeline import march_settings
+from texvocab_viewer.gl.camera import DEFAULT_TARGET, OrbitCamera
+from texvocab_viewer.neural.render_process import ProcessWorker
+from texvocab_viewer.neural.worker import ProgressiveWorker, RenderJob, model_renderer
+from texvocab_viewer.state import ViewerState, load_viewer_data
 
 POSES = ("walk", "squat")
 

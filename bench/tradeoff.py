@@ -137,7 +137,7 @@ def plot(rows: list[dict], front: set[str], path: Path, title: str) -> Path:
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "--", color="tab:blue", lw=1,
                     label="Pareto front")
             ax.legend(loc="lower right", fontsize=8)
-        ax.axvline(1.0, color="black", lw=0.8, ls=":", zorder=1)  # issue 5's frame budget
+        ax.axvline(1.0, color="black", lw=0.8, ls=":", zorder=1)  # the one-second frame budget
         ax.set_xscale("log")
         ticks = [t for t in (0.25, 0.5, 1, 2, 4, 8, 16) if min(r["seconds"] for r in shown) / 1.3
                  <= t <= max(r["seconds"] for r in shown) * 1.3]

@@ -31,8 +31,8 @@ from threadpoolctl import threadpool_limits
 
 from texvocab.blas import blas_threads, budget_blas_threads
 
-# the training rays before session 14: the rest marched, 5-sample band, shell voxel 1 cm
-BEFORE_14 = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
+# the earlier training rays: the rest marched, 5-sample band, shell voxel 1 cm
+EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
 SHELL = ["encoder=pyramid", "perceptual=off", "train_guide=shell", "train_shell_voxel=0.01"]
 UNBUDGETED = "reference, numpy's BLAS on every core (before texvocab/blas.py)"
 VARIANTS = {
@@ -44,10 +44,10 @@ VARIANTS = {
     "encoder resnet34-scratch": ["encoder=resnet34-scratch"] + SHELL[1:],
     "texture maps cosine-weighted": SHELL + ["view_weighting=cosine"],
     "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster",
-                                                    "train_coarse_samples=none"] + BEFORE_14,
+                                                    "train_coarse_samples=none"] + EARLIER_RAYS,
     "train_guide raster, train_coarse_samples 9": SHELL[:2] + ["train_guide=raster",
-                                                             "train_coarse_samples=9"] + BEFORE_14,
-    "session 13's defaults (5-sample band, the rest marched)": BEFORE_14,
+                                                             "train_coarse_samples=9"] + EARLIER_RAYS,
+    "the earlier defaults (5-sample band, the rest marched)": EARLIER_RAYS,
     "Newton band, the rest marched": ["train_residual=off"],
     "Newton band, residual rays everywhere (train_residual=all)": ["train_residual=all"],
     "defaults at train_shell_voxel 0.01": ["train_shell_voxel=0.01"],
@@ -56,10 +56,10 @@ VARIANTS = {
 
 
 def measure(capture, overrides: list[str], steps: int, warmup: int) -> dict:
-    from texvocab.pipeline.settings import Settings
+    from texvocab.pipeline.settings import Settings, TrainSettings
     from texvocab.pipeline.train import Trainer
 
-    s = Settings(iterations=steps + warmup).with_overrides(overrides)
+    s = Settings(train=TrainSettings(iterations=steps + warmup)).with_overrides(overrides)
     t0 = time.perf_counter()
     trainer = Trainer(capture, s, Path("/tmp/texvocab_train_speed"), progress=False)
     pf = trainer.model.pose_feature

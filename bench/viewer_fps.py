@@ -1,4 +1,4 @@
-"""Frame rate of the viewer's 3D view (app.scene.SceneRenderer) on a headless OSMesa
+"""Frame rate of the viewer's 3D view (texvocab_viewer.gl.scene.SceneRenderer) on a headless OSMesa
 context (Mesa llvmpipe, CPU), at 1280x800, 640x400 and 1920x1080: the textured body
 alone, with each overlay, with 4x MSAA, and with the pose changing every frame (posing,
 normals and the blended vocabulary texture redone per frame). Prints a Markdown table;
@@ -22,10 +22,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from app.camera import OrbitCamera  # noqa: E402
-from app.gl_headless import create_headless_context, release  # noqa: E402
-from app.scene import SceneOptions, SceneRenderer  # noqa: E402
-from app.state import ViewerData, ViewerState, load_viewer_data  # noqa: E402
+from texvocab_viewer.gl.camera import OrbitCamera  # noqa: E402
+from texvocab_viewer.gl.headless import create_headless_context, release  # noqa: E402
+from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer  # noqa: E402
+from texvocab_viewer.state import ViewerData, ViewerState, load_viewer_data  # noqa: E402
 
 SIZES = ((1280, 800), (640, 400), (1920, 1080))
 MODES = {

@@ -3,8 +3,8 @@ costs, how fast the neural render reaches the screen in the window against
 ``texvocab shot`` rendering the same pose from the same camera at the same size, and
 frame times while a slider is dragged.
 
-Runs ``python -m app.window CHECKPOINT --script bench:SECONDS:RES`` under xvfb-run (the
-driver in app/bench_driver.py), then ``texvocab shot CHECKPOINT --pose P --camera 0,0,3.2
+Runs ``python -m texvocab_viewer CHECKPOINT --script bench:SECONDS:RES`` under xvfb-run (the
+driver in app/testing/bench.py), then ``texvocab shot CHECKPOINT --pose P --camera 0,0,3.2
 --size WxH`` for each pose the window rendered, one after the other (nothing else
 running). Prints tables (per render, their spread, frames, panels) and a last line
 
@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from app.bench_driver import RENDERS  # pose changes timed per worker
+from texvocab_viewer.testing.bench import RENDERS  # pose changes timed per worker
 
 ROOT = Path(__file__).resolve().parent.parent
-FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # issue 16's viewer targets
+FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # the viewer's targets: first level, full level
 TEXVOCAB = Path(sys.executable).parent / "texvocab"
 
 
@@ -51,7 +51,7 @@ def run_window(checkpoint: str, seconds: float, res: int, size: str, threads: in
         sys.exit("error: xvfb-run is missing (apt-get install xvfb xauth)")
     with tempfile.TemporaryDirectory() as tmp:
         report = Path(tmp) / "bench.json"
-        cmd = [xvfb, "-a", "-s", "-screen 0 1920x1200x24", sys.executable, "-m", "app.window",
+        cmd = [xvfb, "-a", "-s", "-screen 0 1920x1200x24", sys.executable, "-m", "texvocab_viewer",
                checkpoint, "--size", size, "--script", f"bench:{seconds}:{res}:{renders}",
                "--report", str(report), "--neural-worker", worker]
         if threads:
@@ -89,7 +89,7 @@ def empty_window_child(size: str, seconds: float, out: str) -> None:
     rp.callbacks.show_gui = gui
     rp.ini_disable = True
     rp.fps_idling.enable_idling = False
-    from app.window import WINDOW_MSAA_SAMPLES  # the viewer's framebuffer, not hello_imgui's 8x
+    from texvocab_viewer.window import WINDOW_MSAA_SAMPLES  # the viewer's framebuffer, not hello_imgui's 8x
 
     rp.renderer_backend_options.open_gl_options.anti_aliasing_samples = WINDOW_MSAA_SAMPLES
     immapp.run(rp)
@@ -157,7 +157,7 @@ def _spread(a: np.ndarray, fmt: str) -> str:
 
 def spread_table(runs: dict[str, list[dict]]) -> str:
     """Per worker, over its renders: when the first level and the full level were on
-    screen (median, quartiles, worst; how many within the issue's targets), and when the
+    screen (median, quartiles, worst; how many within the targets), and when the
     frame that changed the pose (the 3D view's) was."""
     lines = ["| worker | renders | first level on screen ms: median (p25-p75, max) | "
              f"within {FIRST_TARGET_MS:g} ms | full level s: median (p25-p75, max) | "

@@ -1,1 +1,2 @@
-"""The viewer's GLSL, loaded by app.glsl; installed as the package ``app.shaders``."""
+"""The viewer's GLSL, loaded by texvocab_viewer.gl.glsl; installed as the package
+``texvocab_viewer.shaders``."""

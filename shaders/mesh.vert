@@ -1,6 +1,6 @@
 #version 330 core
 // The posed body, unrolled per triangle corner (positions and normals change per pose).
-uniform mat4 mvp;  // world -> clip (see app/camera.py: gl_mvp)
+uniform mat4 mvp;  // world -> clip (see app/gl/camera.py: gl_mvp)
 
 in vec3 in_position;  // world, metres
 in vec3 in_normal;

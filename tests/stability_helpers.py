@@ -142,12 +142,13 @@ def render_and_backprop(field: AvatarField, ctx: PoseContext, origins: torch.Ten
 
 
 def vocab_pose_gradient(vocab: Vocabulary, pose: torch.Tensor) -> tuple[torch.Tensor, list]:
-    """d(loss)/d(pose) through quaternions → Eq. 2 distances → Eqs. 3–4 weights, float64.
+    """d(loss)/d(pose) through the pose condition → quaternions → Eq. 4 distances →
+    Eqs. 5–6 weights, float64.
 
     Args: pose (24, 3). Returns the gradient (24, 3) and per part (weights (K,), d (K,)).
     """
     pose = pose.detach().double().requires_grad_(True)
-    quats = rotvec_to_quat(pose)
+    quats = rotvec_to_quat(vocab.condition(pose))
     loss = pose.new_zeros(())
     parts = []
     for joints, keys in zip(vocab.part_joints, vocab.key_quats, strict=True):

@@ -1,17 +1,40 @@
-"""Shared training-test cases: a tiny model's settings."""
+"""Shared training-test cases: a tiny model's settings, and settings from the flat names."""
 import sys
 from pathlib import Path
 
 from texvocab.method.field import FieldSettings
-from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.settings import FLAT_NAMES, GROUPS, Settings
 
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
 
 
+def flat_settings(**kw) -> Settings:
+    """Settings from flat names (``FLAT_NAMES``: ``texture_size=64`` sets
+    ``data.texture_size``, ``train_guide="shell"`` sets ``train.guide``) and ``field``, a
+    FieldSettings; the rest at their defaults."""
+    groups: dict[str, dict] = {}
+    for key, value in kw.items():
+        if key == "field":
+            continue
+        group, name = FLAT_NAMES[key].split(".")
+        groups.setdefault(group, {})[name] = value
+    built = {g: GROUPS[g](**values) for g, values in groups.items()}
+    return Settings(**built, **({"field": kw["field"]} if "field" in kw else {}))
+
+
+def flat_dict(s: Settings) -> dict:
+    """``s`` as checkpoints stored settings before the groups: one flat dict of
+    ``FLAT_NAMES`` (view tuples as lists) and ``field``, a dict."""
+    dotted = s.dotted()
+    return {**{flat: dotted[name] for flat, name in FLAT_NAMES.items()},
+            "field": s.to_dict()["field"]}
+
+
 def tiny_settings(**kw) -> Settings:
+    """A tiny model's settings, ``kw`` (flat names, as :func:`flat_settings`) applied."""
     base = dict(texture_size=64, num_keys=3, k=2, encoder="small", rays_per_batch=256,
                 coarse_samples=8, fine_samples=8, iterations=40, checkpoint_every=10,
                 field=FieldSettings(hidden=48, sdf_layers=2, color_layers=1, pos_freqs=4),
                 lr=2e-3)
     base.update(kw)
-    return Settings(**base)
+    return flat_settings(**base)

@@ -1,4 +1,4 @@
-"""Run the viewer window for real under Xvfb with a scripted driver (app/drivers.py)."""
+"""Run the viewer window for real under Xvfb with a scripted driver (app/testing/scripts.py)."""
 from __future__ import annotations
 
 import json
@@ -13,7 +13,7 @@ XVFB = shutil.which("xvfb-run")
 
 
 def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float = 150,
-               command: tuple[str, ...] = (PYTHON, "-m", "app.window"), env=None,
+               command: tuple[str, ...] = (PYTHON, "-m", "texvocab_viewer"), env=None,
                cwd: Path = ROOT):
     """(process, report dict, screenshot path) of ``command SOURCE --script SCRIPT`` in a
     1280x800 window with a 48 px neural render (``extra``: more arguments)."""

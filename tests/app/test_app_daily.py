@@ -15,6 +15,8 @@ from PIL import Image
 from tiny_runs import smallest_run
 from window_runs import PYTHON, run_window
 
+pytestmark = pytest.mark.slow  # Xvfb windows
+
 TEXVOCAB = str(Path(PYTHON).parent / "texvocab")
 
 
@@ -155,14 +157,14 @@ def test_file_open_of_a_bad_file_says_why_and_keeps_the_window(tmp_path):
 
 
 def test_no_dialog_program_is_said_not_hidden(monkeypatch):
-    from app.dialogs import FileDialogs
+    from texvocab_viewer.dialogs import FileDialogs
 
     monkeypatch.setenv("PATH", "/nonexistent")
     assert "zenity" in FileDialogs.missing()
 
 
 def test_weights_panel_shows_distance_raw_weight_and_share():
-    from app.panel_vocab import key_caption, raw_weight
+    from texvocab_viewer.panels.vocab import key_caption, raw_weight
 
     assert raw_weight("paper", 3, 0.25) == pytest.approx(2.75)
     assert raw_weight("inverse", 3, 0.25) == pytest.approx(4.0)
@@ -172,8 +174,8 @@ def test_weights_panel_shows_distance_raw_weight_and_share():
 
 
 def test_follow_centres_the_root_in_an_orbit_view_and_keeps_it_there():
-    from app.state import load_viewer_data
-    from app.viewer import Viewer
+    from texvocab_viewer.state import load_viewer_data
+    from texvocab_viewer.viewer import Viewer
 
     v = Viewer(load_viewer_data(None))  # no window needed: follow is camera arithmetic
     v.camera.target = np.array([0.3, -0.2, 0.1])
@@ -193,8 +195,8 @@ def test_follow_centres_the_root_in_an_orbit_view_and_keeps_it_there():
 
 
 def test_export_video_follows_the_root_when_follow_is_on():
-    from app.viewer import follow_cameras
     from texvocab.pipeline import Camera
+    from texvocab_viewer.viewer import follow_cameras
 
     cam = Camera(np.array([[100.0, 0, 32], [0, 100.0, 32], [0, 0, 1]]), np.eye(3),
                  np.array([0.0, 0.0, 3.0]), 64, 64)
@@ -211,8 +213,8 @@ def test_export_video_follows_the_root_when_follow_is_on():
 
 
 def test_screenshot_without_a_model_writes_the_3d_view_alone(tmp_path):
-    from app.export import Export
     from texvocab.pipeline import Camera
+    from texvocab_viewer.export.job import Export
 
     cam = Camera(np.eye(3), np.eye(3), np.zeros(3), 8, 8)
     view = np.full((8, 8, 3), 200, np.uint8)
@@ -237,7 +239,7 @@ def test_screenshot_scripts_end_in_their_state(checkpoint, tmp_path, script):
 def test_dialog_program_search_follows_path(monkeypatch, tmp_path):
     """The per-frame check is cached per PATH value: a dialog program that appears on a
     new PATH is found, and the empty PATH still says none."""
-    from app.dialogs import FileDialogs
+    from texvocab_viewer.dialogs import FileDialogs
 
     program = tmp_path / "zenity"
     program.write_text("#!/bin/sh\n")
@@ -254,9 +256,9 @@ def test_a_pose_panel_edit_is_submitted_before_the_3d_view_draws():
     """The Pose panel's slider changes the pose mid-frame: the neural job goes out right
     after that panel (Viewer.SUBMIT_AFTER), not when the Neural render panel draws after
     the 3D view's work; only the frame's start polls levels."""
-    from app.panel_neural import NeuralView
-    from app.state import load_viewer_data
-    from app.viewer import Viewer
+    from texvocab_viewer.panels.neural import NeuralView
+    from texvocab_viewer.state import load_viewer_data
+    from texvocab_viewer.viewer import Viewer
 
     class Recorder:
         busy, delivered, errors = False, [], []
@@ -291,11 +293,11 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     ``preview_wait`` from the submission, and take it; poses streaming in (a dragged
     slider) never make a frame wait, nor does ``preview_wait`` 0, a preview that came
     while the frame was built (late_poll took it) or a cancelled wait (a popup)."""
-    import app.panel_neural as pn
-    from app.panel_neural import NeuralView
-    from app.state import load_viewer_data
-    from app.viewer import Viewer
-    from app.worker import RenderFrame
+    import texvocab_viewer.panels.neural as pn
+    from texvocab_viewer.neural.worker import RenderFrame
+    from texvocab_viewer.panels.neural import NeuralView
+    from texvocab_viewer.state import load_viewer_data
+    from texvocab_viewer.viewer import Viewer
 
     class Texture:
         def __init__(self, size):
@@ -377,10 +379,10 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
 
 
 def test_the_preview_blit_rectangles():
-    """app.view_blit.image_rects: the whole texture, its row 0 (the image's top) to the
+    """texvocab_viewer.gl.view_blit.image_rects: the whole texture, its row 0 (the image's top) to the
     rectangle's top in the window's bottom-up rows, scaled for HiDPI; nothing when the
     rectangle is empty or leaves the window."""
-    from app.view_blit import image_rects
+    from texvocab_viewer.gl.view_blit import image_rects
 
     src, dst = image_rects((10.0, 20.0, 110.0, 70.0), (32, 17), (1280, 800))
     assert src == (0, 0, 32, 17) and dst == (10, 780, 110, 730)  # flipped: y0 > y1

@@ -10,11 +10,14 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from PIL import Image
 from pose_file_cases import amass_file
 from tiny_runs import smallest_run
 
 from texvocab.pipeline.clip import read_video_info
+
+pytestmark = pytest.mark.slow  # Xvfb windows
 
 XVFB = shutil.which("xvfb-run")
 
@@ -27,7 +30,7 @@ def test_export_video_and_screenshot_buttons(tmp_path):
     (work / "exports" / "walk.mp4").write_bytes(b"mine")  # must survive the export
     report = tmp_path / "export.json"
     assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
-    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", sys.executable, "-m", "app.window",
+    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", sys.executable, "-m", "texvocab_viewer",
            str(ckpt), "--size", "1280x800", "--script", "export", "--report", str(report),
            "--neural-resolution", "48", "--poses", str(tmp_path / "walk.npz")]
     proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=300)

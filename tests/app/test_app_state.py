@@ -4,13 +4,13 @@ and random texture maps, no images)."""
 import numpy as np
 import pytest
 
-from app.state import ViewerData, ViewerState, load_viewer_data
 from texvocab.body import default_body
 from texvocab.body.parts import BODY_PARTS
 from texvocab.errors import TexvocabError
 from texvocab.geometry.uv import texel_map
 from texvocab.method.vocab import Vocabulary
 from texvocab.method.vocab_texture import VocabTexture
+from texvocab_viewer.state import ViewerData, ViewerState, load_viewer_data
 
 TEX = 32
 LEFT_SHOULDER, LEFT_KNEE = 16, 4
@@ -117,6 +117,25 @@ def test_set_part_to_key_makes_that_key_nearest(body):
         state.set_part_to_key("left_arm", 6)
 
 
+def test_moving_the_main_body_to_a_key_keeps_the_way_the_body_faces(body):
+    """The vocabulary reads the root-relative pose: a body facing away (143° about y) is
+    as near its keys as one facing forward, and moving its main body to a key keeps the
+    root's orientation (the key holds none)."""
+    data = make_data(body)
+    state = ViewerState(data)
+    main = list(BODY_PARTS).index("main_body")
+    pose = training_poses()[int(data.vocab.key_frames[main][1])].copy()  # a main-body key
+    pose[0] = [0.0, np.radians(143.0), 0.0]
+    state.set_pose(pose)
+    assert state.novelty()[main] == pytest.approx(0.0, abs=1e-12)
+    state.set_joint(9, (25.0, 0.0, 0.0))  # spine3 bends: away from every key
+    assert state.novelty()[main] > 1e-3
+    assert state.set_part_to_key("main_body", 2)
+    assert state.novelty()[main] == pytest.approx(0.0, abs=1e-12)
+    assert state.query()[main].key_ids[0] == 2
+    np.testing.assert_array_equal(state.pose[0], pose[0])
+
+
 def test_blended_texture_is_the_key_texture_where_its_weight_is_one(body):
     data = make_data(body, weighting="inverse")
     state = ViewerState(data)
@@ -164,13 +183,13 @@ def test_no_vocabulary_and_bad_sources(tmp_path):
 
 
 def test_numpy_posing_equals_the_body_model(body, toy_arrays):
-    """app.posing (NumPy LBS for display) against BodyModel.forward, with and without
+    """texvocab_viewer.posing (NumPy LBS for display) against BodyModel.forward, with and without
     pose correctives."""
     import torch
 
-    from app.posing import BodyPoser
     from texvocab.body import BodyModel
     from texvocab.body.smpl_io import parents_from_kintree
+    from texvocab_viewer.posing import BodyPoser
 
     toy = BodyModel(v_template=toy_arrays["v_template"], faces=toy_arrays["f"],
                     weights=toy_arrays["weights"],

@@ -1,5 +1,5 @@
 """The viewer window for real: a GLFW window under Xvfb, driven by the ImGui Test Engine
-(app/drivers.py). It moves a left-arm slider and clicks a vocabulary key the way a
+(app/testing/scripts.py). It moves a left-arm slider and clicks a vocabulary key the way a
 user would; the vocabulary panel's keys and weights must follow, the screenshot must show
 the body, and the app (and its neural render worker) must exit cleanly."""
 from __future__ import annotations
@@ -13,6 +13,8 @@ import pytest
 from PIL import Image
 from tiny_runs import tiny_run
 from window_runs import PYTHON, ROOT, run_window
+
+pytestmark = pytest.mark.slow  # Xvfb windows
 
 
 @pytest.fixture(scope="module")
@@ -88,12 +90,12 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert rep["idling_while_busy"] == [True] and rep["idling_when_done"] is True
     assert rep["idling_while_playing"] == [False]
 
-    # the window's framebuffer is not multisampled (app.window.WINDOW_MSAA_SAMPLES: under
+    # the window's framebuffer is not multisampled (texvocab_viewer.window.WINDOW_MSAA_SAMPLES: under
     # llvmpipe a 4x buffer and its resolve cost ~20 ms of CPU a frame)
     assert rep["window_sample_buffers"] == 0
 
     # the screenshot is the whole window and shows the body in the 3D view, copied into
-    # the window's framebuffer (app/view_blit.py), not drawn by ImGui
+    # the window's framebuffer (app/gl/view_blit.py), not drawn by ImGui
     assert rep["view_blits"] > 0
     img = np.asarray(Image.open(shot).convert("RGB")).astype(np.float32)
     assert img.shape == (800, 1280, 3) and img.std() > 10
@@ -116,7 +118,7 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
         tiny_checkpoint, tmp_path, worker):
     """bench/viewer_ui.py's driver, short: three renders (the script's count) to full
     resolution in the render process (or thread), the CPU of each side measured, and after
-    the last level the window idles again (a level's wake draws a frame, app/wake.py)."""
+    the last level the window idles again (a level's wake draws a frame, app/neural/wake.py)."""
     proc, rep, _ = run_window(tiny_checkpoint, "bench:1:64:3", tmp_path, "--neural-worker",
                               worker, "--neural-preview-wait", "200")
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
@@ -147,7 +149,7 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     assert rep["idle"]["frames"] <= 4  # 1 s idle at 1 frame per second
 
 
-@pytest.mark.parametrize("cmd", [[PYTHON, "-m", "app.window"],
+@pytest.mark.parametrize("cmd", [[PYTHON, "-m", "texvocab_viewer"],
                                  [str(Path(PYTHON).parent / "texvocab"), "view"]])
 def test_viewer_without_display_says_what_to_do(cmd):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
@@ -178,11 +180,11 @@ def test_render_worker_bench_runs_all_workers(tiny_checkpoint):
 
 
 def test_the_ui_waker_is_glfws_empty_event_of_the_loaded_library():
-    """app/wake.py posts an empty event through the very libglfw imgui_bundle loaded (one
+    """app/neural/wake.py posts an empty event through the very libglfw imgui_bundle loaded (one
     copy in the process), not hello_imgui.request_refresh."""
     from imgui_bundle import hello_imgui
 
-    from app.wake import ui_waker
+    from texvocab_viewer.neural.wake import ui_waker
 
     wake = ui_waker()
     assert wake is not hello_imgui.request_refresh and wake.__name__ == "glfwPostEmptyEvent"

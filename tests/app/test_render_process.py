@@ -1,4 +1,4 @@
-"""The viewer's render process (app/render_process.py): the thread worker's protocol
+"""The viewer's render process (app/neural/render_process.py): the thread worker's protocol
 across a process boundary. Levels arrive coarse to fine from another process, a newer
 version cancels the job in progress and stale levels never arrive, a failing render is
 reported and the process keeps serving, a crashed process is reported, and stop ends it.
@@ -11,8 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from app.render_process import ProcessWorker
-from app.worker import RenderJob
+from texvocab_viewer.neural.render_process import ProcessWorker
+from texvocab_viewer.neural.worker import RenderJob
 
 
 def _levels(job, cancelled, levels=(8, 4, 2, 1)):

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import torch
 
-from app.camera import OrbitCamera, gl_mvp
-from app.colors import PART_COLORS
-from app.gl_headless import create_headless_context, make_current, release
-from app.scene import SceneOptions, SceneRenderer, face_normals
-from app.state import ViewerData, ViewerState
 from texvocab.body import default_body
 from texvocab.body.parts import BODY_PARTS
 from texvocab.capture import Camera
 from texvocab.geometry.raster import rasterize_mesh
 from texvocab.method.vocab import Vocabulary
+from texvocab_viewer.gl.camera import OrbitCamera, gl_mvp
+from texvocab_viewer.gl.colors import PART_COLORS
+from texvocab_viewer.gl.headless import create_headless_context, make_current, release
+from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer, face_normals
+from texvocab_viewer.state import ViewerData, ViewerState
 
 W, H = 320, 200
 LEFT_SHOULDER = 16
@@ -218,7 +218,7 @@ def test_msaa_resolves_into_the_same_image_with_smoother_edges(ctx, body):
 def test_missing_osmesa_is_one_clear_error(monkeypatch):
     import ctypes.util
 
-    import app.gl_headless as gh
+    import texvocab_viewer.gl.headless as gh
     from texvocab.errors import TexvocabError
 
     monkeypatch.setattr(gh, "LIBRARY_NAMES", ("libOSMesa-not-here.so.99",))

@@ -87,7 +87,7 @@ def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(tiny
     view, neural, both = (read(out / n) for n in ("view3d.png", "neural.png", "shot.png"))
     assert view.shape == neural.shape == (64, 64, 3)  # the capture view's size
     assert both.shape[1] > 2 * 64
-    from app.scene import SceneOptions
+    from texvocab_viewer.gl.scene import SceneOptions
 
     bg = np.asarray(SceneOptions().background) * 255
     gl_body = np.abs(view - bg).max(-1) > 3
@@ -103,7 +103,7 @@ def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(tiny
 
 def test_demo_without_a_display_writes_the_viewer_shots(tiny_checkpoint, tmp_path):
     """What `texvocab demo` does at its end when there is no display."""
-    from app.shot import DEMO_LOOKS, demo_shots
+    from texvocab_viewer.export.shot import DEMO_LOOKS, demo_shots
 
     sheet = demo_shots(tiny_checkpoint, tmp_path / "viewer", poses=("1", "kick"))
     img = read(sheet)

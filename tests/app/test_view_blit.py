@@ -1,10 +1,10 @@
-"""The 3D view's copy into the window (app/view_blit.py): which rows and columns of the
+"""The 3D view's copy into the window (app/gl/view_blit.py): which rows and columns of the
 scene's framebuffer land where in the window's, GL rows counted from the bottom. The copy
 itself runs in the window tests (tests/app/test_app_window.py: the body in the screenshot's
 3D view)."""
 from __future__ import annotations
 
-from app.view_blit import ViewBlit, blit_rects
+from texvocab_viewer.gl.view_blit import ViewBlit, blit_rects
 
 FB = (1280, 800)
 

@@ -1,4 +1,4 @@
-"""The viewer's progressive render worker (app/worker.py), no GL: levels arrive coarse to
+"""The viewer's progressive render worker (app/neural/worker.py), no GL: levels arrive coarse to
 fine with timings, a newer version cancels stale work (stale levels never reach the UI),
 and the thread stops cleanly, also in the middle of a render."""
 from __future__ import annotations
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from app.worker import ProgressiveWorker, RenderJob, model_renderer
 from texvocab.capture.camera import Camera
 from texvocab.render import MarchSettings, progressive_render
 from texvocab.render.analytic import SphereField
+from texvocab_viewer.neural.worker import ProgressiveWorker, RenderJob, model_renderer
 
 SETTINGS = MarchSettings.from_flat(chunk_rays=64, coarse_samples=8, fine_samples=4)
 

@@ -100,7 +100,7 @@ def test_prepare_and_vocab_commands(tmp_path):
     run("synth", str(cap), "--frames", "4", "--train-frames", "3", "--size", "64",
         "--ring-views", "2", "--raised-views", "0", "--texture-size", "128", check_rc=0)
     err = run("prepare", str(cap), "--texture-size", "32", check_rc=2).stderr
-    assert err.startswith("error: setting eval_views=[1, 5]") and "views 0..1" in err  # no 5
+    assert err.startswith("error: setting data.eval_views=[1, 5]") and "views 0..1" in err  # no 5
     out = run("prepare", str(cap), "--texture-size", "32", "--eval-views", "1", check_rc=0).stdout
     assert out.startswith("3 texture maps (32² texels, views 0)")  # view 1 is held out
     assert len(list((cap / "texvocab_cache" / "texmaps_32_views_0").glob("frame_*.npz"))) == 3

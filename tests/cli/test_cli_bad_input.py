@@ -133,9 +133,8 @@ def _tiny_sets() -> list[str]:
     """--set items reproducing the fixture run's settings (the defaults aside)."""
     from texvocab.pipeline.settings import Settings
 
-    ours, default = tiny_settings(iterations=2, perceptual="off").to_dict(), Settings().to_dict()
-    items = [f"field.{k}={v}" for k, v in ours.pop("field").items() if default["field"][k] != v]
-    items += [f"{k}={v}" for k, v in ours.items() if k != "field" and default[k] != v]
+    ours, default = tiny_settings(iterations=2, perceptual="off").dotted(), Settings().dotted()
+    items = [f"{k}={v}" for k, v in ours.items() if default[k] != v]
     return sum((["--set", i] for i in items), [])
 
 
@@ -167,6 +166,14 @@ CASES = [
     ("set-patch-size-4", T + ["--set", "patch_size=4"], "patch_size"),
     ("set-view-weighting-max", T + ["--set", "view_weighting=max"], "view_weighting"),
     ("set-fg-fraction-2", T + ["--set", "fg_fraction=2"], "fg_fraction"),
+    ("set-dotted-range", T + ["--set", "render.coarse_samples=0"], "render.coarse_samples=0"),
+    ("set-dotted-type", T + ["--set", "train.coarse_samples=2.5"], "train.coarse_samples"),
+    ("set-dotted-unknown", T + ["--set", "train.nosuch=1"], "train.nosuch"),
+    ("set-group", T + ["--set", "render=3"], "group of settings"),
+    ("eval-set-train-knob", ["eval", RUN + "/checkpoint.pt", CAP, "--set",
+                             "train.coarse_samples=3"], "only render knobs"),
+    ("eval-set-misspelt", ["eval", RUN + "/checkpoint.pt", CAP, "--set",
+                           "render.coarse_sample=3"], "render.coarse_samples"),
     ("iterations-negative", ["train", CAP, "--out", "{base}/new_run", "--iterations", "-5"],
      "iterations"),
     ("out-is-a-file", lambda w: ["train", str(w / "cap"), "--out", _out_file(w)], "is a file"),
@@ -174,7 +181,7 @@ CASES = [
     ("resume-and-overwrite", ["train", CAP, "--out", RUN, "--resume", "--overwrite"],
      "exclude"),
     ("resume-past-iterations", R + ["--iterations", "1"], "already at step 2"),
-    ("resume-other-settings", R + ["--set", "lr=0.1"], "written with lr"),
+    ("resume-other-settings", R + ["--set", "lr=0.1"], "written with train.lr"),
     ("synth-frames-0", ["synth", "{base}/new_cap", "--frames", "0"], "--frames"),
     ("synth-frames-negative", ["synth", "{base}/new_cap", "--frames", "-3"], "--frames"),
     ("synth-size-0", ["synth", "{base}/new_cap", "--size", "0"], "--size"),
@@ -284,4 +291,4 @@ def test_check_assets_passes_the_good_capture_and_flags_missing_eval_views(world
     assert main(["check-assets", str(four)]) == 0  # a valid capture; the defaults do not fit
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("note ") and "default eval_views are [1, 5]" in out[0]
-    assert "--set eval_views" in out[0] and out[1].startswith("OK ")
+    assert "--set data.eval_views" in out[0] and out[1].startswith("OK ")

@@ -15,13 +15,13 @@ from texvocab.capture import open as open_capture
 from texvocab.capture.synth import load_pose_file
 from texvocab.errors import TexvocabError
 from texvocab.pipeline.avatar import load_avatar
-from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.settings import FLAT_NAMES, Settings
 
 FUZZ = settings(max_examples=60, deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
-KEYS = [f.name for f in Settings.__dataclass_fields__.values()] + [
-    "field.hidden", "field.pos_freqs", "field.beta_min", "field.shell_width", "nosuch", "field"]
+KEYS = list(FLAT_NAMES) + list(Settings().dotted()) + ["nosuch", "field", "render",
+                                                       "render.nosuch"]
 VALUES = st.one_of(st.sampled_from(["nan", "inf", "-inf", "-1", "0", "1e30", "none", "true",
                                     "1,2", "abc", "", "0.5", "3", "part", "paper", "auto"]),
                    st.text(string.printable, max_size=8),

@@ -9,7 +9,7 @@ from texvocab.geometry.raster import rasterize, rasterize_mesh
 
 
 def reference_rasterize(pix, depth, faces, width, height):
-    """The torch rasteriser of texvocab <= session 8: (face, bary, depth) (H·W, ...)."""
+    """The torch rasteriser of the first texvocab versions: (face, bary, depth) (H·W, ...)."""
     pix, faces = pix.double(), faces.long()
     front = (depth[faces] > 1e-6).all(1)
     face_ids = torch.nonzero(front).squeeze(1)

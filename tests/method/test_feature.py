@@ -141,8 +141,8 @@ def test_a_subjects_shape_is_the_same_mesh_everywhere(tmp_path):
     from texvocab.body.model import BodyModel
     from texvocab.capture.camera import Camera, look_at
     from texvocab.capture.capture import Capture
-    from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import build_model
+    from texvocab.pipeline.model import build_model
+    from texvocab.pipeline.settings import DataSettings, Settings, VocabSettings
 
     base = default_body()
     rng = np.random.default_rng(0)
@@ -161,7 +161,8 @@ def test_a_subjects_shape_is_the_same_mesh_everywhere(tmp_path):
                   [[tmp_path / "x.png"] * 2] * 2, [[tmp_path / "m.png"] * 2] * 2, [0, 1], 2,
                   shaped, betas=np.array([2.0, -1.5, 1.0, 0.5, 9.0]))
     assert cap.shape().shape == (1, 4)
-    s = Settings(encoder="pyramid", texture_size=32, num_keys=2, k=1, eval_views=(1,))
+    s = Settings(data=DataSettings(texture_size=32, eval_views=(1,)),
+                 vocab=VocabSettings(encoder="pyramid", num_keys=2, k=1))
     model = build_model(cap, s, torch.rand(2, 3, 32, 32))
     for t in range(2):
         ctx = model.pose_feature.context(cap.poses[t], cap.trans[t])

@@ -117,11 +117,12 @@ def test_texel_fill_is_the_nearest_covered_texel():
 
 
 def _maps_of(root, body, **settings):
-    from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import load_textures
+    from texvocab.pipeline.model import load_textures
+    from texvocab.pipeline.settings import DataSettings, Settings
 
     cap = open_capture(root, body=body)
-    return load_textures(cap, Settings(texture_size=64, **settings), progress=False).numpy()
+    s = Settings(data=DataSettings(texture_size=64, **settings))
+    return load_textures(cap, s, progress=False).numpy()
 
 
 def _scramble(paths, seed):
@@ -156,13 +157,15 @@ def test_texture_map_cache_is_keyed_by_view_set(unlit_capture, tmp_path):
     """A cache built from other views (e.g. every view, as before held-out views were
     excluded) is never reused: another view set gets its own folder."""
     from texvocab.method.texmap import cache_dir
-    from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import texmap_settings
+    from texvocab.pipeline.model import texmap_settings
+    from texvocab.pipeline.settings import DataSettings, Settings
 
     cap = unlit_capture
     all_views = cache_dir(cap, TexmapSettings(size=64))
-    train = cache_dir(cap, texmap_settings(cap, Settings(texture_size=64, eval_views=(1, 5))))
-    other = cache_dir(cap, texmap_settings(cap, Settings(texture_size=64, eval_views=(2,))))
+    train = cache_dir(cap, texmap_settings(cap, Settings(data=DataSettings(
+        texture_size=64, eval_views=(1, 5)))))
+    other = cache_dir(cap, texmap_settings(cap, Settings(data=DataSettings(
+        texture_size=64, eval_views=(2,)))))
     assert len({all_views, train, other}) == 3
     assert train.name == "texmaps_64_views_0-2-3-4-6-7"
     maps = prepare_texture_maps(cap, TexmapSettings(size=64), progress=False)  # all views

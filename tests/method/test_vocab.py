@@ -72,18 +72,21 @@ def test_vocabulary_build_and_query(strategy, parts):
     poses[10] = poses[3]  # a repeated pose
     vocab = Vocabulary.build(poses, strategy, num_keys=8, k=3)
     assert vocab.num_parts == parts
-    for kf in vocab.key_frames:
-        assert len(kf) == 8 and len(set(kf.tolist())) == 8 and kf[0] == 0
+    for joints, kf in zip(vocab.part_joints, vocab.key_frames, strict=True):
+        if set(joints) <= set(vocab.ignored_joints):  # the pelvis alone ("joint"): one pose
+            assert kf.tolist() == list(range(8))  # root-relative, so its keys tie (lowest first)
+        else:
+            assert len(kf) == 8 and len(set(kf.tolist())) == 8 and kf[0] == 0
     # querying a training frame that is a key: its own frame is the nearest, distance 0
-    key_frame = int(vocab.key_frames[0][1])
+    key_frame = int(vocab.key_frames[-1][1])
     res = vocab.query(poses[key_frame])
-    assert res[0].frames[0] == key_frame and res[0].novelty == pytest.approx(0.0, abs=1e-9)
+    assert res[-1].frames[0] == key_frame and res[-1].novelty == pytest.approx(0.0, abs=1e-9)
     for q in res:
         assert q.weights.sum() == pytest.approx(1.0) and np.all(q.weights >= 0)
         assert np.all(np.diff(q.distances) >= 0)
     # batched query agrees with the single one
     frames, weights, _ = vocab.query_tensors(np.stack([poses[key_frame], poses[5]]))
-    assert frames[0][0].tolist() == res[0].frames.tolist()
+    assert frames[-1][0].tolist() == res[-1].frames.tolist()
     assert torch.allclose(weights[-1][0], torch.as_tensor(res[-1].weights))
 
 

@@ -15,6 +15,8 @@ from texvocab.io.checkpoint import load_checkpoint
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.train import Trainer
 
+pytestmark = pytest.mark.slow  # torch.distributed processes
+
 SETS = ["texture_size=64", "num_keys=3", "k=2", "encoder=pyramid", "rays_per_batch=128",
         "coarse_samples=8", "fine_samples=4", "iterations=3", "checkpoint_every=3",
         "field.hidden=32", "field.sdf_layers=2", "field.color_layers=1", "field.pos_freqs=4",

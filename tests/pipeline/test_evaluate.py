@@ -52,7 +52,7 @@ class FakeCapture:
     empty_masks: tuple = ()
 
 
-SETTINGS = SimpleNamespace(eval_views=(1, 5))
+SETTINGS = SimpleNamespace(data=SimpleNamespace(eval_views=(1, 5)))
 
 
 def frames_views(items) -> list[tuple[int, int]]:
@@ -136,10 +136,11 @@ def fake_render(monkeypatch):
     differs per image; the Inception extractor is the channel-mean stand-in."""
     truth = {}
 
-    def render_view(model, pose, trans, camera, march, scale=1.0):
-        return truth[(int(pose[0, 0]), camera.name)] * 0.9, SimpleNamespace(seconds=0.5)
+    def render_view_rgba(model, pose, trans, camera, march, scale=1.0):
+        rgb = truth[(int(pose[0, 0]), camera.name)]
+        return rgb * 0.9, np.ones(rgb.shape[:2], np.float32), SimpleNamespace(seconds=0.5)
 
-    monkeypatch.setattr(evaluate, "render_view", render_view)
+    monkeypatch.setattr(evaluate, "render_view_rgba", render_view_rgba)
     monkeypatch.setattr(frechet, "inception_extractor", lambda extractor=None: _fake_extractor)
     monkeypatch.setattr(evaluate, "evaluate_pair", lambda pred, gt, mask, lpips_model=None: {
         "psnr_bbox": float(-10 * np.log10(np.mean((pred - gt) ** 2))), "ssim_bbox": 0.9,
@@ -199,7 +200,7 @@ def test_report_shows_mean_pm_sem_counts_and_fid_na_under_50(tmp_path):
     header = md.splitlines()[0]
     assert "ck.pt" in header and "±" in header and "standard error" in header
     assert ("| novel_poses | 60 | 27.41 ± 0.23 | 0.9312 ± 0.0021 | 31.00 ± 0.10 | 0.9700 ± 0.0010 "
-            "| n/a | 41.23 | 0.0123 | 1.31 |") in md
+            "| n/a | 41.23 | 0.0123 | n/a | 1.31 |") in md
     assert "| generated_novel_poses | 8 |" in md and "| n/a (8 images) | -0.0021 (sd 0.0005) |" in md
     paths = write_report(tmp_path, table, [{"set": "novel_poses", "index": 0, "psnr_bbox": 27.0}],
                          {"novel_poses": []}, {"checkpoint": "ck.pt"})
@@ -214,3 +215,14 @@ def test_eval_command_rejects_per_set_below_one(capsys, tmp_path):
     assert main(["eval", str(tmp_path / "none.pt"), str(tmp_path), "--per-set", "0"]) == 2
     err = capsys.readouterr().err
     assert err == "error: --per-set must be at least 1, got 0\n"
+
+
+def test_silhouette_iou_thresholds_the_opacity_at_one_half():
+    mask = np.zeros((4, 4), bool)
+    mask[:2] = True  # 8 pixels
+    alpha = np.zeros((4, 4), np.float32)
+    alpha[:2, :2] = 0.9  # 4 inside
+    alpha[3, 0] = 0.6  # 1 outside
+    alpha[2, :] = 0.5  # not > 0.5
+    assert evaluate.silhouette_iou(alpha, mask) == pytest.approx(4 / 9)
+    assert evaluate.silhouette_iou(np.zeros((4, 4)), np.zeros((4, 4), bool)) is None

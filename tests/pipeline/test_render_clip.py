@@ -62,9 +62,22 @@ def test_other_settings_never_reuse_or_destroy_cached_frames(checkpoint, tmp_pat
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 
 
+def test_render_knobs_by_either_name_are_the_same_clip(checkpoint, tmp_path, capsys):
+    amass_file(tmp_path / "walk.npz", frames=9, rate=120.0)
+    args = ["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--out",
+            str(tmp_path / "seq"), "--preset", "fast"]
+    assert main(args + ["--set", "render.fine_samples=1"]) == 0
+    assert "rendered 3 frames (0 cached)" in capsys.readouterr().out
+    assert main(args + ["--set", "fine_samples=1"]) == 0  # the flat name: the same knob
+    assert "rendered 0 frames (3 cached)" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("extra,needle", [(["--camera", "7"], "--camera 7"),
                                           (["--frames", "5:2"], "--frames"),
-                                          (["--fps", "0"], "--fps")])
+                                          (["--fps", "0"], "--fps"),
+                                          (["--set", "render.fine_sample=1"],
+                                           "did you mean render.fine_samples"),
+                                          (["--set", "vocab.k=1"], "only render knobs")])
 def test_bad_render_arguments_give_one_error_line(checkpoint, tmp_path, capsys, extra, needle):
     amass_file(tmp_path / "walk.npz", frames=9, rate=120.0)
     code = main(["render", str(checkpoint), "--poses", str(tmp_path / "walk.npz"), "--out",
@@ -91,6 +104,7 @@ def test_follow_camera_keeps_the_root_where_the_capture_had_it():
                                                                  [0, 0, 3.0], atol=1e-9)
 
 
+@pytest.mark.slow  # a local Ray cluster
 def test_ray_frames_equal_the_serial_render(checkpoint, tmp_path):
     """`--ray` on a local 2-worker Ray: the same frames as the serial render (to one 8-bit
     level: the workers run 1 torch thread, the serial render the process's)."""

@@ -94,13 +94,13 @@ def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_
 
 
 def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):
-    from texvocab.pipeline.train import load_textures
+    from texvocab.pipeline.model import load_textures
 
     cap = open_capture(capture)
     s = tiny_settings()
     before = load_textures(cap, s, progress=False)
     from texvocab.method.texmap import texture_map_path
-    from texvocab.pipeline.train import texmap_settings
+    from texvocab.pipeline.model import texmap_settings
 
     victim = texture_map_path(cap, 1, texmap_settings(cap, s))
     victim.write_bytes(b"PK\x03\x04 not really a zip")  # truncated / foreign
@@ -110,6 +110,7 @@ def test_a_damaged_texture_map_cache_file_is_rebuilt(capture, tmp_path, caplog):
     assert any("damaged texture-map cache" in r.getMessage() for r in caplog.records)
 
 
+@pytest.mark.slow  # kill -9 of a training process
 def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, tmp_path):
     """A real SIGKILL (no cleanup runs): the checkpoint stays loadable, the dead writer's
     lock is taken over, and the resumed run ends where an uninterrupted one does."""
@@ -155,7 +156,7 @@ def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, t
 def test_a_moved_capture_is_named_and_capture_points_to_it(capture, tmp_path, capsys):
     import shutil
 
-    from app.state import load_viewer_data
+    from texvocab_viewer.state import load_viewer_data
 
     moved = tmp_path / "moved_cap"
     shutil.copytree(capture, moved)

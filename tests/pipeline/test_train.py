@@ -85,6 +85,7 @@ def test_resume_after_kill_gives_the_same_weights(capture, tmp_path, one_thread)
         assert torch.equal(a[key], b[key]), key
 
 
+@pytest.mark.slow  # the command line end to end in subprocesses
 def test_train_and_eval_commands(capture, tmp_path):
     run = tmp_path / "run"
     args = ["--set", "texture_size=64", "--set", "encoder=small", "--set", "num_keys=3",

@@ -7,12 +7,12 @@ differentiable), band rays from the probe and the Newton point, both with per-ra
 import pytest
 import torch
 from render_cases import MARCH, psnr, rays_of
-from train_cases import tiny_settings
+from train_cases import flat_dict, flat_settings, tiny_settings
 
 from texvocab.capture import open as open_capture
 from texvocab.errors import TexvocabError
 from texvocab.geometry.surface import SurfaceIndex
-from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.pipeline.settings import Settings, TrainSettings, march_settings
 from texvocab.pipeline.train import Trainer
 from texvocab.render import render_rays, render_rays_banded
 from texvocab.render.guided.band import newton_band, sample_band
@@ -139,20 +139,20 @@ def test_training_uses_residual_and_newton_rays_by_their_knobs(capture, tmp_path
 
 
 def test_old_runs_marched_and_used_the_five_sample_band():
-    old = Settings().to_dict()
+    old = flat_dict(Settings())
     for key in ("train_residual", "train_band_newton"):
         del old[key]
     s = Settings.from_dict(old)
-    assert s.train_residual == "off" and s.train_band_newton is False
+    assert s.train.residual == "off" and s.train.band_newton is False
     m = march_settings(s, training=True)
     assert not m.residual_rays and not m.band_newton
     assert march_settings(Settings(), training=True).residual_rays
     # the shell guide bands nothing, so it has no residual rays either
-    assert not march_settings(Settings(train_guide="shell"), training=True).residual_rays
+    assert not march_settings(flat_settings(train_guide="shell"), training=True).residual_rays
     # render knobs do not follow the training ones
-    assert march_settings(Settings(train_residual="off", train_band_newton=False)).residual_rays
-    with pytest.raises(TexvocabError, match="train_residual"):
-        Settings(train_residual="some")
+    assert march_settings(flat_settings(train_residual="off", train_band_newton=False)).residual_rays
+    with pytest.raises(TexvocabError, match="train.residual"):
+        TrainSettings(residual="some")
 
 
 def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):
@@ -171,8 +171,8 @@ def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):
     centres = torch.from_numpy(fine.origin) + (idx + 0.5) * 0.01
     assert coarse.contains(centres.float()).float().mean() > 0.99
     assert coarse.occupied.sum() * 0.015 ** 3 > fine.occupied.sum() * 0.01 ** 3
-    old = Settings().to_dict()
+    old = flat_dict(Settings())
     del old["train_shell_voxel"]
-    assert Settings.from_dict(old).train_shell_voxel == 0.01  # runs before the setting
-    with pytest.raises(TexvocabError, match="train_shell_voxel"):
-        Settings(train_shell_voxel=0.0)
+    assert Settings.from_dict(old).train.shell_voxel == 0.01  # runs before the setting
+    with pytest.raises(TexvocabError, match="train.shell_voxel"):
+        TrainSettings(shell_voxel=0.0)

@@ -47,13 +47,14 @@ def test_report_pairs_seeds_and_images():
 
 def test_the_evaluation_preset_does_not_change_training_unless_asked():
     """Runs train with their own settings and are evaluated at the preset's render knobs;
-    --train-with-preset trains at the preset's knobs as runs before session 9 did."""
+    --train-with-preset trains at the preset's knobs as earlier runs did."""
     mod = _load()
     job = {"preset": "fast", "iterations": 7, "overrides": ["train_coarse_samples=9"],
            "seed": 3}
     trained, shown = mod.run_settings(job)
-    assert (trained.coarse_samples, trained.fine_samples, trained.train_coarse_samples) == (
+    assert (trained.render.coarse_samples, trained.render.fine_samples,
+            trained.train.coarse_samples) == (
         18, 8, 9)
-    assert (shown.coarse_samples, shown.fine_samples, shown.seed) == (6, 2, 3)
+    assert (shown.render.coarse_samples, shown.render.fine_samples, shown.train.seed) == (6, 2, 3)
     old, _ = mod.run_settings({**job, "train_with_preset": True})
-    assert (old.coarse_samples, old.fine_samples) == (6, 2)
+    assert (old.render.coarse_samples, old.render.fine_samples) == (6, 2)

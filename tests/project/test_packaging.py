@@ -14,6 +14,8 @@ import pytest
 from PIL import Image
 from smpl_files import write_official_pickle
 
+pytestmark = pytest.mark.slow  # builds and installs the wheel
+
 ROOT = Path(__file__).resolve().parents[2]
 SKIP = shutil.ignore_patterns(".git", ".venv", "out", "build", "*.egg-info", "__pycache__",
                               ".pytest_cache", ".hypothesis", "runs")
@@ -41,8 +43,10 @@ def installed(tmp_path_factory):
     purelib = Path(_run([str(vpy), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
                         cwd=tmp).stdout.strip())
     # the project's dependencies, seen through a plain path entry (no .pth of the editable
-    # install runs, so `texvocab` can only come from the wheel)
-    deps = [sysconfig.get_path("purelib"), *site.getsitepackages()]
+    # install runs, so `texvocab` can only come from the wheel): this interpreter's
+    # site-packages folders, also those a .pth adds (a venv layered over another's)
+    deps = [sysconfig.get_path("purelib"), *site.getsitepackages(),
+            *(p for p in sys.path if Path(p).name == "site-packages" and Path(p).is_dir())]
     (purelib / "project_deps.pth").write_text("\n".join(dict.fromkeys(deps)) + "\n")
     _run([sys.executable, "-m", "pip", "--python", str(vpy), "install", "--no-deps", "-q",
           str(wheels[0])], cwd=tmp)
@@ -53,8 +57,8 @@ def installed(tmp_path_factory):
 
 def test_wheel_carries_shaders_and_specs_inside_its_packages(installed):
     vpy, _, work = installed
-    code = ("import texvocab, app.glsl, texvocab.io.spec as s;"
-            "print(texvocab.__file__); print(app.glsl.shader_source('mesh.vert')[:8]);"
+    code = ("import texvocab, texvocab_viewer.gl.glsl as glsl, texvocab.io.spec as s;"
+            "print(texvocab.__file__); print(glsl.shader_source('mesh.vert')[:8]);"
             "print(sorted(s.load_spec('smpl_model')['keys'])[:2])")
     out = _run([str(vpy), "-c", code], cwd=work).stdout.splitlines()
     assert str(ROOT) not in out[0] and "site-packages" in out[0]
@@ -62,7 +66,23 @@ def test_wheel_carries_shaders_and_specs_inside_its_packages(installed):
     site_dir = Path(out[0]).parent.parent
     assert not (site_dir / "assets_spec").exists() and not (site_dir / "shaders").exists()
     assert (site_dir / "texvocab" / "assets_spec" / "smpl_model.json").is_file()
-    assert (site_dir / "app" / "shaders" / "mesh.frag").is_file()
+    assert (site_dir / "texvocab_viewer" / "shaders" / "mesh.frag").is_file()
+
+
+def test_the_viewer_is_installed_as_texvocab_viewer_and_nothing_as_app(installed):
+    """The viewer's source folder app/ is installed under a name of its own: no top-level
+    ``app`` (which would collide with any other), and ``python -m texvocab_viewer`` is the
+    viewer's command line."""
+    vpy, _, work = installed
+    code = ("import importlib.util, texvocab_viewer.panels.registry as r;"
+            "print(importlib.util.find_spec('app')); print([p.title for p in r.PANELS])")
+    out = _run([str(vpy), "-c", code], cwd=work).stdout.splitlines()
+    assert out == ["None", "['Pose', '3D view', 'Neural render', 'Vocabulary']"]
+    site_dir = Path(_run([str(vpy), "-c", "import texvocab_viewer as v; print(v.__file__)"],
+                         cwd=work).stdout.strip()).parent.parent
+    assert not (site_dir / "app").exists()
+    help_text = _run([str(vpy), "-m", "texvocab_viewer", "--help"], cwd=work).stdout
+    assert help_text.startswith("usage: python -m texvocab_viewer") and "--neural-worker" in help_text
 
 
 def test_installed_check_assets_and_shot_run_outside_the_checkout(installed, toy_arrays,

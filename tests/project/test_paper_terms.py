@@ -21,7 +21,7 @@ from texvocab.method.texmap import TexmapSettings, build_texture_map, cache_dir
 from texvocab.method.vocab import Vocabulary, farthest_point_sampling, part_distance
 from texvocab.metrics import perceptual as lpips_module
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
-from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.settings import DataSettings, Settings
 from texvocab.pipeline.train import Trainer
 
 
@@ -45,7 +45,7 @@ def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, 
     assert g_perc.abs().max() > 0  # the term reaches the field's parameters
     g_on = _field_grads(trainer, on["loss"])
     trainer.gen.set_state(state)  # the same frame, views, patch and rays
-    trainer.s = dataclasses.replace(s, lambda_perceptual=0.0)
+    trainer.s = dataclasses.replace(s, train=dataclasses.replace(s.train, lambda_perceptual=0.0))
     off = trainer.loss_terms()
     assert torch.allclose(off["color"], on["color"]) and torch.allclose(off["perceptual"],
                                                                         on["perceptual"])
@@ -143,7 +143,7 @@ def test_cosine_view_weighting_favours_head_on_views(capture, tmp_path):
     many = mean[1] >= 2  # texels seen by several views get a different blend
     diff = np.abs(mean[0] - cos[0]).max(-1)
     assert diff[many].max() > 1e-3 and diff[mean[1] == 1].max() < 1e-6
-    s = Settings(view_weighting="cosine")
+    s = DataSettings(view_weighting="cosine")
     assert cache_dir(cap, TexmapSettings(view_weighting="cosine")) != cache_dir(
         cap, TexmapSettings())
     with pytest.raises(TexvocabError, match="view_weighting"):
@@ -172,6 +172,7 @@ def test_adaptive_keys_stop_when_every_pose_is_within_d_min():
 
 def test_settings_absent_from_an_old_checkpoint_keep_their_old_meaning():
     old = Settings.from_dict({})  # a checkpoint written before these settings existed
-    assert (old.perceptual, old.view_weighting, old.min_key_distance) == ("off", "mean", 0.0)
-    assert Settings().perceptual == "auto"  # today's default differs
+    assert (old.train.perceptual, old.data.view_weighting, old.vocab.min_key_distance) == (
+        "off", "mean", 0.0)
+    assert Settings().train.perceptual == "auto"  # today's default differs
     assert Settings.from_dict(Settings().to_dict()) == Settings()

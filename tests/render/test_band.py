@@ -6,10 +6,10 @@ and the trainer's use of it (``train_guide``)."""
 import pytest
 import torch
 from render_cases import MARCH, psnr, rays_of
-from train_cases import tiny_settings
+from train_cases import flat_dict, tiny_settings
 
 from texvocab.capture import open as open_capture
-from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.settings import Settings, TrainSettings
 from texvocab.pipeline.train import Trainer
 from texvocab.render import render_rays, render_rays_banded
 
@@ -132,21 +132,24 @@ def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path,
 def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
     from texvocab.errors import TexvocabError
 
-    with pytest.raises(TexvocabError, match="train_guide"):
-        Settings(train_guide="mesh")
-    old = Settings().to_dict()
+    with pytest.raises(TexvocabError, match="train.guide"):
+        TrainSettings(guide="mesh")
+    old = flat_dict(Settings())
     del old["train_guide"]
-    assert Settings.from_dict(old).train_guide == "shell"
+    assert Settings.from_dict(old).train.guide == "shell"
     from texvocab.pipeline.settings import march_settings
 
+    def train(**kw):
+        return Settings(train=TrainSettings(**kw))
+
     assert march_settings(Settings(), training=True).coarse_samples == 9  # the default
-    assert march_settings(Settings(train_coarse_samples=None), training=True).coarse_samples \
-        == Settings().coarse_samples == 18  # none: the render's coarse_samples
-    assert march_settings(Settings(train_coarse_samples=9), training=True).coarse_samples == 9
-    assert march_settings(Settings(train_coarse_samples=9)).coarse_samples == 18  # rendering
+    assert march_settings(train(coarse_samples=None), training=True).coarse_samples \
+        == Settings().render.coarse_samples == 18  # none: the render's coarse_samples
+    assert march_settings(train(coarse_samples=9), training=True).coarse_samples == 9
+    assert march_settings(train(coarse_samples=9)).coarse_samples == 18  # rendering
     del old["train_coarse_samples"]  # written before the setting: trained at coarse_samples
-    assert Settings.from_dict(old).train_coarse_samples is None
-    with pytest.raises(TexvocabError, match="train_coarse_samples"):
+    assert Settings.from_dict(old).train.coarse_samples is None
+    with pytest.raises(TexvocabError, match="train.coarse_samples"):
         Settings().with_overrides(["train_coarse_samples=2.5"])
-    assert Settings().with_overrides(["train_coarse_samples=none"]).train_coarse_samples is None
-    assert Settings().with_overrides(["train_coarse_samples=12"]).train_coarse_samples == 12
+    assert Settings().with_overrides(["train_coarse_samples=none"]).train.coarse_samples is None
+    assert Settings().with_overrides(["train_coarse_samples=12"]).train.coarse_samples == 12

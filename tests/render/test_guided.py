@@ -131,14 +131,14 @@ def test_unknown_guide_is_refused(body):
 
 def test_guide_is_a_render_knob_that_training_never_uses():
     from texvocab.errors import TexvocabError
-    from texvocab.pipeline.settings import Settings, march_settings, render_overrides
+    from texvocab.pipeline.settings import RenderSettings, Settings, march_settings, render_overrides
 
     s = Settings()
     assert march_settings(s).guide == "raster" and march_settings(s, training=True).guide == "shell"
     assert march_settings(render_overrides(s, None, ["guide=shell"])).guide == "shell"
     assert march_settings(render_overrides(s, "fast", [])).guide == "raster"
-    with pytest.raises(TexvocabError, match="guide"):
-        Settings(guide="mesh")
+    with pytest.raises(TexvocabError, match="render.guide"):
+        RenderSettings(guide="mesh")
 
 
 def test_a_one_point_field_call_works(body):

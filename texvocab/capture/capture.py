@@ -1,10 +1,13 @@
 """Capture: calibrated views × frames of one person, with per-frame SMPL poses.
 
 Images and masks load lazily from disk (undistorted with each camera's distortion); the
-training / novel-pose split is by frame, as in the paper (first frames train).
+training / novel-pose split is by frame, as in the paper (first frames train): by default
+70 % of the frames train, or 80 % for a one-camera capture, which has no held-out view
+and so holds out its last frames (:func:`default_num_train`).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +20,13 @@ from texvocab.capture.camera import Camera
 from texvocab.errors import AssetError
 
 SYNTH_META = "texvocab_synth.json"
+
+
+def default_num_train(num_frames: int, num_views: int) -> int:
+    """Leading training frames of a capture without a recorded split: 70 % of the frames,
+    or ⌊0.8·T⌋ with one camera (the last 20 % are its novel poses); at least 1."""
+    share = 0.8 if num_views == 1 else 0.7
+    return max(1, int(share * num_frames))
 
 
 def read_image(path: Path) -> np.ndarray:
@@ -46,7 +56,7 @@ class Capture:
     """A multi-view capture.
 
     Attributes:
-        root: folder on disk; layout: ``zju`` or ``thuman``.
+        root: folder on disk; layout: ``zju``, ``thuman`` or ``humannerf``.
         cameras: one :class:`Camera` per view.
         poses: (T, 24, 3) axis-angle per frame (SMPL order, root orientation at joint 0).
         trans: (T, 3) root translation in the project's convention (body.forward's trans).
@@ -55,6 +65,15 @@ class Capture:
         num_train: frames [0, num_train) are training poses, the rest novel poses.
         body: the :class:`~texvocab.body.BodyModel` the poses drive.
         betas: (S,) shape coefficients for SMPL bodies, or None.
+        rest_joints: (24, 3) the subject's own rest (T-pose) joints in the body frame,
+            metres, when the capture gives them (HumanNeRF's ``tpose_joints``), else None:
+            what a body fit to this subject starts from.
+        image_scale: images and masks are resized by this factor on load (``cameras`` are
+            the resized ones; :meth:`scaled`); 1: as on disk.
+        source_cameras: the cameras of the images on disk when ``image_scale`` != 1.
+        masked: images are black outside their mask (:meth:`image`): a real capture's
+            background (a studio, other people) is not the avatar's to render; synthetic
+            captures are rendered on black already.
     """
 
     root: Path
@@ -69,6 +88,10 @@ class Capture:
     body: object
     betas: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    rest_joints: np.ndarray | None = None
+    image_scale: float = 1.0
+    source_cameras: list[Camera] | None = None
+    masked: bool = False
 
     def __post_init__(self):
         t = len(self.image_paths)
@@ -80,6 +103,10 @@ class Capture:
                                  np.isfinite(self.trans).all(1)))[0][0])
             raise AssetError(f"{self.root}: non-finite pose or translation at frame "
                              f"{self.frame_ids[f]}")
+        if self.rest_joints is not None and (np.shape(self.rest_joints) != (24, 3) or
+                                             not np.isfinite(self.rest_joints).all()):
+            raise AssetError(f"{self.root}: rest joints {np.shape(self.rest_joints)}; expected "
+                             "(24, 3) finite")
         self.num_train = int(min(max(self.num_train, 0), t))  # 0: every frame is a novel pose
 
     @property
@@ -98,20 +125,60 @@ class Capture:
     def novel_frames(self) -> range:
         return range(self.num_train, self.num_frames)
 
+    def scaled(self, factor: float) -> Capture:
+        """This capture with its images and masks resized by ``factor`` on load (area
+        average; a mask pixel is foreground where more than half of its area is) and its
+        cameras scaled to match; ``factor`` is relative to the images on disk. A 1024²
+        capture at 0.5 trains and evaluates at 512²."""
+        if not (0.0 < factor <= 1.0) or not np.isfinite(factor):
+            raise AssetError(f"image scale {factor!r}: expected 0 < scale <= 1")
+        source = self.source_cameras or self.cameras
+        if factor == 1.0:
+            return dataclasses.replace(self, cameras=list(source), source_cameras=None,
+                                       image_scale=1.0)
+        cams = [dataclasses.replace(c.scaled(factor), dist=np.zeros_like(c.dist))
+                for c in source]  # images are undistorted before they are resized
+        return dataclasses.replace(self, cameras=cams, source_cameras=list(source),
+                                   image_scale=float(factor))
+
+    def _source(self, view: int) -> Camera:
+        return (self.source_cameras or self.cameras)[view]
+
+    def _resized(self, image: np.ndarray, view: int) -> np.ndarray:
+        """(H, W[, C]) float32 at the source size -> this capture's size for ``view``."""
+        if self.source_cameras is None:
+            return image
+        cam = self.cameras[view]
+        chans = image.reshape(image.shape[0], image.shape[1], -1)
+        out = [np.asarray(Image.fromarray(chans[..., c]).resize(
+            (cam.width, cam.height), Image.Resampling.BOX)) for c in range(chans.shape[2])]
+        return np.stack(out, -1).reshape(cam.height, cam.width, *image.shape[2:])
+
     def image(self, view: int, frame: int) -> np.ndarray:
-        """(H, W, 3) float32 RGB, undistorted."""
+        """(H, W, 3) float32 RGB, undistorted (black outside the mask when ``masked``;
+        resized to ``image_scale`` after both)."""
         img = read_image(self.image_paths[frame][view])
         self._check_size(self.image_paths[frame][view], img.shape, view)
-        return self.cameras[view].undistort_image(img)
+        img = self._source(view).undistort_image(img)
+        if self.masked:
+            img = img * self._source_mask(view, frame)[..., None]
+        return self._resized(img, view)
 
-    def mask(self, view: int, frame: int) -> np.ndarray:
-        """(H, W) bool foreground, undistorted."""
+    def _source_mask(self, view: int, frame: int) -> np.ndarray:
+        """(H, W) bool foreground at the size on disk, undistorted."""
         m = read_mask(self.mask_paths[frame][view])
         self._check_size(self.mask_paths[frame][view], m.shape, view)
-        return self.cameras[view].undistort_image(m.astype(np.uint8), nearest=True) > 0
+        return self._source(view).undistort_image(m.astype(np.uint8), nearest=True) > 0
+
+    def mask(self, view: int, frame: int) -> np.ndarray:
+        """(H, W) bool foreground, undistorted (and resized to ``image_scale``)."""
+        m = self._source_mask(view, frame)
+        if self.source_cameras is None:
+            return m
+        return self._resized(m.astype(np.float32), view) > 0.5
 
     def _check_size(self, path: Path, shape: tuple, view: int) -> None:
-        cam = self.cameras[view]
+        cam = self._source(view)
         if tuple(shape[:2]) != (cam.height, cam.width):
             raise AssetError(f"{path}: image is {shape[1]}x{shape[0]}, but view {view}'s "
                              f"calibration (and its other images) say {cam.width}x{cam.height}")

@@ -19,7 +19,7 @@ import numpy as np
 from PIL import Image
 
 from texvocab.capture.camera import Camera
-from texvocab.capture.capture import Capture
+from texvocab.capture.capture import Capture, default_num_train
 from texvocab.errors import AssetError
 from texvocab.io.images import atomic_write_bytes, to_uint8
 from texvocab.io.safe_pickle import read_npz
@@ -90,7 +90,7 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
                    trans=p["transl"][idx].astype(np.float32),
                    image_paths=[list(r) for r in zip(*image_paths)],
                    mask_paths=[list(r) for r in zip(*mask_paths)], frame_ids=frames,
-                   num_train=max(1, int(0.7 * n)) if num_train is None else num_train,
+                   num_train=default_num_train(n, len(cameras)) if num_train is None else num_train,
                    body=body, betas=betas)
 
 

@@ -18,7 +18,7 @@ import torch
 from PIL import Image
 
 from texvocab.capture.camera import Camera
-from texvocab.capture.capture import Capture
+from texvocab.capture.capture import Capture, default_num_train
 from texvocab.errors import AssetError
 from texvocab.geometry.rotations import quat_multiply, quat_to_rotvec, rotvec_to_quat, rotvec_to_rotmat
 from texvocab.io.images import save_png
@@ -136,7 +136,8 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
                    trans=np.asarray(trans, np.float32),
                    image_paths=[[root / p for p in row] for row in ims], mask_paths=masks,
                    frame_ids=list(range(offset, offset + len(ims))),
-                   num_train=max(1, int(0.7 * len(ims))) if num_train is None else num_train,
+                   num_train=(default_num_train(len(ims), num_views) if num_train is None
+                              else num_train),
                    body=body, betas=betas)
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from texvocab.body import smpl_io
+from texvocab.capture import detect_layout
 from texvocab.capture import open as open_capture
 from texvocab.errors import AssetError, PoseError
 from texvocab.io.spec import check_arrays, load_spec, name_is_accepted, spec_ref
@@ -19,7 +20,7 @@ def check_path(path: str | Path) -> list[str]:
     path = Path(path)
     if not path.exists():
         raise AssetError(f"{path}: no such file or folder")
-    if path.is_dir() and ((path / "annots.npy").is_file() or (path / "calibration.json").is_file()):
+    if path.is_dir() and _is_capture(path):
         return check_capture(path)
     files = [path] if path.is_file() else sorted(
         p for p in path.rglob("*") if p.suffix in (".pkl", ".npz", ".obj"))
@@ -41,6 +42,14 @@ def check_path(path: str | Path) -> list[str]:
     return lines
 
 
+def _is_capture(path: Path) -> bool:
+    try:
+        detect_layout(path)
+    except AssetError:
+        return False
+    return True
+
+
 def _check_content(cap) -> list[str]:
     """What training and evaluation rely on beyond the files: poses finite and within the
     stated bounds, every mask non-empty, the default held-out views present."""
@@ -57,11 +66,18 @@ def _check_content(cap) -> list[str]:
         lines.append(f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(empty)} of "
                      f"{cap.num_frames * cap.num_views} masks are empty); training and "
                      "evaluation need the person in every view")
-    held_out = [v for v in Settings().eval_views if v >= cap.num_views]
-    if held_out:
+    held_out = [v for v in Settings().data.eval_views if v >= cap.num_views]
+    novel = cap.num_frames - cap.num_train
+    if cap.num_views == 1:
+        held = (f"the last {novel} frames ({cap.frame_ids[cap.num_train]}.."
+                f"{cap.frame_ids[-1]}) are held out as novel poses, scored from this camera"
+                if novel else "no frame is held out (every frame trains)")
+        lines.append(f"note {cap.root}: one camera, so no held-out view: {held}; training "
+                     "frames are scored as seen views")
+    elif held_out:
         lines.append(f"note {cap.root}: has views 0..{cap.num_views - 1}, but the default "
-                     f"eval_views are {list(Settings().eval_views)}: train and eval with "
-                     "--set eval_views=... (views that exist)")
+                     f"eval_views are {list(Settings().data.eval_views)}: train and eval "
+                     "with --set data.eval_views=... (views that exist)")
     return lines
 
 
@@ -84,6 +100,7 @@ def check_capture(path: Path) -> list[str]:
     if not lines:
         lines += _check_content(cap)
     if not [ln for ln in lines if ln.startswith("FAIL")]:
-        lines.append(f"OK   {path}: {cap.layout} capture, {cap.num_views} views x "
+        lines.append(f"OK   {path}: {cap.layout} capture, {cap.num_views} "
+                     f"view{'s' if cap.num_views != 1 else ''} x "
                      f"{cap.num_frames} frames ({cap.num_train} training)")
     return lines

@@ -102,7 +102,7 @@ def add_sheet_parser(sub) -> None:
     p = sub.add_parser("contact-sheet", help="write a views x frames PNG of a capture",
                        description="Tile a capture's images (rows: views, columns: frames) "
                                    "into one PNG to look at.")
-    p.add_argument("capture", help="capture folder (ZJU-MoCap or THUman4.0 layout)")
+    p.add_argument("capture", help="capture folder (ZJU-MoCap, THUman4.0 or HumanNeRF layout)")
     p.add_argument("--out", default=None, help="PNG path (default: CAPTURE/contact_sheet.png)")
     p.add_argument("--frames", default=None,
                    help="comma-separated frame indices (default: 8 spread over the sequence)")

@@ -17,7 +17,7 @@ from texvocab.capture.synth import synthesize
 from texvocab.errors import TexvocabError
 from texvocab.io.images import contact_sheet, save_png
 from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
-from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.pipeline.settings import Settings, TrainSettings, march_settings
 from texvocab.pipeline.train import Trainer
 
 log = logging.getLogger("texvocab")
@@ -88,7 +88,8 @@ def demo_avatar(out_dir: str | Path, capture_root: Path, minutes: float = 3.0,
     a progress bar); returns (checkpoint, report)."""
     run = Path(out_dir) / "avatar"
     cap = open_capture(capture_root, body=load_body(smpl))
-    settings = Settings(iterations=100000, max_minutes=minutes, checkpoint_every=100)
+    settings = Settings(train=TrainSettings(iterations=100000, max_minutes=minutes,
+                                            checkpoint_every=100))
     trainer = Trainer(cap, settings, run)
     try:
         trainer.resume()

@@ -8,11 +8,16 @@ import sys
 import time
 from pathlib import Path
 
-from app.arguments import add_view_arguments
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
 from texvocab.cli.method import add_method_parsers, add_train_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.errors import TexvocabError
+
+# The command line stands above the viewer (an import-linter contract: texvocab_viewer never
+# imports texvocab.cli). The viewer's arguments module is light (no GL, no torch) and builds
+# the `view` parser; the window, `shot` and the demo's viewer are imported inside the
+# commands that run them, so `texvocab --help` loads neither imgui_bundle, moderngl nor torch.
+from texvocab_viewer.arguments import add_view_arguments
 
 
 def _add_smpl(p: argparse.ArgumentParser) -> None:
@@ -44,11 +49,11 @@ def cmd_demo(args) -> int:
         print(report.read_text())
     source = ckpt if args.train_minutes > 0 else root
     if os.environ.get("DISPLAY") and not args.no_view:
-        from app.window import run_viewer  # late: the viewer loads imgui_bundle, moderngl, torch
+        from texvocab_viewer.window import run_viewer  # late: imgui_bundle, moderngl, torch
 
         print(f"opening the viewer on {source} (close its window to finish)")
         return run_viewer(str(source), smpl=args.smpl, size=(1280, 800))
-    from app.shot import demo_shots  # late: moderngl and torch
+    from texvocab_viewer.export.shot import demo_shots  # late: moderngl and torch
 
     t0 = time.perf_counter()
     sheet = demo_shots(source, Path(args.out) / "viewer", smpl=args.smpl)
@@ -66,13 +71,13 @@ def cmd_check_assets(args) -> int:
 
 
 def cmd_shot(args) -> int:
-    from app.shot import cmd_shot as run_shot  # late: moderngl and torch
+    from texvocab_viewer.export.shot import cmd_shot as run_shot  # late: moderngl and torch
 
     return run_shot(args)
 
 
 def cmd_view(args) -> int:
-    from app.window import run_from_args  # late: imgui_bundle, moderngl and torch
+    from texvocab_viewer.launch import run_from_args  # late: imgui_bundle, moderngl and torch
 
     return run_from_args(args)
 
@@ -81,7 +86,7 @@ SHOT_OVERLAYS = ("part_colors", "novelty", "wireframe", "skeleton")
 
 
 def add_viewer_parsers(sub) -> None:
-    """``view`` (the desktop viewer, app/) and ``shot`` (its headless screenshot)."""
+    """``view`` (the desktop viewer, texvocab_viewer) and ``shot`` (its headless screenshot)."""
     p = sub.add_parser("view", help="the desktop viewer: pose, 3D view, vocabulary, neural render",
                        description="Open the viewer window on a checkpoint (its avatar, "
                                    "vocabulary and capture), a capture folder (its vocabulary "
@@ -145,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check-assets", help="check SMPL files or a capture against assets_spec/",
                        description="Say exactly what is wrong with an SMPL model file, UV file, "
                                    "a folder of them, or a capture folder (ZJU-MoCap / "
-                                   "THUman4.0), or that all is well.")
+                                   "THUman4.0 / HumanNeRF), or that all is well.")
     p.add_argument("path", help="a .pkl/.npz model, a smpl_uv.obj, a folder of them, or a "
                                 "capture folder")
     p.set_defaults(func=cmd_check_assets)

@@ -46,6 +46,11 @@ def add_method_parsers(sub, add_smpl) -> None:
     p.add_argument("--min-distance", type=float, default=0.0,
                    help="adaptive M: stop adding keys to a part once every training pose of "
                         "it is within this Eq. 4 distance of a key (default 0: always M)")
+    p.add_argument("--pose-condition", choices=("root-relative", "global"),
+                   default="root-relative",
+                   help="the pose keys and queries read: root-relative (default: joint 0's "
+                        "rotation, which way the body faces, removed) or global (as "
+                        "checkpoints trained before it)")
     p.add_argument("--train-frames", type=int, default=None)
     add_smpl(p)
     p.set_defaults(func=cmd_vocab)
@@ -63,14 +68,15 @@ def _open(args):
 def cmd_prepare(args: argparse.Namespace) -> int:
     # late: torch (module docstring)
     from texvocab.method.texmap import cache_dir, prepare_texture_maps
-    from texvocab.pipeline.settings import Settings
-    from texvocab.pipeline.train import texmap_settings
+    from texvocab.pipeline.model import texmap_settings
+    from texvocab.pipeline.settings import DataSettings, Settings
 
     cap = _open(args)
     if cap.num_train == 0:
         raise TexvocabError(f"{args.capture}: no training frames (--train-frames)")
     views = {} if args.eval_views is None else {"eval_views": tuple(args.eval_views)}
-    settings = texmap_settings(cap, Settings(texture_size=args.texture_size, **views))
+    settings = texmap_settings(cap, Settings(data=DataSettings(texture_size=args.texture_size,
+                                                                **views)))
     t0 = time.perf_counter()
     paths = prepare_texture_maps(cap, settings)
     print(f"{len(paths)} texture maps ({settings.size}² texels, views "
@@ -123,7 +129,7 @@ def cmd_vocab(args: argparse.Namespace) -> int:
         raise TexvocabError(f"{args.capture}: no training frames to build a vocabulary from")
     pose = parse_pose(args.pose, cap)
     vocab = Vocabulary.build(cap.poses[: cap.num_train], args.strategy, args.keys, args.k,
-                             args.weighting, args.min_distance)
+                             args.weighting, args.min_distance, args.pose_condition)
     print(f"pose: {args.pose}   training frames: {cap.num_train}")
     print(vocab.format_query(pose))
     return 0
@@ -147,7 +153,7 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
                    help="speed/accuracy preset (bench/tradeoff.py); --set applies after it")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a setting, e.g. --set strategy=joint --set field.hidden=64")
+                   help="override a setting, e.g. --set vocab.strategy=joint --set field.hidden=64")
     p.add_argument("--train-frames", type=int, default=None,
                    help="leading training frames (default: the capture's split)")
     add_smpl(p)
@@ -168,7 +174,7 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
                    help="render preset (render knobs only; the rest is in the checkpoint)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a render knob, e.g. --set coarse_samples=24")
+                   help="override a render knob, e.g. --set render.coarse_samples=24")
     add_smpl(p)
     p.set_defaults(func=cmd_eval)
 
@@ -181,7 +187,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.ddp is not None and args.ddp < 1:
         raise TexvocabError(f"--ddp {args.ddp}: expected a number of processes >= 1")
     pre = preset_overrides(args.preset) if args.preset else []
-    steps = [] if args.iterations is None else [f"iterations={args.iterations}"]
+    steps = [] if args.iterations is None else [f"train.iterations={args.iterations}"]
     settings = Settings().with_overrides(pre + args.overrides + steps)
     out = Path(args.out)
     check_run_folder(out, args.resume, args.overwrite)
@@ -237,6 +243,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from texvocab.pipeline.avatar import load_avatar
     from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
     from texvocab.pipeline.settings import march_settings, render_overrides
+    from texvocab.pipeline.split import split_note
 
     if args.per_set is not None and args.per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {args.per_set}")
@@ -246,11 +253,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     sets = build_sets(avatar.capture, settings, args.per_set)
     t0 = time.perf_counter()
     table, records, grids = evaluate_sets(model, sets, march_settings(settings),
-                                          scale=settings.image_scale, progress=True)
+                                          scale=settings.render.image_scale, progress=True)
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     paths = write_report(out, table, records, grids,
                          {"checkpoint": str(args.checkpoint), "step": int(ck["step"]),
-                          "capture": str(args.capture), "settings": settings.to_dict()})
+                          "capture": str(args.capture), "settings": settings.to_dict(),
+                          "split": split_note(avatar.capture)})
     print(paths[0].read_text())
     print(f"evaluated {sum(len(v) for v in sets.values())} images in "
           f"{time.perf_counter() - t0:.1f} s; report in {out.resolve()}")

@@ -43,7 +43,7 @@ def add_render_parser(sub, add_smpl) -> None:
     p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
                    help="render preset (render knobs only; the rest is in the checkpoint)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a render knob, e.g. --set image_scale=0.5")
+                   help="override a render knob, e.g. --set render.image_scale=0.5")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="render frames in parallel as Ray tasks: a local Ray with --workers "
                         "workers, or the cluster at ADDRESS (pip install 'texvocab[scale]')")
@@ -110,7 +110,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--out {out}: exists; pass --overwrite to replace it")
     data = None
     if gl:  # the viewer's data: the avatar plus what its 3D view draws
-        from app.state import load_viewer_data
+        from texvocab_viewer.state import load_viewer_data  # late: torch, only for GL panels
 
         data = load_viewer_data(args.checkpoint, args.smpl, args.capture)
         cap, model, trained = data.capture, data.model, data.settings
@@ -132,9 +132,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     keep = _frame_range(args.frames, len(seq))
     poses, trans = seq.poses[keep.start:keep.stop], seq.trans[keep.start:keep.stop]
     fps = seq.fps or args.fps
-    knobs = {k: getattr(settings, k) for k in RENDER_KNOBS}
+    knobs = {k: getattr(settings.render, k) for k in RENDER_KNOBS}
     spec = ClipSpec.make(args.checkpoint, args.poses, args.camera, args.orbit, args.follow,
-                         fps, settings.image_scale,
+                         fps, settings.render.image_scale,
                          {**knobs, "frames": [keep.start, keep.stop], "up": args.up,
                           "root": args.root, "panels": panels})
     folder = frames_dir(out)
@@ -147,10 +147,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.ray is None:
         import torch
 
-        worker = FrameWorker(model, march, settings.image_scale, torch.get_num_threads())
+        worker = FrameWorker(model, march, settings.render.image_scale, torch.get_num_threads())
         extra = None
         if gl:
-            from app.clip_panels import GLPanels, side_by_side
+            from texvocab_viewer.export.clip_panels import GLPanels, side_by_side  # late: GL
 
             extra = GLPanels(data, panels)
 
@@ -168,7 +168,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     else:
         from texvocab.pipeline.clip_ray import render_frames_ray
 
-        paths = render_frames_ray(model, march, settings.image_scale, poses, trans, cams,
+        paths = render_frames_ray(model, march, settings.render.image_scale, poses, trans, cams,
                                   folder, None if args.ray == "local" else args.ray,
                                   args.workers)
     seconds = time.perf_counter() - t0

@@ -1,9 +1,11 @@
 """Checkpoints: written atomically (temp file + rename), read with ``weights_only=True``
 (tensors and plain Python containers only: loading one never runs code).
 
-Layout (see assets_spec/checkpoint.md): {"format": "texvocab-checkpoint", "version": 1,
+Layout (see assets_spec/checkpoint.md): {"format": "texvocab-checkpoint", "version": 2,
 "step": int, "settings": dict, "capture": str, "num_train": int, "model": state_dict,
-"optimizer": state_dict, "vocab": {...}, "rng": {"torch": ByteTensor}}.
+"optimizer": state_dict, "vocab": {...}, "rng": {"torch": ByteTensor}}. Version 2 stores
+the settings as a dict per group; version 1 stored them flat. Both are read
+(:meth:`texvocab.pipeline.settings.Settings.from_dict`).
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from texvocab.io.images import atomic_write_bytes
 from texvocab.io.weights import load_error_reason
 
 FORMAT = "texvocab-checkpoint"
-VERSION = 1
+VERSION = 2  # 2: settings grouped; 1: flat
 REQUIRED = ("format", "version", "step", "settings", "model")
 
 

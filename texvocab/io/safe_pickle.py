@@ -3,7 +3,8 @@
 Unpickling normally imports and calls whatever a file names, so a pickle is code. Here
 numpy array/dtype reconstruction, scipy sparse matrices and chumpy ``Ch`` objects (as
 inert data holders) are allowed; anything else is refused before any of it runs. Used
-for SMPL ``.pkl`` files and for ZJU-MoCap's pickled ``annots.npy`` / ``params/*.npy``.
+for SMPL ``.pkl`` files, ZJU-MoCap's pickled ``annots.npy`` / ``params/*.npy`` and
+HumanNeRF's ``cameras.pkl`` / ``mesh_infos.pkl`` (dicts of numpy arrays per frame).
 """
 from __future__ import annotations
 

@@ -20,6 +20,7 @@ import torch
 from torch import nn
 
 from texvocab.body.parts import part_membership
+from texvocab.body.pose_condition import condition_pose
 from texvocab.geometry.surface import SurfaceIndex
 from texvocab.method.feature_maps import FeatureMaps, sample_maps
 
@@ -29,7 +30,11 @@ __all__ = ["FeatureMaps", "FeatureOutput", "PoseContext", "PoseFeature", "naive_
 
 @dataclass
 class PoseContext:
-    """Everything about one pose that every ray of a frame shares."""
+    """Everything about one pose that every ray of a frame shares.
+
+    ``pose`` is the full pose the body is posed with (root orientation included);
+    :attr:`condition` is the pose the field's Θ reads, under ``pose_condition`` (the
+    vocabulary's, :mod:`texvocab.body.pose_condition`)."""
 
     pose: torch.Tensor  # (24, 3)
     vertices: torch.Tensor  # (V, 3) posed
@@ -39,7 +44,14 @@ class PoseContext:
     part_coef: torch.Tensor  # (P, U) Σ_k ŵ_{p,k} over keys of part p pointing to frame u
     features: FeatureMaps | None  # the U frames' encoder maps (a frozen encoder's are
     # rows of its cache's table, shared by every pose: never copied per pose)
+    pose_condition: str = "global"
     stats: dict = field(default_factory=dict)
+
+    @property
+    def condition(self) -> torch.Tensor:
+        """(24, 3) the pose as the field's Θ sees it (computed from ``pose`` on each read,
+        so gradients reach ``pose``)."""
+        return condition_pose(self.pose, self.pose_condition)
 
 
 @dataclass
@@ -132,9 +144,11 @@ class PoseFeature(nn.Module):
         index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy(),
                              like=like)
         part_frames, part_weights, _ = self.vocab.query_tensors(pose.double())
+        condition = self.vocab.pose_condition
         if not part_frames:  # strategy "none": no vocabulary, no texture feature (zeros)
             return PoseContext(pose, verts, posed.transforms[0], index,
-                               torch.zeros(0, dtype=torch.long), torch.zeros(0, 0), None)
+                               torch.zeros(0, dtype=torch.long), torch.zeros(0, 0), None,
+                               condition)
         all_frames = torch.cat([f[0] for f in part_frames])
         frames, inverse = torch.unique(all_frames, return_inverse=True)
         coef = torch.zeros(self.vocab.num_parts, len(frames), dtype=torch.float64)
@@ -144,7 +158,7 @@ class PoseFeature(nn.Module):
             coef[p].index_add_(0, inverse[start:start + k], w[0])
             start += k
         return PoseContext(pose, verts, posed.transforms[0], index, frames, coef.float(),
-                           self.feature_maps(frames))
+                           self.feature_maps(frames), condition)
 
     def forward(self, ctx: PoseContext, points: torch.Tensor,
                 max_distance: float | None = None) -> FeatureOutput:

@@ -7,34 +7,50 @@ density (Yariv et al. 2021).
   learned residual whose last layer starts at zero — the geometric initialisation is the
   body surface itself (for a clothed person the residual is small), which is what makes
   short CPU training converge.
+* Θ is the pose's condition (:attr:`~texvocab.method.feature.PoseContext.condition`), the
+  vocabulary's: root-relative in new models, so x_c, f and Θ, and with them the SDF, do
+  not change when the whole body turns; γ(d) reads the viewing direction in the world.
 * density σ = α Ψ_β(−SDF), α = 1/β, Ψ_β the Laplace CDF, evaluated with exponentials of
   non-positive arguments only, so σ stays finite as β → 0 (β is clamped at ``beta_min``).
 """
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from texvocab.geometry.rotations import rotvec_to_quat
+from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
 
 
 @dataclass
 class FieldSettings:
-    """Network sizes; each trades speed for capacity."""
+    """The field's network sizes and VolSDF's β (settings group ``field``); each size trades
+    speed for capacity."""
 
-    pos_freqs: int = 6  # γ_x frequencies
-    dir_freqs: int = 4  # γ_d frequencies
-    feature_proj: int = 32  # f(Θ, x) is linearly projected to this many channels
-    hidden: int = 128
-    sdf_layers: int = 3
-    color_layers: int = 2
-    beta_init: float = 0.005
-    beta_min: float = 1e-4
-    shell_width: float = 0.04  # points farther from the body count as empty space
+    GROUP: ClassVar[str] = "field"
+
+    pos_freqs: int = knob(6, count_in(0, 16), doc="γ_x frequencies")
+    dir_freqs: int = knob(4, count_in(0, 16), doc="γ_d frequencies")
+    feature_proj: int = knob(32, at_least(1), doc="f(Θ, x) is linearly projected to this "
+                             "many channels")
+    hidden: int = knob(128, at_least(1), doc="width of the SDF network (the colour network's "
+                       "is half)")
+    sdf_layers: int = knob(3, at_least(1), doc="hidden layers of the SDF network")
+    color_layers: int = knob(2, at_least(0), doc="hidden layers of the colour network")
+    beta_init: float = knob(0.005, Check(lambda v, g: v >= g.beta_min, ">= field.beta_min"),
+                            doc="VolSDF β at the start of training (m)")
+    # float32 VolSDF density and its gradients break down for beta below ~1e-17
+    beta_min: float = knob(1e-4, at_least(1e-8), doc="β is clamped at this (m)")
+    shell_width: float = knob(0.04, within(0, 1, open_low=True, unit=" m"),
+                              doc="points farther from the body count as empty space (m)")
+
+    def __post_init__(self) -> None:
+        check_group(self)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -59,8 +75,10 @@ def laplace_density(sdf: torch.Tensor, beta: torch.Tensor) -> torch.Tensor:
     return psi / beta
 
 
-def pose_condition(pose: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
-    """The field's pose input Θ: per joint the unit quaternion of its rotation, signed so
+def pose_input(pose: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
+    """The field's pose input Θ from the pose its context conditions the field on
+    (:attr:`~texvocab.method.feature.PoseContext.condition`: root-relative, or global in
+    old checkpoints): per joint the unit quaternion of its rotation, signed so
     that q and -q (the same rotation, e.g. θ and θ - 2π about one axis) give one input:
     w > 0, or for |w| <= eps (θ ≈ π) the first of x, y, z beyond eps positive. Identical
     to ``rotvec_to_quat`` for rotation vectors of norm < π (w > 0 already), so weights
@@ -121,7 +139,7 @@ class AvatarField(nn.Module):
         rounding; returns (N, 1 + hidden)."""
         first = self.sdf_net[0]
         d = x.shape[1]
-        pose = pose_condition(ctx.pose.to(x.dtype)).reshape(-1)
+        pose = pose_input(ctx.condition.to(x.dtype)).reshape(-1)
         bias = first.bias + first.weight[:, d:].contiguous() @ pose
         # contiguous copies: row-aligned operands keep BLAS results bitwise reproducible
         return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))

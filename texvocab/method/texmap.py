@@ -132,11 +132,16 @@ def cache_dir(capture, settings: TexmapSettings) -> Path:
     """Where ``texvocab prepare`` keeps the texture maps of a capture: keyed by texture
     size and by the set of views back-projected, so maps built from other views (a cache
     from before held-out views were excluded, or another train/eval split) are never
-    reused."""
+    reused; and by the image scale and the body fit (``capture.meta["body_fit"]``) when
+    they are not the defaults, so maps of another body or resolution are never reused."""
     views = "-".join(str(v) for v in settings_views(settings, capture))
     weighting = "" if settings.view_weighting == "mean" else f"_{settings.view_weighting}"
+    scale = getattr(capture, "image_scale", 1.0)
+    scaled = "" if scale == 1.0 else f"_x{scale:g}"
+    fit = capture.meta.get("body_fit") if isinstance(getattr(capture, "meta", None), dict) else None
+    body = f"_body-{fit}" if fit else ""
     return (Path(capture.root) / "texvocab_cache"
-            / f"texmaps_{settings.size}_views_{views}{weighting}")
+            / f"texmaps_{settings.size}_views_{views}{weighting}{scaled}{body}")
 
 
 def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:

@@ -9,6 +9,14 @@ and each key keeps the frame whose texture map it points to. A query pose takes,
 part, its K nearest keys and weights w = J_p − d (Eq. 6), normalised to sum to one
 (Eq. 5). Strategies: ``part`` (Table 1's five parts), ``joint`` (one part per joint),
 ``global`` (one part of all joints) — the paper's ablation.
+
+Keys and queries read the pose under the vocabulary's ``pose_condition``
+(:mod:`texvocab.body.pose_condition`): ``root-relative`` for new vocabularies (joint 0's
+rotation, which says which way the body faces, removed), ``global`` for those recorded
+before the condition existed (joint 0 as the reader folded the root orientation into it).
+Root-relative, J_p in Eq. 6 stays the part's joint count (Table 1), the main body's
+distances reach at most J_p − 1, and the ``joint`` strategy's pelvis part sees one pose:
+its keys tie (the first M frames) and every query blends its first K keys uniformly.
 """
 from __future__ import annotations
 
@@ -18,6 +26,7 @@ import numpy as np
 import torch
 
 from texvocab.body.parts import STRATEGIES, body_parts
+from texvocab.body.pose_condition import check_pose_condition, condition_pose, ignored_joints
 from texvocab.geometry.rotations import rotvec_to_quat
 
 
@@ -120,7 +129,10 @@ class PartQuery:
 @dataclass
 class Vocabulary:
     """Keys per part. ``key_frames[p][m]`` is the training frame (index into the frames the
-    vocabulary was built from) whose texture map key m of part p points to."""
+    vocabulary was built from) whose texture map key m of part p points to.
+    ``pose_condition``: the pose its keys were taken from and its queries read
+    (:func:`~texvocab.body.pose_condition.condition_pose`); a vocabulary given its keys
+    directly, or read from a checkpoint that records none, is ``global``."""
 
     strategy: str
     part_names: list[str]
@@ -129,12 +141,15 @@ class Vocabulary:
     key_frames: list[torch.Tensor]  # per part (M_p,)
     k: int
     weighting: str = "paper"
+    pose_condition: str = "global"
 
     @classmethod
     def build(cls, poses, strategy: str = "part", num_keys: int = 20, k: int = 3,
-              weighting: str = "paper", min_distance: float = 0.0) -> Vocabulary:
+              weighting: str = "paper", min_distance: float = 0.0,
+              pose_condition: str = "root-relative") -> Vocabulary:
         """Farthest-point-sample ``num_keys`` keys per part from training poses (T, 24, 3)
-        (fewer for a part whose poses all lie within ``min_distance`` of its keys)."""
+        (fewer for a part whose poses all lie within ``min_distance`` of its keys), read
+        under ``pose_condition``."""
         poses = torch.as_tensor(np.asarray(poses), dtype=torch.float64)
         if poses.ndim != 3 or poses.shape[1:] != (24, 3) or len(poses) == 0:
             raise ValueError(f"poses must be (T, 24, 3) with T >= 1, got {tuple(poses.shape)}")
@@ -142,7 +157,7 @@ class Vocabulary:
             raise ValueError(f"num_keys and k must be >= 1, got M={num_keys}, K={k}")
         if weighting not in WEIGHTINGS:
             raise ValueError(f"unknown weighting {weighting!r}; expected one of {WEIGHTINGS}")
-        quats = rotvec_to_quat(poses)
+        quats = rotvec_to_quat(condition_pose(poses, pose_condition))
         parts = body_parts(strategy)
         key_quats, key_frames = [], []
         for joints in parts.values():
@@ -151,22 +166,32 @@ class Vocabulary:
             key_quats.append(q[idx])
             key_frames.append(idx)
         return cls(strategy, list(parts), list(parts.values()), key_quats, key_frames, k,
-                   weighting)
+                   weighting, pose_condition)
 
     @property
     def num_parts(self) -> int:
         return len(self.part_names)
 
+    def condition(self, pose) -> torch.Tensor:
+        """The pose (..., 24, 3) as this vocabulary (and the field built on it) reads it."""
+        return condition_pose(pose, self.pose_condition)
+
+    @property
+    def ignored_joints(self) -> tuple[int, ...]:
+        """Joints whose rotation the queries do not see (their keys hold the identity)."""
+        return ignored_joints(self.pose_condition)
+
     def query_tensors(self, pose) -> tuple[list[torch.Tensor], list[torch.Tensor], list[torch.Tensor]]:
         """Batched query: per part, frames (B, K), weights (B, K), distances (B, K).
 
         Args:
-            pose: (B, 24, 3) or (24, 3) axis-angle.
+            pose: (B, 24, 3) or (24, 3) axis-angle, the full pose (read here under the
+                vocabulary's ``pose_condition``).
         """
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float64)
         if pose.ndim == 2:
             pose = pose[None]
-        quats = rotvec_to_quat(pose)
+        quats = rotvec_to_quat(self.condition(pose))
         frames, weights, dists = [], [], []
         for joints, keys, kf in zip(self.part_joints, self.key_quats, self.key_frames,
                                     strict=True):
@@ -180,7 +205,7 @@ class Vocabulary:
     def query(self, pose) -> list[PartQuery]:
         """Per part: selected keys, their source frames, weights and distances (one pose)."""
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float64).reshape(24, 3)
-        quats = rotvec_to_quat(pose)
+        quats = rotvec_to_quat(self.condition(pose))
         out = []
         for name, joints, keys, kf in zip(self.part_names, self.part_joints, self.key_quats,
                                           self.key_frames, strict=True):
@@ -194,7 +219,7 @@ class Vocabulary:
         sizes = sorted({len(f) for f in self.key_frames})
         keys = "-".join(str(m) for m in sizes[::max(1, len(sizes) - 1)]) if sizes else "0"
         lines = [f"vocabulary: strategy={self.strategy}, M={keys} keys/part, "
-                 f"K={self.k}, weighting={self.weighting}",
+                 f"K={self.k}, weighting={self.weighting}, pose={self.pose_condition}",
                  f"{'part':<16}{'novelty':>9}  keys (id:frame weight)"]
         for q in self.query(pose):
             keys = "  ".join(f"{i}:{f} {w:.3f}" for i, f, w in
@@ -207,7 +232,7 @@ class Vocabulary:
         return {"strategy": self.strategy, "part_names": list(self.part_names),
                 "part_joints": [list(j) for j in self.part_joints],
                 "key_quats": list(self.key_quats), "key_frames": list(self.key_frames),
-                "k": self.k, "weighting": self.weighting}
+                "k": self.k, "weighting": self.weighting, "pose_condition": self.pose_condition}
 
     def check(self, num_frames: int) -> None:
         """ValueError unless the parts, keys and key frames are consistent: every part's
@@ -215,6 +240,7 @@ class Vocabulary:
         if self.strategy not in STRATEGIES or self.weighting not in WEIGHTINGS or self.k < 1:
             raise ValueError(f"strategy {self.strategy!r}, weighting {self.weighting!r}, "
                              f"k {self.k!r}")
+        check_pose_condition(self.pose_condition)
         if not len(self.part_names) == len(self.part_joints) == len(self.key_quats) == len(
                 self.key_frames):
             raise ValueError("parts, joints, keys and key frames differ in number")
@@ -233,5 +259,8 @@ class Vocabulary:
 
     @classmethod
     def from_dict(cls, d: dict) -> Vocabulary:
+        """The vocabulary :meth:`to_dict` wrote; one without ``pose_condition`` (written
+        before it existed) is ``global``, so its keys keep their meaning."""
         return cls(d["strategy"], list(d["part_names"]), [tuple(j) for j in d["part_joints"]],
-                   list(d["key_quats"]), list(d["key_frames"]), int(d["k"]), d["weighting"])
+                   list(d["key_quats"]), list(d["key_frames"]), int(d["k"]), d["weighting"],
+                   d.get("pose_condition", "global"))

@@ -41,10 +41,16 @@ _API: dict[str, tuple[str, str]] = {
     "progressive_shard": ("texvocab.render", "progressive_shard"),
     # runs
     "Settings": ("texvocab.pipeline.settings", "Settings"),
+    "DataSettings": ("texvocab.pipeline.settings", "DataSettings"),
+    "VocabSettings": ("texvocab.pipeline.settings", "VocabSettings"),
+    "FieldSettings": ("texvocab.method.field", "FieldSettings"),
+    "RenderSettings": ("texvocab.pipeline.settings", "RenderSettings"),
+    "TrainSettings": ("texvocab.pipeline.settings", "TrainSettings"),
     "RENDER_PRESETS": ("texvocab.pipeline.settings", "PRESETS"),
     "march_settings": ("texvocab.pipeline.settings", "march_settings"),
     "render_overrides": ("texvocab.pipeline.settings", "render_overrides"),
-    "load_textures": ("texvocab.pipeline.train", "load_textures"),
+    "load_textures": ("texvocab.pipeline.model", "load_textures"),
+    "build_vocabulary": ("texvocab.pipeline.model", "build_vocabulary"),
     "Avatar": ("texvocab.pipeline.avatar", "Avatar"),
     "load_avatar": ("texvocab.pipeline.avatar", "load_avatar"),
     # clips (texvocab render, the viewer's export)

@@ -18,8 +18,8 @@ from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint
 from texvocab.method.field import AvatarField
 from texvocab.method.vocab import Vocabulary
+from texvocab.pipeline.model import build_model, load_textures
 from texvocab.pipeline.settings import Settings
-from texvocab.pipeline.train import build_model, load_textures
 
 
 @dataclass

@@ -26,10 +26,11 @@ from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 from texvocab.metrics import evaluate_pair, frechet
 from texvocab.metrics.image import SSIM_WINDOW
+from texvocab.pipeline.split import one_camera, scored_views
 from texvocab.render import ShellGeometry, render_image
 
 #: Per-image metrics whose set mean is reported with its standard error.
-SEM_KEYS = ("psnr_bbox", "ssim_bbox", "psnr_full", "ssim_full", "lpips")
+SEM_KEYS = ("psnr_bbox", "ssim_bbox", "psnr_full", "ssim_full", "lpips", "iou")
 #: Default generated novel poses of synthetic captures (texvocab.body.poses presets).
 GENERATED_POSES = ("kick", "squat", "arms_up", "a_pose")
 
@@ -43,6 +44,12 @@ def render_view(model, pose, trans, camera, march, scale: float = 1.0):
 
     ``scale`` < 1 renders ``camera.scaled(scale)`` (the ``image_scale`` knob) and resizes
     the result bilinearly to the camera's full size, as a viewer would show it."""
+    rgb, _, stats = render_view_rgba(model, pose, trans, camera, march, scale)
+    return rgb, stats
+
+
+def render_view_rgba(model, pose, trans, camera, march, scale: float = 1.0):
+    """:func:`render_view` with the opacity: (rgb (H, W, 3), alpha (H, W), RenderStats)."""
     t0 = time.perf_counter()
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
@@ -52,13 +59,22 @@ def render_view(model, pose, trans, camera, march, scale: float = 1.0):
         cam = camera if scale == 1.0 else camera.scaled(scale)
         out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
                            shell=shell, index=ctx.index)
-        rgb = out.rgb
+        rgba = torch.cat([out.rgb, out.alpha[..., None]], -1)
         if scale != 1.0:
-            rgb = torch.nn.functional.interpolate(
-                rgb.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
+            rgba = torch.nn.functional.interpolate(
+                rgba.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
                 align_corners=False)[0].permute(1, 2, 0).clamp(0, 1)
     out.stats.seconds = time.perf_counter() - t0  # incl. pose context and shell
-    return rgb.numpy().astype(np.float32), out.stats
+    rgba = rgba.numpy().astype(np.float32)
+    return rgba[..., :3], rgba[..., 3], out.stats
+
+
+def silhouette_iou(alpha: np.ndarray, mask: np.ndarray) -> float | None:
+    """IoU of the rendered silhouette (opacity > 0.5) (H, W) against the mask (H, W);
+    None when both are empty."""
+    pred, truth = alpha > 0.5, np.asarray(mask, bool)
+    union = int((pred | truth).sum())
+    return None if union == 0 else float((pred & truth).sum() / union)
 
 
 def _error_image(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -143,8 +159,9 @@ def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=Non
             feats = _PairFeatures(extractor if len(items) >= 2 else None)
             per, rows = [], []
             for i, (pose, trans, cam, gt, mask) in enumerate(items):
-                pred, stats = render_view(model, pose, trans, cam, march, scale)
+                pred, alpha, stats = render_view_rgba(model, pose, trans, cam, march, scale)
                 m = evaluate_pair(pred, gt, mask, lpips_model=lpips_model)
+                m["iou"] = silhouette_iou(alpha, mask)
                 m["seconds"] = stats.seconds
                 per.append(m)
                 where = {"frame": int(pairs[i][0]), "view": int(pairs[i][1])} if pairs else {}
@@ -155,6 +172,8 @@ def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=Non
                 bar.update()
             bar.set_postfix_str(f"{name}: FID/KID")
             table[name] = {**summarise(per), **feats.scores(), "images": len(per)}
+            if getattr(items, "label", None):  # e.g. "seen view" (texvocab.pipeline.split)
+                table[name]["views"] = items.label
             grids[name] = rows
     return table, records, grids
 
@@ -177,8 +196,10 @@ def _score_cell(row: dict, key: str, need: int, digits: int) -> str:
     return f"{v:.{digits}f}" + ("" if std is None else f" (sd {std:.{digits}f})")
 
 
-def format_table(table: dict[str, dict], checkpoint: str = "") -> str:
-    """metrics.md: the header says what ± means; one row per set with its image count."""
+def format_table(table: dict[str, dict], checkpoint: str = "", split: str = "") -> str:
+    """metrics.md: the header says what ± means (and ``split``, what is held out); one
+    row per set with its image count, labelled with its views when they are not held out
+    (``views``: "seen view" ...)."""
     lines = [f"# texvocab eval: {checkpoint} (mean ± standard error of the mean, std/√n)", "",
              "Each cell is the mean over the set's n images ± its standard error (sample std "
              "with ddof 1 / √n; it treats the images as independent, but the views of one frame "
@@ -188,15 +209,18 @@ def format_table(table: dict[str, dict], checkpoint: str = "") -> str:
              f"{frechet.FID_MIN_IMAGES} images per set) and KID (unbiased, polynomial kernel, "
              "from 2 images; sd = std over random subsets when the set is subsampled) between "
              "the set's true and rendered images when the Inception extractor is installed, "
-             "else n/a; seconds: mean render time per image.", "",
+             "else n/a; iou: the rendered silhouette (opacity > 0.5) against the mask; "
+             "seconds: mean render time per image.", "",
+             *([f"Split: {split}.", ""] if split else []),
              "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | fid | kid "
-             "| seconds |", "|---" * 10 + "|"]
+             "| iou | seconds |", "|---" * 11 + "|"]
     for name, row in table.items():
         cells = [str(row.get("images", 0)), _cell(row, "psnr_bbox", 2), _cell(row, "ssim_bbox", 4),
                  _cell(row, "psnr_full", 2), _cell(row, "ssim_full", 4), _cell(row, "lpips", 4),
                  _score_cell(row, "fid", frechet.FID_MIN_IMAGES, 2), _score_cell(row, "kid", 2, 4),
-                 _cell(row, "seconds", 2)]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+                 _cell(row, "iou", 3), _cell(row, "seconds", 2)]
+        shown = f"{name} ({row['views']})" if row.get("views") else name
+        lines.append(f"| {shown} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -205,7 +229,7 @@ def write_report(out_dir: Path, table: dict, records: list, grids: dict, meta: d
     grid_<set>.png under ``out_dir``; returns their paths, metrics.md first."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    md = format_table(table, str(meta.get("checkpoint", "")))
+    md = format_table(table, str(meta.get("checkpoint", "")), str(meta.get("split", "")))
     paths = [atomic_write_bytes(out_dir / "metrics.md", lambda t: Path(t).write_text(md))]
     protocol = {"sem": "std(ddof=1) / sqrt(images), in <metric>_sem",
                 "fid_min_images": frechet.FID_MIN_IMAGES,
@@ -223,10 +247,12 @@ def write_report(out_dir: Path, table: dict, records: list, grids: dict, meta: d
 
 class CaptureItems(Sequence):
     """Evaluation items of a capture's (frame, view) ``pairs``, read from disk when indexed
-    (a full test split of a real capture is never held in memory at once)."""
+    (a full test split of a real capture is never held in memory at once). ``label``: what
+    the views are when they are not held out ("seen view"), for the report."""
 
-    def __init__(self, capture, pairs: Sequence[tuple[int, int]]):
+    def __init__(self, capture, pairs: Sequence[tuple[int, int]], label: str | None = None):
         self.capture, self.pairs = capture, [(int(t), int(v)) for t, v in pairs]
+        self.label = label
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -251,7 +277,8 @@ def spread(frames: Sequence[int], n: int) -> list[int]:
 def build_sets(capture, settings, per_set: int | None = None,
                generated: tuple[str, ...] = GENERATED_POSES) -> dict[str, Sequence[Item]]:
     """Evaluation sets of items (pose, trans, camera, gt (H, W, 3), mask (H, W)), each frame
-    seen from every view of ``settings.eval_views``:
+    seen from every view of ``settings.data.eval_views`` (a one-camera capture: from its camera,
+    the training poses labelled "seen view"; :mod:`texvocab.pipeline.split`):
 
     - ``novel_poses``: every novel frame (``per_set``: that many, evenly spread);
     - ``training_poses``: as many training frames as novel ones, evenly spread over the
@@ -264,11 +291,9 @@ def build_sets(capture, settings, per_set: int | None = None,
     """
     if per_set is not None and per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {per_set}")
-    views = list(settings.eval_views)
-    missing = [v for v in views if v >= capture.num_views]
-    if missing:
-        raise TexvocabError(f"eval_views {views}: {capture.root} has views 0.."
-                            f"{capture.num_views - 1} (the checkpoint holds out views it lacks)")
+    views = scored_views(capture, settings.data.eval_views)
+    labels = ({"training_poses": "seen view", "novel_poses": "capture camera, held-out frames"}
+              if one_camera(capture) else {})
     small = [v for v in views if min(capture.cameras[v].width, capture.cameras[v].height)
              < SSIM_WINDOW]
     if small:
@@ -289,7 +314,7 @@ def build_sets(capture, settings, per_set: int | None = None,
                         len(pairs), capture.frame_ids[empty[0][0]], empty[0][1])
             pairs = [p for p in pairs if p not in empty]
         if pairs:
-            sets[name] = CaptureItems(capture, pairs)
+            sets[name] = CaptureItems(capture, pairs, labels.get(name))
     if capture.synthetic and generated:
         renderer, cams = ground_truth_renderer(capture)
         items = []

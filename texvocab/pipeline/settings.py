@@ -1,297 +1,350 @@
-"""One settings object for every knob that trades speed for accuracy (and the rest of a
-training run). Each field has a documented default; the CLI maps ``--set key=value``
-onto it and checkpoints store it as a plain dict.
+"""One settings object for every knob of a run, in the groups of the method's data flow:
+``data`` (the view split and the texture maps, Eq. 2), ``vocab`` (the texture vocabulary
+and its encoder, Eqs. 3-6), ``field`` (the network, Eq. 1), ``render`` (the marchers) and
+``train`` (the optimisation, Eq. 10). Each field has a documented default and its check
+beside it (:mod:`texvocab.knobs`); a bad value is refused with one line naming it, e.g.
+``setting render.coarse_samples=0: expected >= 1``.
+
+Names: ``group.field`` (``render.coarse_samples``) everywhere; ``--set`` also takes the
+names of the flat settings checkpoints stored before the groups (:data:`FLAT_NAMES`:
+``coarse_samples`` is ``render.coarse_samples``, ``train_coarse_samples`` is
+``train.coarse_samples``). Checkpoints store :meth:`Settings.to_dict` (a dict per group);
+:meth:`Settings.from_dict` reads that and the older flat dict.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, field, fields
+import dataclasses
+import difflib
+from dataclasses import asdict, dataclass, fields
+from typing import ClassVar, Literal
 
-from texvocab.body.parts import STRATEGIES
 from texvocab.errors import TexvocabError
-from texvocab.method.encoder import ENCODER_NAMES
+from texvocab.knobs import Check, above, at_least, check_group, knob, parse_value, type_hints, within
 from texvocab.method.field import FieldSettings
-from texvocab.method.texmap import VIEW_WEIGHTINGS
-from texvocab.method.vocab import WEIGHTINGS
 from texvocab.metrics.inception_perceptual import MIN_PATCH
-from texvocab.render import GUIDES, MarchSettings
+from texvocab.render import MarchSettings
 
-PERCEPTUAL_CHOICES = ("auto", "lpips-vgg", "inception", "off")
-TRAIN_RESIDUAL = ("all", "hits", "off")
-# What a setting absent from a stored settings dict (a checkpoint written before the
-# setting existed) meant then; its default today may differ.
-OPTIONAL_INTS = ("train_coarse_samples",)  # settings that are an integer or None
-LEGACY = {"view_weighting": "mean", "perceptual": "off", "min_key_distance": 0.0,
-          "train_guide": "shell", "train_coarse_samples": None, "train_residual": "off",
-          "train_band_newton": False, "train_shell_voxel": 0.01}
+# choices (each the Literal of a tuple the method defines; tests/pipeline keep them equal)
+ViewWeighting = Literal["mean", "cosine"]  # method.texmap.VIEW_WEIGHTINGS
+Strategy = Literal["part", "joint", "global", "none"]  # body.parts.STRATEGIES
+Weighting = Literal["paper", "inverse"]  # method.vocab.WEIGHTINGS
+Encoder = Literal["auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid"]
+Guide = Literal["raster", "shell"]  # render.GUIDES
+TrainResidual = Literal["hits", "all", "off"]
+Perceptual = Literal["auto", "lpips-vgg", "inception", "off"]
+PoseCondition = Literal["root-relative", "global"]  # body.pose_condition.POSE_CONDITIONS
+
+
+def _views_held_out(v, g) -> bool:
+    return len(v) > 0 and not set(v) & set(g.eval_views) and all(i >= 0 for i in v)
+
+
+@dataclass
+class DataSettings:
+    """What the avatar is built from: the training and held-out views of the capture and
+    the texture maps U_t back-projected from the training views (Eq. 2)."""
+
+    GROUP: ClassVar[str] = "data"
+
+    texture_size: int = knob(256, at_least(8), doc="(S/A) texels per side of U_t; the "
+                             "encoder's cost grows with its square")
+    train_views: tuple[int, ...] | None = knob(None, Check(
+        _views_held_out, "view indices >= 0 not among eval_views (held-out views never "
+        "train)"), doc="views to train on; none: every view not in eval_views")
+    eval_views: tuple[int, ...] = knob((1, 5), Check(
+        lambda v, _: len(set(v)) == len(v) and all(i >= 0 for i in v),
+        "distinct view indices >= 0"), doc="held-out views for evaluation")
+    view_weighting: ViewWeighting = knob("mean", doc="texture maps: mean (Eq. 2) | cosine "
+                                         "(by viewing angle; +0.11 dB on novel poses, not "
+                                         "resolved over 3 seeds)")
+
+    def __post_init__(self) -> None:
+        check_group(self)
+
+
+@dataclass
+class VocabSettings:
+    """The texture vocabulary (Sec. 3.3-3.4): which poses are keys, how many are blended
+    (Eqs. 4-6), and the encoder that turns the keys' texture maps into features."""
+
+    GROUP: ClassVar[str] = "vocab"
+
+    strategy: Strategy = knob("part", doc="part | joint | global (the paper's ablation) | "
+                              "none (no texture)")
+    num_keys: int = knob(20, at_least(1), doc="(S/A) M keys per part (the most, when "
+                         "min_key_distance > 0)")
+    min_key_distance: float = knob(0.0, at_least(0), doc="(S/A) adaptive M: stop sampling "
+                                   "keys of a part once every training pose of it is within "
+                                   "this Eq. 4 distance of a key (0: always M)")
+    k: int = knob(3, at_least(1), Check(lambda v, g: v <= g.num_keys,
+                                        lambda g: f"<= num_keys ({g.num_keys}): K of the M "
+                                        "keys"), doc="(S/A) K nearest keys blended per part")
+    weighting: Weighting = knob("paper", doc="paper (J_p - d, Eq. 6) | inverse (1/d)")
+    encoder: Encoder = knob("auto", doc="(S/A) texture encoder: auto (resnet34 when its "
+                            "weights exist, else pyramid) | resnet34 | resnet34-scratch | "
+                            "inception | small | pyramid")
+    pose_condition: PoseCondition = knob("root-relative", doc="the pose the vocabulary and "
+                                         "the field read: root-relative (joint 0's rotation, "
+                                         "the way the body faces, removed) | global")
+
+    def __post_init__(self) -> None:
+        check_group(self)
+
+
+@dataclass
+class RenderSettings:
+    """The marchers' knobs at render time (S/A); a preset or ``--set`` may change them on a
+    trained checkpoint. See :class:`~texvocab.render.MarchSettings` for what each does."""
+
+    GROUP: ClassVar[str] = "render"
+
+    image_scale: float = knob(1.0, within(0, 4, open_low=True), doc="render at this "
+                              "fraction of the capture's resolution")
+    coarse_samples: int = knob(18, at_least(1), doc="coarse samples per 2δ of in-shell path")
+    fine_samples: int = knob(8, at_least(0), doc="importance samples per ray")
+    early_stop_eps: float = knob(1e-3, within(0, 1, open_high=True), doc="a ray stops once "
+                                 "its transmittance is below this")
+    shell_width: float | None = knob(None, within(0, 1, open_low=True, unit=" m"), doc="the "
+                                     "marcher's δ (m); none: field.shell_width")
+    guide: Guide = knob("raster", doc="raster: the surface-guided marcher (mesh raster + SDF "
+                        "band) | shell: every ray marched front to back through the shell")
+    residual_rays: bool = knob(True, doc="guide raster: the rays the band cannot take from the "
+                               "mesh distance + the field's residual at 3 evaluations "
+                               "(false: marched)")
+    band_newton: bool = knob(True, doc="guide raster: band rays from the probe, the Newton "
+                             "point and one point behind it (false: band_samples samples)")
+
+    def __post_init__(self) -> None:
+        check_group(self)
+
+
+@dataclass
+class TrainSettings:
+    """The optimisation (Sec. 3.5, loss Eq. 10) and how training renders its rays.
+
+    Five knobs are training's own counterparts of render knobs, separate because training
+    renders small ray batches with gradients where rendering renders images: ``guide``,
+    ``coarse_samples`` (none: ``render.coarse_samples``), ``residual``, ``shell_voxel`` and
+    ``band_newton``. Checkpoints before the groups named them ``train_guide``,
+    ``train_coarse_samples``, ``train_residual``, ``train_shell_voxel`` and
+    ``train_band_newton`` (:data:`FLAT_NAMES`). The other render knobs are not used by
+    training (it marches with ``field.shell_width`` and every coarse sample in one call).
+    """
+
+    GROUP: ClassVar[str] = "train"
+    TWINS: ClassVar[tuple[str, ...]] = ("guide", "coarse_samples", "residual", "shell_voxel",
+                                        "band_newton")
+
+    iterations: int = knob(2000, at_least(1), doc="optimisation steps")
+    rays_per_batch: int = knob(1024, at_least(1), doc="rays rendered per step")
+    fg_fraction: float = knob(0.8, within(0, 1), doc="share of rays drawn inside the mask")
+    guide: Guide = knob("raster", doc="raster: rays in the mask that hit the posed mesh are "
+                        "rendered by the surface band (closed-form VolSDF opacity), the rest "
+                        "by the shell marcher | shell: every ray by the shell marcher")
+    coarse_samples: int | None = knob(9, at_least(1), doc="coarse samples of the rays "
+                                      "training marches (none: render.coarse_samples); 9 "
+                                      "against 18: the same loss curve, +0.54 dB novel PSNR")
+    residual: TrainResidual = knob("hits", doc="guide raster: which rays the band leaves are "
+                                   "residual rays (3 evaluations) before the marcher: hits "
+                                   "(failed bands and hits behind a close edge, inside the "
+                                   "mask) | all (also the close silhouette misses: fastest, "
+                                   "-0.12 dB on novel poses) | off")
+    shell_voxel: float = knob(0.015, within(0.002, 0.1, unit=" m"), doc="(S/A) voxel of each "
+                              "training frame's shell grid (m): 0.01 builds 2.7x slower for "
+                              "an 11% tighter shell")
+    band_newton: bool = knob(True, doc="guide raster: band rays from the probe, the Newton "
+                             "point and one behind it (3 evaluations) | false: band_samples")
+    lr: float = knob(5e-4, within(0, 1, open_low=True), doc="Adam's learning rate")
+    lambda_color: float = knob(1.0, at_least(0), doc="λ_c of the colour term (Eq. 10)")
+    lambda_mask: float = knob(0.1, at_least(0), doc="λ_m of the mask term (Eq. 10)")
+    lambda_eikonal: float = knob(0.05, at_least(0), doc="λ_e of the eikonal term (Eq. 10)")
+    perceptual: Perceptual = knob("auto", doc="auto (lpips-vgg if its weights exist, else "
+                                  "inception) | lpips-vgg | inception | off")
+    lambda_perceptual: float = knob(0.05, at_least(0), doc="λ_p of the perceptual term "
+                                    "(Eq. 10; 0: off)")
+    patch_size: int = knob(24, at_least(MIN_PATCH), doc="(S/A) side of the square patch each "
+                           "step renders for the perceptual term")
+    checkpoint_every: int = knob(250, at_least(1), doc="steps between checkpoints")
+    max_minutes: float | None = knob(None, above(0), doc="stop (with a checkpoint) after this "
+                                     "much training time")
+    seed: int = knob(0, doc="seeds the initial weights and the run's random stream")
+
+    def __post_init__(self) -> None:
+        check_group(self)
 
 
 @dataclass
 class Settings:
-    """Knobs, grouped. Speed/accuracy trade-offs are marked (S/A)."""
+    """Every knob of a run, one group per stage of the method (module docstring).
+    Speed/accuracy trade-offs are marked (S/A) in the fields' docs."""
 
-    # data
-    texture_size: int = 256  # (S/A) texels per side of U_t; encoder cost grows with its square
-    train_views: tuple[int, ...] | None = None  # None: every view not in eval_views
-    eval_views: tuple[int, ...] = (1, 5)  # held-out views for evaluation
-    view_weighting: str = "mean"  # texture maps: mean (Eq. 2) | cosine (by viewing angle;
-    # +0.11 dB on novel poses but not resolved over 3 seeds, README)
-    # vocabulary (Sec. 3.3-3.4)
-    strategy: str = "part"  # part | joint | global (the paper's ablation) | none (no texture)
-    num_keys: int = 20  # (S/A) M keys per part (the most, when min_key_distance > 0)
-    min_key_distance: float = 0.0  # (S/A) adaptive M: stop sampling keys of a part once
-    # every training pose of it is within this Eq. 4 distance of a key (0: always M)
-    k: int = 3  # (S/A) K nearest keys blended per part
-    weighting: str = "paper"  # paper (J_p - d) | inverse (1/d)
-    encoder: str = "auto"  # (S/A) auto | resnet34 | resnet34-scratch | inception | small | pyramid
-    # field
-    field: FieldSettings = field(default_factory=FieldSettings)
-    # rendering (S/A)
-    coarse_samples: int = 18  # per 2δ of in-shell path (see MarchSettings)
-    fine_samples: int = 8
-    early_stop_eps: float = 1e-3
-    image_scale: float = 1.0  # render at this fraction of the capture's resolution
-    shell_width: float | None = None  # marcher δ (m); None: the field's shell_width
-    guide: str = "raster"  # raster: surface-guided marcher (mesh raster + SDF band, README
-    # "Rendering") | shell: every ray marched front to back through the shell
-    residual_rays: bool = True  # guide raster: the rays the band cannot take from the mesh
-    # distance + the field's residual at 3 evaluations (false: marched; MarchSettings)
-    band_newton: bool = True  # guide raster: band rays from the probe, the Newton point and
-    # one point behind it (false: band_samples samples; MarchSettings)
-    # training
-    iterations: int = 2000
-    rays_per_batch: int = 1024
-    fg_fraction: float = 0.8  # share of rays drawn inside the mask
-    train_guide: str = "raster"  # raster: rays in the mask that hit the posed mesh are
-    # rendered by the surface band (probe + band_samples, closed-form VolSDF opacity), the
-    # rest by the shell marcher | shell: every ray by the shell marcher (README "Training")
-    train_coarse_samples: int | None = 9  # coarse_samples of the rays training marches
-    # (none: coarse_samples); with the band, only silhouette and occlusion-edge rays are
-    # marched; 9 against 18: the same loss curve, +0.54 dB novel PSNR (README "Training")
-    train_residual: str = "hits"  # train_guide raster: which rays the band leaves are
-    # residual rays (3 evaluations; residual_* knobs) before the marcher: hits (failed
-    # bands and hits behind a close edge, inside the mask) | all (also the close
-    # silhouette misses: fastest, but -0.12 dB on novel poses) | off (README "Training")
-    train_shell_voxel: float = 0.015  # (S/A) voxel of each training frame's shell grid
-    # (metres; exact near its boundary): 0.01 builds 2.7x slower (135 against 50 ms a
-    # frame) for an 11% tighter shell around the marched rays
-    train_band_newton: bool = True  # train_guide raster: band rays from the probe, the
-    # Newton point and one behind it (3 evaluations) | false: band_samples samples
-    lr: float = 5e-4
-    lambda_color: float = 1.0
-    lambda_mask: float = 0.1
-    lambda_eikonal: float = 0.05
-    perceptual: str = "auto"  # auto (lpips-vgg if its weights exist, else inception) |
-    # lpips-vgg | inception | off
-    lambda_perceptual: float = 0.05  # 0: the perceptual term is off
-    patch_size: int = 24  # (S/A) side of the square patch each step renders for it
-    checkpoint_every: int = 250
-    max_minutes: float | None = None  # stop (with a checkpoint) after this much training time
-    seed: int = 0
+    GROUP: ClassVar[str] = ""  # the groups are named by their own names
+
+    data: DataSettings = dataclasses.field(default_factory=DataSettings)
+    vocab: VocabSettings = dataclasses.field(default_factory=VocabSettings)
+    field: FieldSettings = dataclasses.field(default_factory=FieldSettings)
+    render: RenderSettings = dataclasses.field(default_factory=RenderSettings)
+    train: TrainSettings = dataclasses.field(default_factory=TrainSettings)
 
     def __post_init__(self) -> None:
-        """Refuse values the method cannot run with, naming the setting and the range."""
-        self._check_types()
-        f = self.field
-        checks = [
-            ("texture_size", self.texture_size >= 8, ">= 8"),
-            ("num_keys", self.num_keys >= 1, ">= 1"),
-            ("k", self.k >= 1, ">= 1"),
-            ("strategy", self.strategy in STRATEGIES, "part, joint, global or none"),
-            ("weighting", self.weighting in WEIGHTINGS, " or ".join(WEIGHTINGS)),
-            ("min_key_distance", 0 <= self.min_key_distance, ">= 0"),
-            ("view_weighting", self.view_weighting in VIEW_WEIGHTINGS,
-             " or ".join(VIEW_WEIGHTINGS)),
-            ("encoder", self.encoder in ENCODER_NAMES, ", ".join(ENCODER_NAMES)),
-            ("perceptual", self.perceptual in PERCEPTUAL_CHOICES, ", ".join(PERCEPTUAL_CHOICES)),
-            ("lambda_perceptual", self.lambda_perceptual >= 0, ">= 0"),
-            ("patch_size", MIN_PATCH <= self.patch_size, f">= {MIN_PATCH}"),
-            ("coarse_samples", self.coarse_samples >= 1, ">= 1"),
-            ("train_coarse_samples", self.train_coarse_samples is None
-             or self.train_coarse_samples >= 1, ">= 1 or none"),
-            ("fine_samples", self.fine_samples >= 0, ">= 0"),
-            ("early_stop_eps", 0 <= self.early_stop_eps < 1, "in [0, 1)"),
-            ("image_scale", 0 < self.image_scale <= 4, "in (0, 4]"),
-            ("shell_width", self.shell_width is None or 0 < self.shell_width <= 1, "in (0, 1] m"),
-            ("train_shell_voxel", 0.002 <= self.train_shell_voxel <= 0.1, "in [0.002, 0.1] m"),
-            ("guide", self.guide in GUIDES, " or ".join(GUIDES)),
-            ("train_guide", self.train_guide in GUIDES, " or ".join(GUIDES)),
-            ("train_residual", self.train_residual in TRAIN_RESIDUAL,
-             " or ".join(TRAIN_RESIDUAL)),
-            ("k", self.k <= self.num_keys, f"<= num_keys ({self.num_keys}): K of the M keys"),
-            ("iterations", self.iterations >= 1, ">= 1"),
-            ("checkpoint_every", self.checkpoint_every >= 1, ">= 1"),
-            ("max_minutes", self.max_minutes is None or self.max_minutes > 0, "> 0 or none"),
-            ("lr", 0 < self.lr <= 1, "in (0, 1]"),
-            ("lambda_color", self.lambda_color >= 0, ">= 0"),
-            ("lambda_mask", self.lambda_mask >= 0, ">= 0"),
-            ("lambda_eikonal", self.lambda_eikonal >= 0, ">= 0"),
-            ("eval_views", len(set(self.eval_views)) == len(self.eval_views)
-             and all(v >= 0 for v in self.eval_views), "distinct view indices >= 0"),
-            ("train_views", self.train_views is None or (
-                len(self.train_views) > 0 and not set(self.train_views) & set(self.eval_views)
-                and all(v >= 0 for v in self.train_views)),
-             "view indices >= 0 not among eval_views (held-out views never train)"),
-            ("field.pos_freqs", 0 <= f.pos_freqs <= 16, "in 0..16"),
-            ("field.dir_freqs", 0 <= f.dir_freqs <= 16, "in 0..16"),
-            ("field.feature_proj", 1 <= f.feature_proj, ">= 1"),
-            ("field.hidden", 1 <= f.hidden, ">= 1"),
-            ("field.sdf_layers", 1 <= f.sdf_layers, ">= 1"),
-            ("field.color_layers", 0 <= f.color_layers, ">= 0"),
-            ("rays_per_batch", self.rays_per_batch >= 1, ">= 1"),
-            ("fg_fraction", 0 <= self.fg_fraction <= 1, "in [0, 1]"),
-            # float32 VolSDF density and its gradients break down for beta below ~1e-17
-            ("field.beta_min", self.field.beta_min >= 1e-8, ">= 1e-8"),
-            ("field.beta_init", self.field.beta_init >= self.field.beta_min, ">= field.beta_min"),
-            ("field.shell_width", 0 < self.field.shell_width <= 1, "in (0, 1] m"),
-        ]
-        for name, ok, expected in checks:
-            if not ok:
-                value = self.field.to_dict()[name[6:]] if name.startswith("field.") else getattr(
-                    self, name)
-                raise TexvocabError(f"setting {name}={value!r}: expected {expected}")
+        check_group(self)
 
-    def _check_types(self) -> None:
-        """Every setting has its default's type (ints stay ints, floats are finite
-        numbers, tuples of view indices are ints); raises naming the first that is not."""
-        if not isinstance(self.field, FieldSettings):
-            raise TexvocabError(f"setting field={self.field!r}: expected a group of field "
-                                "settings (field.hidden=..., field.pos_freqs=...)")
-        for group, prefix in ((self, ""), (self.field, "field.")):
-            for f in fields(group):
-                if f.name == "field":
-                    continue
-                value, default = getattr(group, f.name), f.default
-                if f.name in ("train_views", "eval_views"):
-                    ok = (value is None and f.name == "train_views") or (
-                        isinstance(value, tuple) and all(type(v) is int for v in value))
-                    what = "a list of view indices"
-                elif f.name in ("max_minutes", "shell_width"):
-                    ok = value is None or _finite(value)
-                    what = "a finite number or none"
-                elif f.name in OPTIONAL_INTS:
-                    ok, what = value is None or type(value) is int, "an integer or none"
-                elif isinstance(default, bool):
-                    ok, what = isinstance(value, bool), "true or false"
-                elif isinstance(default, int):
-                    ok, what = type(value) is int, "an integer"
-                elif isinstance(default, float):
-                    ok, what = _finite(value), "a finite number"
-                else:
-                    ok, what = isinstance(value, str), "a name"
-                if not ok:
-                    raise TexvocabError(f"setting {prefix}{f.name}={value!r}: expected {what}")
-
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, dict]:
+        """``{group: {field: value}}`` of plain values (view tuples as lists)."""
         d = asdict(self)
-        d["train_views"] = None if self.train_views is None else list(self.train_views)
-        d["eval_views"] = list(self.eval_views)
+        for key in ("train_views", "eval_views"):
+            if d["data"][key] is not None:
+                d["data"][key] = list(d["data"][key])
         return d
+
+    def dotted(self) -> dict[str, object]:
+        """``{"group.field": value}`` for every setting."""
+        return {f"{g}.{k}": v for g, group in self.to_dict().items() for k, v in group.items()}
 
     @classmethod
     def from_dict(cls, d: dict) -> Settings:
-        """Settings from a plain dict (a checkpoint's or ``--set``'s); TexvocabError naming
-        the first setting that is unknown or of the wrong kind."""
+        """Settings from :meth:`to_dict`'s form or a checkpoint's older flat one; settings a
+        dict lacks take :data:`LEGACY`'s value (what they meant before they existed), else
+        their default. TexvocabError naming the first unknown or bad setting."""
         if not isinstance(d, dict):
             raise TexvocabError(f"settings: expected a mapping of setting names to values, "
                                 f"got {type(d).__name__}")
-        d = {**LEGACY, **d}  # a checkpoint from before a setting existed: its behaviour then
-        group = d.get("field", {})
-        if not isinstance(group, dict):
-            raise TexvocabError(f"setting field={group!r}: expected a group of field settings "
-                                "(field.hidden=..., field.pos_freqs=...)")
-        unknown = set(group) - {f.name for f in fields(FieldSettings)}
-        if unknown:
-            raise TexvocabError(f"unknown settings {sorted('field.' + k for k in unknown)}")
-        d["field"] = FieldSettings(**group)
-        for key in ("train_views", "eval_views"):
-            if isinstance(d.get(key), list | tuple):
-                d[key] = tuple(d[key])
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise TexvocabError(f"unknown settings {sorted(unknown)}")
-        return cls(**d)
+        grouped = bool(set(d) & set(GROUPS) - {"field"})  # flat dicts hold a "field" group
+        dotted = _from_groups(d) if grouped else _from_flat(d)
+        return cls._from_dotted({**LEGACY, **dotted})
+
+    @classmethod
+    def _from_dotted(cls, d: dict[str, object]) -> Settings:
+        groups: dict[str, dict] = {g: {} for g in GROUPS}
+        for name, value in d.items():
+            group, key = name.split(".", 1)
+            if isinstance(value, list) and key.endswith("views"):
+                value = tuple(value)
+            groups[group][key] = value
+        return cls(**{g: GROUPS[g](**kw) for g, kw in groups.items()})
 
     def with_overrides(self, items: list[str]) -> Settings:
-        """Apply ``key=value`` strings (``field.hidden=64`` reaches nested settings)."""
-        d = self.to_dict()
+        """Apply ``key=value`` strings; a key is ``group.field`` or a flat name
+        (:func:`resolve_name`)."""
+        d = self.dotted()
         for item in items:
             key, sep, raw = item.partition("=")
             if not sep:
                 raise TexvocabError(f"--set {item!r}: expected key=value")
-            target, name = d, key
-            if "." in key:
-                head, name = key.split(".", 1)
-                if head not in d or not isinstance(d[head], dict):
-                    raise TexvocabError(f"--set {item!r}: no settings group {head!r}")
-                target = d[head]
-            if name not in target:
-                raise TexvocabError(f"--set {item!r}: unknown setting {key!r}")
-            target[name] = _parse(raw, target[name], key)
-        return Settings.from_dict(d)
+            name = resolve_name(key.strip(), item)
+            group, attr = name.split(".", 1)
+            d[name] = parse_value(raw.strip(), type_hints(GROUPS[group])[attr], item, name)
+        return Settings._from_dotted(d)
 
 
-def _finite(value) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+GROUPS: dict[str, type] = {f.name: type_hints(Settings)[f.name] for f in fields(Settings)}
+#: the flat names of the settings before the groups -> ``group.field``
+FLAT_NAMES: dict[str, str] = {
+    (f"train_{f.name}" if g == "train" and f.name in TrainSettings.TWINS else f.name): f"{g}.{f.name}"
+    for g, cls in GROUPS.items() if g != "field" for f in fields(cls)}
+# What a setting absent from a stored settings dict (a checkpoint written before the
+# setting existed) meant then; its default today may differ.
+LEGACY: dict[str, object] = {
+    "data.view_weighting": "mean", "train.perceptual": "off", "vocab.min_key_distance": 0.0,
+    "train.guide": "shell", "train.coarse_samples": None, "train.residual": "off",
+    "train.band_newton": False, "train.shell_voxel": 0.01, "vocab.pose_condition": "global"}
 
 
-def _parse(raw: str, current, key: str):
-    if key in OPTIONAL_INTS and raw.lower() == "none":
-        return None
-    try:
-        if isinstance(current, bool):
-            if raw.lower() not in ("true", "false", "1", "0"):
-                raise ValueError(raw)
-            return raw.lower() in ("true", "1")
-        if isinstance(current, int):
-            return int(raw)
-        if isinstance(current, float):
-            return float(raw)
-        if raw.lower() == "none" and (current is None or key.endswith("views")):
-            return None
-        if isinstance(current, list) or "views" in key:
-            return [int(v) for v in raw.split(",") if v]
-        if current is None:
-            return int(raw) if key in OPTIONAL_INTS else float(raw)
-    except ValueError:
-        what = "an integer or none" if key in OPTIONAL_INTS else f"a {type(current).__name__}"
-        raise TexvocabError(f"--set {key}={raw}: expected {what}") from None
-    return raw
+def resolve_name(key: str, item: str | None = None) -> str:
+    """``group.field`` for a setting named ``key`` (itself, or a flat name of
+    :data:`FLAT_NAMES`); TexvocabError naming ``item`` (the ``--set`` string) and the
+    closest known names when there is no such setting."""
+    group, dot, attr = key.partition(".")
+    if dot and group in GROUPS and attr in {f.name for f in fields(GROUPS[group])}:
+        return key
+    if not dot and key in FLAT_NAMES:
+        return FLAT_NAMES[key]
+    if not dot and key in GROUPS:
+        raise TexvocabError(f"--set {item or key!r}: {key} is a group of settings "
+                            f"({key}.{fields(GROUPS[key])[0].name}=...)")
+    known = [f"{g}.{f.name}" for g, cls in GROUPS.items() for f in fields(cls)]
+    close = difflib.get_close_matches(key, known + list(FLAT_NAMES), n=4, cutoff=0.6)
+    close = list(dict.fromkeys(FLAT_NAMES.get(c, c) for c in close))[:3]
+    hint = f" (did you mean {' or '.join(close)}?)" if close else ""
+    raise TexvocabError(f"--set {item or key!r}: unknown setting {key!r}{hint}")
+
+
+def _from_groups(d: dict) -> dict[str, object]:
+    """Dotted names of a ``{group: {field: value}}`` dict; unknown names are refused."""
+    out = {}
+    for group, values in d.items():
+        if group not in GROUPS:
+            raise TexvocabError(f"unknown settings group {group!r}; expected "
+                                f"{', '.join(GROUPS)}")
+        if not isinstance(values, dict):
+            raise TexvocabError(f"setting {group}={values!r}: expected a group of settings "
+                                f"({group}.{fields(GROUPS[group])[0].name}=...)")
+        out.update(_group_items(group, values))
+    return out
+
+
+def _from_flat(d: dict) -> dict[str, object]:
+    """Dotted names of a checkpoint's flat settings dict (its ``field`` a dict)."""
+    out = {}
+    for key, value in d.items():
+        if key == "field":
+            if not isinstance(value, dict):
+                raise TexvocabError(f"setting field={value!r}: expected a group of field "
+                                    "settings (field.hidden=..., field.pos_freqs=...)")
+            out.update(_group_items("field", value))
+        elif key in FLAT_NAMES:
+            out[FLAT_NAMES[key]] = value
+        else:
+            raise TexvocabError(f"unknown setting {key!r}")
+    return out
+
+
+def _group_items(group: str, values: dict) -> dict[str, object]:
+    known = {f.name for f in fields(GROUPS[group])}
+    unknown = sorted(f"{group}.{k}" for k in set(values) - known)
+    if unknown:
+        raise TexvocabError(f"unknown settings {unknown}")
+    return {f"{group}.{k}": v for k, v in values.items()}
 
 
 # Render knobs: a preset or ``--set`` may change these on a trained checkpoint (the rest
 # is baked into the weights). See bench/tradeoff.py for what each costs and buys.
-RENDER_KNOBS = ("image_scale", "coarse_samples", "fine_samples", "early_stop_eps", "shell_width",
-                "guide", "residual_rays", "band_newton")
+RENDER_KNOBS = tuple(f.name for f in fields(RenderSettings))
 
-# Chosen from bench/tradeoff.py on the default synthetic capture (README, "Presets").
+# Render knob -> value, chosen from bench/tradeoff.py on the default synthetic capture.
 PRESETS: dict[str, dict] = {
     "fast": {"shell_width": 0.025, "coarse_samples": 6, "fine_samples": 2, "early_stop_eps": 1e-2},
     "balanced": {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4},
     # quality also marches the guided marcher's hard rays and takes the 4-sample band:
-    # 1.7x the default's time, 1 dB nearer the 64+32 reference (README, session 11)
+    # 1.7x the default's time, 1 dB nearer the 64+32 reference
     "quality": {"coarse_samples": 36, "fine_samples": 16, "early_stop_eps": 1e-4,
                 "residual_rays": False, "band_newton": False},
 }
 
 
 def preset_overrides(name: str, render_only: bool = False) -> list[str]:
-    """``key=value`` strings of preset ``name`` (only the render knobs if ``render_only``)."""
+    """``render.knob=value`` strings of preset ``name`` (every preset is render knobs
+    only; ``render_only`` is kept for callers that say so)."""
     if name not in PRESETS:
         raise TexvocabError(f"preset {name!r}: expected one of {', '.join(PRESETS)}")
-    return [f"{k}={v}" for k, v in PRESETS[name].items() if not render_only or k in RENDER_KNOBS]
+    return [f"render.{k}={v}" for k, v in PRESETS[name].items()
+            if not render_only or k in RENDER_KNOBS]
 
 
 def render_overrides(settings: Settings, preset: str | None, items: list[str]) -> Settings:
     """A trained checkpoint's settings with a preset and ``--set`` items applied; only the
     render knobs may change (the rest is baked into the weights)."""
-    bad = [i for i in items if i.partition("=")[0] not in RENDER_KNOBS]
-    if bad:
-        raise TexvocabError(f"--set {bad[0]!r}: only render knobs ({', '.join(RENDER_KNOBS)}) "
-                            "can change on a trained checkpoint")
+    for item in items:
+        if not resolve_name(item.partition("=")[0].strip(), item).startswith("render."):
+            raise TexvocabError(f"--set {item!r}: only render knobs ("
+                                f"{', '.join('render.' + k for k in RENDER_KNOBS)}) can "
+                                "change on a trained checkpoint")
     pre = preset_overrides(preset, render_only=True) if preset else []
     return settings.with_overrides(pre + list(items))
+
+
+# Training marches every coarse sample of a ray (at most this many) in one field call.
+TRAIN_MAX_COARSE = 512
 
 
 def march_settings(s: Settings, training: bool = False) -> MarchSettings:
@@ -299,19 +352,25 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
     call (no scouting, one segment): each call's backward through the texture-feature
     sampling costs a dense pass over the feature maps, so few large calls are far cheaper
     than the many small ones that early termination favours at render time."""
-    width = s.field.shell_width if training or s.shell_width is None else s.shell_width
-    m = MarchSettings.from_flat(shell_width=width, coarse_samples=s.coarse_samples,
-                                fine_samples=s.fine_samples, early_stop_eps=s.early_stop_eps,
-                                guide=s.guide, residual_rays=s.residual_rays,
-                                band_newton=s.band_newton)
+    r, t = s.render, s.train
+    knobs = dict(shell_width=s.field.shell_width if training or r.shell_width is None
+                 else r.shell_width, coarse_samples=r.coarse_samples,
+                 fine_samples=r.fine_samples, early_stop_eps=r.early_stop_eps, guide=r.guide,
+                 residual_rays=r.residual_rays, band_newton=r.band_newton)
     if training:
-        m.segment, m.scout_threshold, m.guide = m.max_coarse, None, "shell"
-        m.coarse_samples = s.train_coarse_samples or s.coarse_samples
-        m.residual_rays = s.train_residual != "off" and s.train_guide == "raster"
-        m.band_newton = s.train_band_newton
-        m.shell_voxel = s.train_shell_voxel
-    elif m.guide == "raster":
+        knobs.update(segment=TRAIN_MAX_COARSE, max_coarse=TRAIN_MAX_COARSE,
+                     scout_threshold=None, guide="shell",
+                     coarse_samples=t.coarse_samples or r.coarse_samples,
+                     residual_rays=t.residual != "off" and t.guide == "raster",
+                     band_newton=t.band_newton, shell_voxel=t.shell_voxel)
+    elif r.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact
         # grid builds 3-4x faster (0.15 -> 0.04 s) for slightly longer in-shell paths
-        m.shell_voxel, m.shell_exact = 0.015, False
-    return m
+        knobs.update(shell_voxel=0.015, shell_exact=False)
+    return _march(knobs)
+
+
+def _march(knobs: dict) -> MarchSettings:
+    """The marcher's settings from flat knob names (MarchSettings' own field names): the
+    one place the run's settings build them."""
+    return MarchSettings.from_flat(**knobs)

