@@ -13,10 +13,10 @@ import torch
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 from texvocab.pipeline import (
-    ShellGeometry,
     contact_sheet,
     load_pose_file,
     march_settings,
+    prepare_shell,
     render_image,
     save_png,
     to_uint8,
@@ -97,9 +97,7 @@ def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
     ``background`` (the 3D view's): what ``shot`` and the viewer's Screenshot write."""
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
-        shell = None if march.guide == "raster" else ShellGeometry.build(  # guided: its own
-            ctx.vertices, model.body.faces, march.shell_width, march.shell_voxel,
-            march.shell_exact, index=ctx.index)
+        shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
         out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
                            background=tuple(background), shell=shell, index=ctx.index)
     return to_uint8(out.rgb.numpy())

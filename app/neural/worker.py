@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from texvocab.pipeline import ShellGeometry, progressive_shard
+from texvocab.pipeline import prepare_shell, progressive_shard
 
 #: render(job, cancelled) -> iterator of (level, rgb (H_l, W_l, 3), seconds[, owned]):
 #: ``owned`` (H_l, W_l) bool, the pixels a shard of the job (RenderJob.shard) rendered
@@ -113,14 +113,10 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             if cancelled():
                 return
 
-            def shell():
-                return ShellGeometry.build(ctx.vertices, model.body.faces, m.shell_width,
-                                           m.shell_voxel, m.shell_exact, index=ctx.index)
-
             # the surface-guided marcher builds what it needs of it (the bounding balls
             # for its residual rays, the grid if a ray falls back to marching) after the
-            # first, preview level; the shell marcher needs it at once
-            shell = None if m.guide == "raster" else shell()
+            # first, preview level; the shell marcher needs it at once (its render path)
+            shell = prepare_shell(m, ctx.vertices, model.body.faces, ctx.index)
             field = model.for_pose(ctx)
         for i, out in enumerate(progressive_shard(
                 field, job.camera, ctx.vertices, model.body.faces, m,

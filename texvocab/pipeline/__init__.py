@@ -36,6 +36,7 @@ _API: dict[str, tuple[str, str]] = {
     "VocabTexture": ("texvocab.method.vocab_texture", "VocabTexture"),
     # rendering (step 7)
     "ShellGeometry": ("texvocab.render", "ShellGeometry"),
+    "prepare_shell": ("texvocab.render", "prepare_shell"),
     "render_image": ("texvocab.render", "render_image"),
     "progressive_render": ("texvocab.render", "progressive_render"),
     "progressive_shard": ("texvocab.render", "progressive_shard"),

@@ -27,7 +27,7 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 from texvocab.metrics import evaluate_pair, frechet
 from texvocab.metrics.image import SSIM_WINDOW
 from texvocab.pipeline.split import one_camera, scored_views
-from texvocab.render import ShellGeometry, render_image
+from texvocab.render import prepare_shell, render_image
 
 #: Per-image metrics whose set mean is reported with its standard error.
 SEM_KEYS = ("psnr_bbox", "ssim_bbox", "psnr_full", "ssim_full", "lpips", "iou")
@@ -53,9 +53,7 @@ def render_view_rgba(model, pose, trans, camera, march, scale: float = 1.0):
     t0 = time.perf_counter()
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
-        shell = None if march.guide == "raster" else ShellGeometry.build(  # guided: its own
-            ctx.vertices, model.body.faces, march.shell_width, march.shell_voxel,
-            march.shell_exact, index=ctx.index)
+        shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
         cam = camera if scale == 1.0 else camera.scaled(scale)
         out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
                            shell=shell, index=ctx.index)
