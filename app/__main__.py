@@ -1,4 +1,5 @@
 """``python -m texvocab_viewer [SOURCE] ...``: the viewer window (texvocab_viewer.launch)."""
+
 import sys
 
 from texvocab_viewer.launch import main

@@ -2,6 +2,7 @@
 ``python -m texvocab_viewer``: one size parser, one ``view`` argument set, and the
 defaults the window and its panels start from. Light: no GL, no torch (the ``texvocab``
 parser imports it to build its ``--help``), and the bottom of the package's layers."""
+
 from __future__ import annotations
 
 import argparse
@@ -47,45 +48,78 @@ def parse_size(spec: str, minimum: tuple[int, int] = IMAGE_MIN) -> tuple[int, in
     except ValueError:
         size = None
     if not sep or size is None or not all(lo <= v <= 8192 for v, lo in zip(size, minimum)):
-        raise TexvocabError(f"--size {spec!r}: expected WIDTHxHEIGHT, e.g. 1280x800 "
-                            f"({minimum[0]}..8192 x {minimum[1]}..8192 pixels)")
+        raise TexvocabError(
+            f"--size {spec!r}: expected WIDTHxHEIGHT, e.g. 1280x800 "
+            f"({minimum[0]}..8192 x {minimum[1]}..8192 pixels)"
+        )
     return size
 
 
 def add_view_arguments(p: argparse.ArgumentParser) -> None:
     """The viewer's arguments (``texvocab view`` and ``python -m texvocab_viewer``)."""
-    p.add_argument("source", nargs="?", default=None,
-                   help="checkpoint.pt or capture folder (default: the body alone)")
-    p.add_argument("--size", default="1280x800", metavar="WxH",
-                   help="window size (default 1280x800, at least 320x240)")
-    p.add_argument("--poses", default=None, metavar="FILE.npz",
-                   help="a pose sequence .npz for the Pose panel's timeline: SMPL (T, 24, 3) "
-                        "or (T, 72) [+ trans], AMASS SMPL-H (T, 156) or SMPL-X (T, 165)")
-    p.add_argument("--smpl", metavar="PATH", default=None,
-                   help="your SMPL model file or folder (see assets_spec/README.md); "
-                        "default: the embedded default body")
-    p.add_argument("--capture", metavar="FOLDER", default=None,
-                   help="the capture folder a checkpoint was trained on, when it is not where the "
-                        "checkpoint records it (moved, or another machine)")
+    p.add_argument(
+        "source", nargs="?", default=None, help="checkpoint.pt or capture folder (default: the body alone)"
+    )
+    p.add_argument(
+        "--size", default="1280x800", metavar="WxH", help="window size (default 1280x800, at least 320x240)"
+    )
+    p.add_argument(
+        "--poses",
+        default=None,
+        metavar="FILE.npz",
+        help="a pose sequence .npz for the Pose panel's timeline: SMPL (T, 24, 3) "
+        "or (T, 72) [+ trans], AMASS SMPL-H (T, 156) or SMPL-X (T, 165)",
+    )
+    p.add_argument(
+        "--smpl",
+        metavar="PATH",
+        default=None,
+        help="your SMPL model file or folder (see assets_spec/README.md); default: the embedded default body",
+    )
+    p.add_argument(
+        "--capture",
+        metavar="FOLDER",
+        default=None,
+        help="the capture folder a checkpoint was trained on, when it is not where the "
+        "checkpoint records it (moved, or another machine)",
+    )
     p.add_argument("--script", default=None, help=argparse.SUPPRESS)
     p.add_argument("--report", default=None, help=argparse.SUPPRESS)
     p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)
     p.add_argument("--neural-resolution", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--neural-threads", type=int, default=1, help=argparse.SUPPRESS)
-    p.add_argument("--neural-nice", type=int, default=NEURAL_NICE, metavar="N",
-                   help=f"niceness added to the neural render (default {NEURAL_NICE}: the UI "
-                        "first; 0 shows about 2.5x more previews while a slider is dragged, "
-                        "at up to 12%% longer UI frames; bench/viewer_ui.py)")
-    p.add_argument("--neural-processes", type=int, default=NEURAL_PROCESSES, metavar="N",
-                   help=f"render processes that split each neural render (default "
-                        f"{NEURAL_PROCESSES}: one per core, at most 2); each holds a copy of "
-                        "the model. With --neural-worker thread: 1")
-    p.add_argument("--neural-preview-wait", type=float, default=NEURAL_PREVIEW_WAIT_MS,
-                   metavar="MS",
-                   help=f"after a pause, the frame that changes the pose waits up to MS "
-                        f"milliseconds from the change for the neural preview, so the 3D view "
-                        f"and the preview show together (default {NEURAL_PREVIEW_WAIT_MS:g}; "
-                        "0: never wait; never while a slider is dragged; bench/viewer_ui.py)")
-    p.add_argument("--neural-worker", choices=NEURAL_WORKERS, default=NEURAL_WORKERS[0],
-                   help="where the neural render runs: processes of their own (default; the "
-                        "UI's Python does not slow them) or a thread of the viewer's")
+    p.add_argument(
+        "--neural-nice",
+        type=int,
+        default=NEURAL_NICE,
+        metavar="N",
+        help=f"niceness added to the neural render (default {NEURAL_NICE}: the UI "
+        "first; 0 shows about 2.5x more previews while a slider is dragged, "
+        "at up to 12%% longer UI frames; bench/viewer_ui.py)",
+    )
+    p.add_argument(
+        "--neural-processes",
+        type=int,
+        default=NEURAL_PROCESSES,
+        metavar="N",
+        help=f"render processes that split each neural render (default "
+        f"{NEURAL_PROCESSES}: one per core, at most 2); each holds a copy of "
+        "the model. With --neural-worker thread: 1",
+    )
+    p.add_argument(
+        "--neural-preview-wait",
+        type=float,
+        default=NEURAL_PREVIEW_WAIT_MS,
+        metavar="MS",
+        help=f"after a pause, the frame that changes the pose waits up to MS "
+        f"milliseconds from the change for the neural preview, so the 3D view "
+        f"and the preview show together (default {NEURAL_PREVIEW_WAIT_MS:g}; "
+        "0: never wait; never while a slider is dragged; bench/viewer_ui.py)",
+    )
+    p.add_argument(
+        "--neural-worker",
+        choices=NEURAL_WORKERS,
+        default=NEURAL_WORKERS[0],
+        help="where the neural render runs: processes of their own (default; the "
+        "UI's Python does not slow them) or a thread of the viewer's",
+    )

@@ -6,6 +6,7 @@ blocking the window and hands its answer back through :meth:`FileDialogs.poll`. 
 none of those programs installed, :meth:`FileDialogs.missing` says so and the panels keep
 their path fields.
 """
+
 from __future__ import annotations
 
 import functools
@@ -40,8 +41,7 @@ class FileDialogs:
         frame; the search runs once per PATH value (:func:`_dialog_program_found`)."""
         path = os.environ.get("PATH", os.defpath)
         if sys.platform.startswith("linux") and not _dialog_program_found(path):
-            return ("no file dialog program found (install zenity or kdialog); type the path "
-                    "instead")
+            return "no file dialog program found (install zenity or kdialog); type the path instead"
         return ""
 
     @property

@@ -3,6 +3,7 @@
 check them and open the window (:func:`texvocab_viewer.window.run_viewer`). The hidden
 ``--script NAME --report FILE.json [--screenshot FILE.png]`` drive it for tests and
 benchmarks (:mod:`texvocab_viewer.testing`)."""
+
 from __future__ import annotations
 
 import argparse
@@ -21,18 +22,32 @@ def run_from_args(args: argparse.Namespace) -> int:
     if args.neural_processes < 1:
         raise TexvocabError(f"--neural-processes {args.neural_processes}: expected at least 1")
     if not 0 <= args.neural_preview_wait <= PREVIEW_WAIT_MAX_MS:
-        raise TexvocabError(f"--neural-preview-wait {args.neural_preview_wait:g}: expected "
-                            f"0..{PREVIEW_WAIT_MAX_MS:g} milliseconds")
+        raise TexvocabError(
+            f"--neural-preview-wait {args.neural_preview_wait:g}: expected "
+            f"0..{PREVIEW_WAIT_MAX_MS:g} milliseconds"
+        )
     size = parse_size(args.size, WINDOW_MIN)
     script = None if args.script is None else Script(args.script, args.report, args.screenshot)
-    return run_viewer(args.source, args.smpl, size, script, args.neural_resolution,
-                      args.neural_threads, args.poses, args.neural_nice, args.capture,
-                      args.neural_worker, args.neural_processes, args.neural_preview_wait)
+    return run_viewer(
+        args.source,
+        args.smpl,
+        size,
+        script,
+        args.neural_resolution,
+        args.neural_threads,
+        args.poses,
+        args.neural_nice,
+        args.capture,
+        args.neural_worker,
+        args.neural_processes,
+        args.neural_preview_wait,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog=PROG, description="the texvocab viewer: pose, 3D view, "
-                                "vocabulary, neural render")
+    p = argparse.ArgumentParser(
+        prog=PROG, description="the texvocab viewer: pose, 3D view, vocabulary, neural render"
+    )
     add_view_arguments(p)
     args = p.parse_args(argv)
     try:
@@ -40,4 +55,3 @@ def main(argv: list[str] | None = None) -> int:
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-

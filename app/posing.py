@@ -2,6 +2,7 @@
 ``BodyModel.forward`` (texvocab.body.lbs) for one pose, without torch's intra-op thread
 pool, which stalls on a busy CPU (e.g. beside the viewer's neural render worker): about
 3 ms per pose for 6890 vertices. Tests check it against ``BodyModel.forward``."""
+
 from __future__ import annotations
 
 import numpy as np

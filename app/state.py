@@ -1,6 +1,7 @@
 """What the viewer shows: the loaded data (:class:`ViewerData`) and the pose being edited
 (:class:`ViewerState`, versioned so renderers and workers can tell when it changed).
 No GL and no GUI here."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -61,23 +62,28 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
     s = Settings(data=DataSettings(eval_views=held_out))
     vocab = build_vocabulary(cap, s)
     textures = load_textures(cap, s, progress=True).permute(0, 2, 3, 1).numpy()
-    return ViewerData(cap.body, vocab, textures, None, cap, s,
-                      f"capture {path} ({cap.num_train} training frames)")
+    return ViewerData(
+        cap.body, vocab, textures, None, cap, s, f"capture {path} ({cap.num_train} training frames)"
+    )
 
 
 def _checkpoint_data(path: Path, smpl: str | None, capture: str | None = None) -> ViewerData:
-    cap = None if capture is None else open_capture(Path(capture).expanduser(),
-                                                    body=load_body(smpl))
+    cap = None if capture is None else open_capture(Path(capture).expanduser(), body=load_body(smpl))
     avatar = load_avatar(path, cap, smpl=smpl)
     model = avatar.model
     textures = model.pose_feature.textures.permute(0, 2, 3, 1).numpy()
-    return ViewerData(avatar.capture.body, model.pose_feature.vocab, textures, model,
-                      avatar.capture, avatar.settings,
-                      f"checkpoint {path} (step {avatar.step}, capture {avatar.capture.root})")
+    return ViewerData(
+        avatar.capture.body,
+        model.pose_feature.vocab,
+        textures,
+        model,
+        avatar.capture,
+        avatar.settings,
+        f"checkpoint {path} (step {avatar.step}, capture {avatar.capture.root})",
+    )
 
 
-def load_viewer_data(source: str | None, smpl: str | None = None,
-                     capture: str | None = None) -> ViewerData:
+def load_viewer_data(source: str | None, smpl: str | None = None, capture: str | None = None) -> ViewerData:
     """Load what ``texvocab view [SOURCE]`` shows.
 
     Args:
@@ -98,8 +104,10 @@ def load_viewer_data(source: str | None, smpl: str | None = None,
         return _capture_data(path, smpl)
     if path.is_file():
         return _checkpoint_data(path, smpl, capture)
-    raise TexvocabError(f"{source}: no such file or folder; expected a checkpoint .pt written "
-                        "by 'texvocab train' or a capture folder")
+    raise TexvocabError(
+        f"{source}: no such file or folder; expected a checkpoint .pt written "
+        "by 'texvocab train' or a capture folder"
+    )
 
 
 PART_NAMES: tuple[str, ...] = tuple(BODY_PARTS)
@@ -130,8 +138,7 @@ class ViewerState:
         self._poser = None
 
     # -- editing ------------------------------------------------------------------------
-    def _changed(self, pose: np.ndarray, trans: np.ndarray | None = None,
-                 change: str = "pose set") -> bool:
+    def _changed(self, pose: np.ndarray, trans: np.ndarray | None = None, change: str = "pose set") -> bool:
         trans = self.trans if trans is None else np.asarray(trans, np.float64).reshape(3)
         if np.array_equal(pose, self.pose) and np.array_equal(trans, self.trans):
             return False
@@ -209,8 +216,7 @@ class ViewerState:
             raise TexvocabError(f"part {part!r}: the vocabulary has parts {vocab.part_names}")
         keys = vocab.key_quats[p]
         if not 0 <= key_index < len(keys):
-            raise TexvocabError(f"key {key_index}: part {vocab.part_names[p]} has keys "
-                                f"0..{len(keys) - 1}")
+            raise TexvocabError(f"key {key_index}: part {vocab.part_names[p]} has keys 0..{len(keys) - 1}")
         return vocab.part_joints[p], quat_to_rotvec(keys[key_index]).double().numpy()
 
     def set_part_to_key(self, part: str | int, key_index: int) -> bool:
@@ -260,11 +266,11 @@ class ViewerState:
             return None
         if self._vocab_texture is None:
             self._vocab_texture = VocabTexture(self.data.body, self.data.vocab, self.data.textures)
-        return self._cached("texture", lambda: self._vocab_texture.blend(self.pose,
-                                                                         self.query()))
+        return self._cached("texture", lambda: self._vocab_texture.blend(self.pose, self.query()))
 
     def posed(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertices (V, 3), joints (24, 3)) float32 of the current pose, world space."""
+
         def make():
             if self._poser is None:
                 self._poser = BodyPoser(self.data.body)

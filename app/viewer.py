@@ -3,6 +3,7 @@ edited pose (:class:`texvocab_viewer.state.ViewerState`), the camera (orbit, or 
 preset; optionally following the root), scene options, GL resources, the neural render
 worker, screenshots and exports, and the File menu's dialogs. The window around it is
 :mod:`texvocab_viewer.window`."""
+
 from __future__ import annotations
 
 import threading
@@ -46,8 +47,14 @@ class Viewer:
     options, GL resources (made in :meth:`post_init`, inside the window's context) and
     the neural render worker."""
 
-    def __init__(self, data, size: tuple[int, int] = (1280, 800), neural_threads: int = 1,
-                 neural_nice: int = NEURAL_NICE, neural_worker: str = "process"):
+    def __init__(
+        self,
+        data,
+        size: tuple[int, int] = (1280, 800),
+        neural_threads: int = 1,
+        neural_nice: int = NEURAL_NICE,
+        neural_worker: str = "process",
+    ):
         self.data, self.size = data, size
         self.state = ViewerState(data)
         self.camera = OrbitCamera()
@@ -98,9 +105,15 @@ class Viewer:
         self.thumbs = ThumbnailCache(self.ctx, self.data.textures)
         if self.data.model is not None:
             self.start_neural_worker()
-            self.neural = NeuralView(self.ctx, self.data.model, march_settings(self.data.settings),
-                                     self.neural_threads, self.neural_nice,
-                                     settings=self.data.settings, worker=self._worker)
+            self.neural = NeuralView(
+                self.ctx,
+                self.data.model,
+                march_settings(self.data.settings),
+                self.neural_threads,
+                self.neural_nice,
+                settings=self.data.settings,
+                worker=self._worker,
+            )
             if self.neural_resolution:
                 self.neural.resolution = int(self.neural_resolution)
             if self.neural_preview_wait is not None:
@@ -111,9 +124,15 @@ class Viewer:
         calls this before it opens, so a render process starts up (torch, the model)
         while the window does."""
         if self._worker is None and self.data.model is not None:
-            self._worker = start_worker(self.neural_worker, self.data.model,
-                                        march_settings(self.data.settings), self.neural_threads,
-                                        self.neural_nice, ui_waker(), self.neural_processes)
+            self._worker = start_worker(
+                self.neural_worker,
+                self.data.model,
+                march_settings(self.data.settings),
+                self.neural_threads,
+                self.neural_nice,
+                ui_waker(),
+                self.neural_processes,
+            )
 
     def before_exit(self) -> None:
         if self.neural is not None:
@@ -195,8 +214,16 @@ class Viewer:
         if self.neural is None:
             return
         playing = self.sequence is not None and self.sequence.playing
-        self.neural.update(self.state, self.camera, self.neural_aspect(), force,
-                           self.pose_label(), playing, self.options.background, poll)
+        self.neural.update(
+            self.state,
+            self.camera,
+            self.neural_aspect(),
+            force,
+            self.pose_label(),
+            playing,
+            self.options.background,
+            poll,
+        )
 
     # -- cameras ------------------------------------------------------------------------
     def root_position(self) -> np.ndarray:
@@ -285,8 +312,16 @@ class Viewer:
         if self.scene is None:
             return None
         o = self.options
-        key = (self.state.version, camera_key(self.camera), tuple(size), o.textured,
-               o.part_colors, o.novelty, o.wireframe, o.skeleton)
+        key = (
+            self.state.version,
+            camera_key(self.camera),
+            tuple(size),
+            o.textured,
+            o.part_colors,
+            o.novelty,
+            o.wireframe,
+            o.skeleton,
+        )
         if key != self._scene_key:
             self._scene_tex = self.scene.render(self.state, self.camera, size, o)
             self.ctx.screen.use()
@@ -320,15 +355,23 @@ class Viewer:
         if self.neural is not None:
             model = self.data.model
             march = self.neural.march or march_settings(self.data.settings)
-        self.export = Export(model, march, camera, np.asarray(poses), np.asarray(trans), stem,
-                             fps, image, background=self.options.background)
+        self.export = Export(
+            model,
+            march,
+            camera,
+            np.asarray(poses),
+            np.asarray(trans),
+            stem,
+            fps,
+            image,
+            background=self.options.background,
+        )
 
     def screenshot(self) -> None:
         """The Screenshot button and F12: the 3D view and the neural render of the current
         pose, written under exports/shot*/ (never replacing a file)."""
         if self.export is None or not self.export.running:
-            self.start_export(self.state.pose[None], self.state.trans[None], "shot", 1.0,
-                              view3d=True)
+            self.start_export(self.state.pose[None], self.state.trans[None], "shot", 1.0, view3d=True)
 
     def view_aspect(self) -> float:
         w, h = self.view_size
@@ -380,6 +423,7 @@ class Viewer:
     def open_source(self, path: str) -> None:
         """Load a checkpoint or capture in the background; when it loaded, the window
         closes and reopens on it (the pose sequence stays); an error stays in the caption."""
+
         def load() -> None:
             try:
                 self.reopen = load_viewer_data(path, self.smpl)
@@ -398,10 +442,14 @@ class Viewer:
 
     def neural_absent_reason(self) -> str:
         if self.data.capture is None:
-            return ("No neural render: no checkpoint loaded (only the body). Start the viewer "
-                    "with a trained avatar: texvocab view RUN/checkpoint.pt")
-        return (f"No neural render: {self.data.source} is a capture, not a trained avatar. "
-                "Train one (texvocab train CAPTURE --out RUN) and open RUN/checkpoint.pt.")
+            return (
+                "No neural render: no checkpoint loaded (only the body). Start the viewer "
+                "with a trained avatar: texvocab view RUN/checkpoint.pt"
+            )
+        return (
+            f"No neural render: {self.data.source} is a capture, not a trained avatar. "
+            "Train one (texvocab train CAPTURE --out RUN) and open RUN/checkpoint.pt."
+        )
 
 
 def follow_cameras(camera, trans: np.ndarray, now: np.ndarray) -> list:

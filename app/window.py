@@ -6,6 +6,7 @@ in this process): Pose (left), 3D view and Neural render (centre), Vocabulary (r
 (:mod:`texvocab_viewer.launch`). A test or benchmark drives it with a :data:`Script`
 (:mod:`texvocab_viewer.testing`), which the window knows only by this interface.
 """
+
 from __future__ import annotations
 
 import os
@@ -63,8 +64,10 @@ def _choose_gl_platform() -> None:
 
 def require_display() -> None:
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise TexvocabError("no display ($DISPLAY is not set): use 'texvocab shot' for headless "
-                            "images, or run the viewer under xvfb-run")
+        raise TexvocabError(
+            "no display ($DISPLAY is not set): use 'texvocab shot' for headless "
+            "images, or run the viewer under xvfb-run"
+        )
 
 
 def _cheap_backgrounds(rp, default_style):
@@ -73,12 +76,14 @@ def _cheap_backgrounds(rp, default_style):
     Under Mesa llvmpipe every full-window blended layer costs CPU (measured: the viewer's
     frame went from 55 to 35 ms of rasterisation on one core); the docked panels tile the
     window, so their backgrounds were one such layer on top of the clear."""
+
     def setup() -> None:
         default_style()
         style = imgui.get_style()
         c = style.color_(imgui.Col_.window_bg)
         rp.imgui_window_params.background_color = imgui.ImVec4(c.x, c.y, c.z, 1.0)
         style.set_color_(imgui.Col_.window_bg, imgui.ImVec4(c.x, c.y, c.z, 0.0))
+
     return setup
 
 
@@ -87,8 +92,9 @@ def _runner_params(viewer: Viewer, title: str):
     rp.app_window_params.window_title = title
     rp.app_window_params.window_geometry.size = viewer.size
     rp.app_window_params.restore_previous_geometry = False
-    rp.imgui_window_params.default_imgui_window_type = \
+    rp.imgui_window_params.default_imgui_window_type = (
         hello_imgui.DefaultImGuiWindowType.provide_full_screen_dock_space
+    )
     rp.imgui_window_params.enable_viewports = False
     rp.renderer_backend_options.open_gl_options.anti_aliasing_samples = WINDOW_MSAA_SAMPLES
     rp.ini_disable = True
@@ -102,8 +108,10 @@ def _runner_params(viewer: Viewer, title: str):
     windows = []
     for panel in PANELS:
         win = hello_imgui.DockableWindow(
-            panel.title, panel.space_for(has_model),
-            (lambda f=panel.draw, name=panel.title: viewer.draw_panel(name, f)))
+            panel.title,
+            panel.space_for(has_model),
+            (lambda f=panel.draw, name=panel.title: viewer.draw_panel(name, f)),
+        )
         win.can_be_closed = False
         windows.append(win)
     rp.docking_params.dockable_windows = windows
@@ -116,12 +124,20 @@ def _runner_params(viewer: Viewer, title: str):
     return rp
 
 
-def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
-               script: Script | None = None, neural_resolution: int | None = None,
-               neural_threads: int = 1, poses: str | None = None,
-               neural_nice: int = NEURAL_NICE, capture: str | None = None,
-               neural_worker: str = "process", neural_processes: int = NEURAL_PROCESSES,
-               neural_preview_wait_ms: float = NEURAL_PREVIEW_WAIT_MS) -> int:
+def run_viewer(
+    source: str | None,
+    smpl: str | None = None,
+    size=(1280, 800),
+    script: Script | None = None,
+    neural_resolution: int | None = None,
+    neural_threads: int = 1,
+    poses: str | None = None,
+    neural_nice: int = NEURAL_NICE,
+    capture: str | None = None,
+    neural_worker: str = "process",
+    neural_processes: int = NEURAL_PROCESSES,
+    neural_preview_wait_ms: float = NEURAL_PREVIEW_WAIT_MS,
+) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
     0). ``script``: a scripted run of the window (tests, benchmarks; its exit code is
@@ -134,8 +150,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
     budget_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
     data = load_viewer_data(source, smpl, capture)
     while True:
-        viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice,
-                        neural_worker)
+        viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice, neural_worker)
         viewer.smpl = smpl
         viewer.neural_processes = int(neural_processes)
         viewer.neural_preview_wait = float(neural_preview_wait_ms) / 1000
@@ -152,8 +167,7 @@ def run_viewer(source: str | None, smpl: str | None = None, size=(1280, 800),
         run = None if script is None else script(viewer, rp)
         immapp.run(rp)
         if run is not None:
-            rc, script = run.finish(hello_imgui.final_app_window_screenshot(),
-                                    viewer.reopen is not None)
+            rc, script = run.finish(hello_imgui.final_app_window_screenshot(), viewer.reopen is not None)
             if script is None:
                 return rc
         elif viewer.reopen is None:

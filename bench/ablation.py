@@ -31,6 +31,7 @@ its checkpoint and result.json; finished runs are skipped, unfinished ones resum
 ``--jobs N`` trains N runs at once, each on one thread. Writes OUT/<groups>.md (tables)
 and OUT/<group>_side_by_side.png (truth | one column per variant, first seed).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,17 +49,30 @@ METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
 SET = "novel_poses"
 # the earlier training rays (marched rest, 5-sample band, shell grid voxel 1 cm)
 EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
-DEFAULT_BASE = ["encoder=pyramid", "perceptual=off", "weighting=paper", "view_weighting=mean",
-                "train_guide=shell", "train_coarse_samples=none"] + EARLIER_RAYS
+DEFAULT_BASE = [
+    "encoder=pyramid",
+    "perceptual=off",
+    "weighting=paper",
+    "view_weighting=mean",
+    "train_guide=shell",
+    "train_coarse_samples=none",
+] + EARLIER_RAYS
 # base settings that name no run folder: every run before the setting existed had them
 UNNAMED = {"train_guide=shell", "train_coarse_samples=none"} | set(EARLIER_RAYS)
 GROUPS: dict[str, dict[str, list[str]]] = {
-    "strategies": {"part": [], "joint": ["strategy=joint"], "global": ["strategy=global"],
-                   "none": ["strategy=none"]},
-    "encoders": {"pyramid": [], "small": ["encoder=small"], "inception": ["encoder=inception"],
-                 "resnet34-scratch": ["encoder=resnet34-scratch"]},
-    "perceptual": {"off": [], "inception": ["perceptual=inception"],
-                   "lpips-vgg": ["perceptual=lpips-vgg"]},
+    "strategies": {
+        "part": [],
+        "joint": ["strategy=joint"],
+        "global": ["strategy=global"],
+        "none": ["strategy=none"],
+    },
+    "encoders": {
+        "pyramid": [],
+        "small": ["encoder=small"],
+        "inception": ["encoder=inception"],
+        "resnet34-scratch": ["encoder=resnet34-scratch"],
+    },
+    "perceptual": {"off": [], "inception": ["perceptual=inception"], "lpips-vgg": ["perceptual=lpips-vgg"]},
     "weighting": {"paper": [], "inverse": ["weighting=inverse"]},
     "views": {"mean": [], "cosine": ["view_weighting=cosine"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
@@ -69,16 +83,26 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # everywhere (all); band rays of 5 samples, or from the probe and the Newton point
     # (run with --base and no items: today's defaults, the reference; the
     # others at the earlier shell grid voxel, 1 cm)
-    "train_rays": {"defaults (newton band, residual hits, shell voxel 0.015)": []} | {
-        k: v + ["train_shell_voxel=0.01"] for k, v in {
+    "train_rays": {"defaults (newton band, residual hits, shell voxel 0.015)": []}
+    | {
+        k: v + ["train_shell_voxel=0.01"]
+        for k, v in {
             "marched (the earlier default)": ["train_residual=off", "train_band_newton=false"],
             "newton band": ["train_residual=off"],
             "newton band, residual hits": ["train_residual=hits"],
             "newton band, residual all": ["train_residual=all"],
-            "5-sample band, residual all": ["train_residual=all",
-                                            "train_band_newton=false"]}.items()},
-    "keys": {"M20 K3": [], "M5": ["num_keys=5"], "M10": ["num_keys=10"], "M40": ["num_keys=40"],
-             "K1": ["k=1"], "K5": ["k=5"], "adaptive": ["min_key_distance=0.05"]},
+            "5-sample band, residual all": ["train_residual=all", "train_band_newton=false"],
+        }.items()
+    },
+    "keys": {
+        "M20 K3": [],
+        "M5": ["num_keys=5"],
+        "M10": ["num_keys=10"],
+        "M40": ["num_keys=40"],
+        "K1": ["k=1"],
+        "K5": ["k=5"],
+        "adaptive": ["min_key_distance=0.05"],
+    },
 }
 
 
@@ -113,8 +137,8 @@ def run_settings(job: dict):
 
     pre = preset_overrides(job["preset"], render_only=True) if job["preset"] else []
     trained = Settings(train=TrainSettings(iterations=job["iterations"])).with_overrides(
-        (pre if job.get("train_with_preset") else []) + job["overrides"]
-        + [f"seed={job['seed']}"])
+        (pre if job.get("train_with_preset") else []) + job["overrides"] + [f"seed={job['seed']}"]
+    )
     return trained, render_overrides(trained, job["preset"], [])
 
 
@@ -148,25 +172,43 @@ def train_and_evaluate(job: dict) -> dict:
     step_s = (time.perf_counter() - t0) / max(1, trainer.step - steps0)
     trainer.model.eval()
     sets = {SET: build_sets(cap, settings, job["per_set"], generated=())[SET]}
-    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(shown),
-                                          grid_rows=job["grid_rows"], progress=False)
-    write_report(run_dir / "eval", table, records, grids,
-                 {"checkpoint": str(trainer.checkpoint_path), "step": trainer.step,
-                  "capture": str(job["root"]), "settings": settings.to_dict()})
+    table, records, grids = evaluate_sets(
+        trainer.model, sets, march_settings(shown), grid_rows=job["grid_rows"], progress=False
+    )
+    write_report(
+        run_dir / "eval",
+        table,
+        records,
+        grids,
+        {
+            "checkpoint": str(trainer.checkpoint_path),
+            "step": trainer.step,
+            "capture": str(job["root"]),
+            "settings": settings.to_dict(),
+        },
+    )
     rows = grids[SET]
-    np.savez_compressed(run_dir / "grid.npz", truth=np.stack([r[0] for r in rows]),
-                        render=np.stack([r[1] for r in rows]))
-    result = {"run": run_dir.parent.name, "seed": job["seed"], "steps": trainer.step,
-              "seconds_per_step": step_s, "threads": job["threads"],
-              "kid": table[SET].get("kid"),
-              # training PSNR of each step's batch (this session's steps; resumed runs
-              # have only the steps after the resume)
-              "train_psnr": [r["psnr"] for r in logs] if steps0 == 0 else None,
-              "per_image": {m: [r.get(m) for r in records if r["set"] == SET] for m in METRICS}}
+    np.savez_compressed(
+        run_dir / "grid.npz", truth=np.stack([r[0] for r in rows]), render=np.stack([r[1] for r in rows])
+    )
+    result = {
+        "run": run_dir.parent.name,
+        "seed": job["seed"],
+        "steps": trainer.step,
+        "seconds_per_step": step_s,
+        "threads": job["threads"],
+        "kid": table[SET].get("kid"),
+        # training PSNR of each step's batch (this session's steps; resumed runs
+        # have only the steps after the resume)
+        "train_psnr": [r["psnr"] for r in logs] if steps0 == 0 else None,
+        "per_image": {m: [r.get(m) for r in records if r["set"] == SET] for m in METRICS},
+    }
     blob = json.dumps(result)
     atomic_write_bytes(done, lambda t: Path(t).write_text(blob))
-    print(f"{run_dir}: {trainer.step} steps, {step_s:.2f} s/step, PSNR "
-          f"{table[SET]['psnr_bbox']:.2f} dB", flush=True)
+    print(
+        f"{run_dir}: {trainer.step} steps, {step_s:.2f} s/step, PSNR {table[SET]['psnr_bbox']:.2f} dB",
+        flush=True,
+    )
     return result
 
 
@@ -181,69 +223,110 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
     if not labels:
         return []
     seeds = sorted({k[1] for k in results})
-    by = {(lab, s): {m: _mean(results[(variants[lab], s)]["per_image"][m]) for m in METRICS}
-          | {"kid": results[(variants[lab], s)].get("kid"),
-             "sps": results[(variants[lab], s)]["seconds_per_step"]}
-          for lab in labels for s in seeds if (variants[lab], s) in results}
+    by = {
+        (lab, s): {m: _mean(results[(variants[lab], s)]["per_image"][m]) for m in METRICS}
+        | {
+            "kid": results[(variants[lab], s)].get("kid"),
+            "sps": results[(variants[lab], s)]["seconds_per_step"],
+        }
+        for lab in labels
+        for s in seeds
+        if (variants[lab], s) in results
+    }
     first = results[next(k for k in results if k[0] == variants[labels[0]])]
     steps, n_img = first["steps"], len(first["per_image"]["psnr_bbox"])
     cols = METRICS + ("kid", "sps")
-    lines = [f"## {group}: {steps} steps per run, seeds {', '.join(map(str, seeds))}; "
-             f"{n_img} novel-pose images per run", "",
-             "Mean over seeds of each run's mean (spread over seeds = max - min); `kid` over "
-             "the run's images against the truth; `sps` = training seconds per step.", "",
-             "| variant | " + " | ".join(cols) + " | per seed PSNR |", "|---" * (len(cols) + 2) + "|"]
+    lines = [
+        f"## {group}: {steps} steps per run, seeds {', '.join(map(str, seeds))}; "
+        f"{n_img} novel-pose images per run",
+        "",
+        "Mean over seeds of each run's mean (spread over seeds = max - min); `kid` over "
+        "the run's images against the truth; `sps` = training seconds per step.",
+        "",
+        "| variant | " + " | ".join(cols) + " | per seed PSNR |",
+        "|---" * (len(cols) + 2) + "|",
+    ]
     for lab in labels:
         cells = []
         for m in cols:
             v = [by[(lab, s)][m] for s in seeds if (lab, s) in by]
-            cells.append("n/a" if not v or any(x is None for x in v) else
-                         f"{np.mean(v):.4f} ({max(v) - min(v):.4f})")
+            cells.append(
+                "n/a" if not v or any(x is None for x in v) else f"{np.mean(v):.4f} ({max(v) - min(v):.4f})"
+            )
         per_seed = ", ".join(f"{by[(lab, s)]['psnr_bbox']:.2f}" for s in seeds if (lab, s) in by)
         lines.append(f"| {lab} | " + " | ".join(cells) + f" | {per_seed} |")
     ref = labels[0]
     others = labels[1:]
     if others and len(seeds) > 1:
-        lines += ["", f"Paired, other - {ref} (same seed, same images): mean [min, max] over "
-                  "seeds; then per image over all seeds: mean ± standard error and the share "
-                  f"of pairs where the other is better. A range containing 0 is not resolved.",
-                  "", f"| other - {ref} | " + " | ".join(METRICS) + " | d PSNR per image | better |",
-                  "|---" * (len(METRICS) + 3) + "|"]
+        lines += [
+            "",
+            f"Paired, other - {ref} (same seed, same images): mean [min, max] over "
+            "seeds; then per image over all seeds: mean ± standard error and the share "
+            f"of pairs where the other is better. A range containing 0 is not resolved.",
+            "",
+            f"| other - {ref} | " + " | ".join(METRICS) + " | d PSNR per image | better |",
+            "|---" * (len(METRICS) + 3) + "|",
+        ]
         for lab in others:
             pairs = [s for s in seeds if (lab, s) in by and (ref, s) in by]
             cells = []
             for m in METRICS:
-                d = [by[(lab, s)][m] - by[(ref, s)][m] for s in pairs
-                     if by[(lab, s)][m] is not None and by[(ref, s)][m] is not None]
+                d = [
+                    by[(lab, s)][m] - by[(ref, s)][m]
+                    for s in pairs
+                    if by[(lab, s)][m] is not None and by[(ref, s)][m] is not None
+                ]
                 cells.append("n/a" if not d else f"{np.mean(d):+.4f} [{min(d):+.4f}, {max(d):+.4f}]")
-            d = np.concatenate([np.subtract(results[(variants[lab], s)]["per_image"]["psnr_bbox"],
-                                            results[(variants[ref], s)]["per_image"]["psnr_bbox"])
-                                for s in pairs]) if pairs else np.zeros(0)
-            img = (f"{d.mean():+.3f} ± {d.std(ddof=1) / np.sqrt(len(d)):.3f} (n = {len(d)})"
-                   if len(d) > 1 else "n/a")
+            d = (
+                np.concatenate(
+                    [
+                        np.subtract(
+                            results[(variants[lab], s)]["per_image"]["psnr_bbox"],
+                            results[(variants[ref], s)]["per_image"]["psnr_bbox"],
+                        )
+                        for s in pairs
+                    ]
+                )
+                if pairs
+                else np.zeros(0)
+            )
+            img = (
+                f"{d.mean():+.3f} ± {d.std(ddof=1) / np.sqrt(len(d)):.3f} (n = {len(d)})"
+                if len(d) > 1
+                else "n/a"
+            )
             better = f"{(d > 0).mean():.0%}" if len(d) else "n/a"
             lines.append(f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} |")
     return lines + curve_report(labels, variants, results, seeds) + [""]
 
 
-def curve_report(labels: list[str], variants: dict[str, str], results: dict, seeds: list[int],
-                 window: int = 100) -> list[str]:
+def curve_report(
+    labels: list[str], variants: dict[str, str], results: dict, seeds: list[int], window: int = 100
+) -> list[str]:
     """Markdown table of the training PSNR (each step's batch) per window of ``window``
     steps: per variant the mean over seeds (spread = max - min over seeds), and each
     variant minus the reference, paired by seed (mean [min, max]). Empty unless every run
     of the group recorded its curve."""
-    curves = {(lab, s): results[(variants[lab], s)].get("train_psnr")
-              for lab in labels for s in seeds if (variants[lab], s) in results}
+    curves = {
+        (lab, s): results[(variants[lab], s)].get("train_psnr")
+        for lab in labels
+        for s in seeds
+        if (variants[lab], s) in results
+    }
     if not curves or any(c is None for c in curves.values()):
         return []
     n = min(len(c) for c in curves.values())
     edges = list(range(0, n, window))
-    win = {k: [float(np.mean(c[a:a + window])) for a in edges] for k, c in curves.items()}
+    win = {k: [float(np.mean(c[a : a + window])) for a in edges] for k, c in curves.items()}
     ref = labels[0]
-    lines = ["", f"Training PSNR (dB, each step's batch) per {window} steps: mean over seeds "
-             f"(spread); then minus {ref}, paired by seed: mean [min, max].", "",
-             "| variant | " + " | ".join(f"{a}-{min(a + window, n)}" for a in edges) + " |",
-             "|---" * (len(edges) + 1) + "|"]
+    lines = [
+        "",
+        f"Training PSNR (dB, each step's batch) per {window} steps: mean over seeds "
+        f"(spread); then minus {ref}, paired by seed: mean [min, max].",
+        "",
+        "| variant | " + " | ".join(f"{a}-{min(a + window, n)}" for a in edges) + " |",
+        "|---" * (len(edges) + 1) + "|",
+    ]
     for lab in labels:
         cells = []
         for i in range(len(edges)):
@@ -253,8 +336,7 @@ def curve_report(labels: list[str], variants: dict[str, str], results: dict, see
     for lab in labels[1:]:
         cells = []
         for i in range(len(edges)):
-            d = [win[(lab, s)][i] - win[(ref, s)][i] for s in seeds
-                 if (lab, s) in win and (ref, s) in win]
+            d = [win[(lab, s)][i] - win[(ref, s)][i] for s in seeds if (lab, s) in win and (ref, s) in win]
             cells.append(f"{np.mean(d):+.2f} [{min(d):+.2f}, {max(d):+.2f}]" if d else "n/a")
         lines.append(f"| {lab} - {ref} | " + " | ".join(cells) + " |")
     return lines
@@ -268,9 +350,10 @@ def side_by_side(group: str, variants: dict[str, str], seed: int, out: Path) -> 
         return None
     truth = next(iter(grids.values()))["truth"]
     rows = [[truth[i]] + [g["render"][i] for g in grids.values()] for i in range(len(truth))]
-    return save_png(out / f"{group}_side_by_side.png",
-                    contact_sheet(rows, col_labels=["truth"] + [f"{lab} (seed {seed})"
-                                                                for lab in grids]))
+    return save_png(
+        out / f"{group}_side_by_side.png",
+        contact_sheet(rows, col_labels=["truth"] + [f"{lab} (seed {seed})" for lab in grids]),
+    )
 
 
 def main(argv=None) -> int:
@@ -279,20 +362,28 @@ def main(argv=None) -> int:
     ap.add_argument("--capture", default=None, help="capture folder (default: synthesise)")
     ap.add_argument("--iterations", type=int, default=500, help="training steps per run")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--only", nargs="+", default=None, metavar="VARIANT",
-                    help="run only these variants of the groups (the reference is always run)")
-    ap.add_argument("--per-set", type=int, default=10,
-                    help="novel frames evaluated (x every evaluation view); 0: all")
+    ap.add_argument(
+        "--only",
+        nargs="+",
+        default=None,
+        metavar="VARIANT",
+        help="run only these variants of the groups (the reference is always run)",
+    )
+    ap.add_argument(
+        "--per-set", type=int, default=10, help="novel frames evaluated (x every evaluation view); 0: all"
+    )
     ap.add_argument("--grid-rows", type=int, default=3)
     ap.add_argument("--preset", choices=("fast", "balanced", "quality"), default="fast")
-    ap.add_argument("--jobs", type=int, default=1, help="runs trained at once (1 thread each "
-                                                        "when > 1)")
+    ap.add_argument("--jobs", type=int, default=1, help="runs trained at once (1 thread each when > 1)")
     ap.add_argument("--base", nargs="*", default=DEFAULT_BASE, metavar="KEY=VALUE")
     ap.add_argument("--out", default="out/bench/ablation")
     ap.add_argument("--report-only", action="store_true", help="tables from finished runs")
-    ap.add_argument("--train-with-preset", action="store_true",
-                    help="train with the preset's render knobs too, as earlier runs "
-                         "did (to add seeds to their groups comparably)")
+    ap.add_argument(
+        "--train-with-preset",
+        action="store_true",
+        help="train with the preset's render knobs too, as earlier runs "
+        "did (to add seeds to their groups comparably)",
+    )
     args = ap.parse_args(argv)
     out = Path(args.out)
     root = Path(args.capture) if args.capture else make_capture(out)
@@ -300,20 +391,31 @@ def main(argv=None) -> int:
     jobs, seen = [], set()
     for g in args.groups:
         ref = next(iter(GROUPS[g]))
-        plan[g] = {lab: run_name(args.base, extra) for lab, extra in GROUPS[g].items()
-                   if args.only is None or lab in args.only or lab == ref}
+        plan[g] = {
+            lab: run_name(args.base, extra)
+            for lab, extra in GROUPS[g].items()
+            if args.only is None or lab in args.only or lab == ref
+        }
         for lab, extra in GROUPS[g].items():
             run = plan[g].get(lab)
             for seed in args.seeds:
                 if run is None or (run, seed) in seen:
                     continue
                 seen.add((run, seed))
-                jobs.append({"root": str(root), "run_dir": str(out / "runs" / run / f"seed{seed}"),
-                             "overrides": args.base + extra, "seed": seed,
-                             "iterations": args.iterations, "per_set": args.per_set or None,
-                             "preset": args.preset, "grid_rows": args.grid_rows,
-                             "train_with_preset": args.train_with_preset,
-                             "threads": 1 if args.jobs > 1 else 2})
+                jobs.append(
+                    {
+                        "root": str(root),
+                        "run_dir": str(out / "runs" / run / f"seed{seed}"),
+                        "overrides": args.base + extra,
+                        "seed": seed,
+                        "iterations": args.iterations,
+                        "per_set": args.per_set or None,
+                        "preset": args.preset,
+                        "grid_rows": args.grid_rows,
+                        "train_with_preset": args.train_with_preset,
+                        "threads": 1 if args.jobs > 1 else 2,
+                    }
+                )
     jobs.sort(key=lambda j: j["seed"])  # every variant's first seed before any second one
     if args.report_only:
         results = {}
@@ -324,12 +426,14 @@ def main(argv=None) -> int:
     else:
         # spawn, not fork: a worker forked after the capture's synthesis (pyrender, torch
         # threads) hung without using any CPU
-        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) \
-                as pool:
+        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             done = list(pool.map(train_and_evaluate, jobs))
         results = {(r["run"], r["seed"]): r for r in done}
-    lines = [f"# Ablations on novel poses ({root}; base: {' '.join(args.base) or 'defaults'}; "
-             f"preset {args.preset})", ""]
+    lines = [
+        f"# Ablations on novel poses ({root}; base: {' '.join(args.base) or 'defaults'}; "
+        f"preset {args.preset})",
+        "",
+    ]
     for g in args.groups:
         lines += group_report(g, plan[g], results)
         side_by_side(g, plan[g], args.seeds[0], out)

@@ -11,6 +11,7 @@ If zeroing the feature costs little, the field decodes appearance from its other
 change its novel-pose quality much; if fixed keys cost as much as zeroing, the feature
 matters only through pose-specific key selection.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,10 +34,15 @@ def render(model, item, march, variant: str, fixed) -> np.ndarray:
             ctx.features = ctx.features.zeros_like()
         elif variant == "keys of a fixed pose":
             ctx.frames, ctx.part_coef, ctx.features = fixed.frames, fixed.part_coef, fixed.features
-        shell = ShellGeometry.build(ctx.vertices, model.body.faces, march.shell_width,
-                                    march.shell_voxel, march.shell_exact, index=ctx.index)
-        out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
-                           shell=shell)
+        shell = ShellGeometry.build(
+            ctx.vertices,
+            model.body.faces,
+            march.shell_width,
+            march.shell_voxel,
+            march.shell_exact,
+            index=ctx.index,
+        )
+        out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march, shell=shell)
     return out.rgb.numpy()
 
 
@@ -54,8 +60,11 @@ def main(argv=None) -> int:
     from texvocab.pipeline.evaluate import build_sets
     from texvocab.pipeline.settings import render_overrides
 
-    print("| checkpoint | strategy | images | " + " | ".join(f"PSNR {v}" for v in VARIANTS)
-          + " | zeroed - trained | fixed - trained |")
+    print(
+        "| checkpoint | strategy | images | "
+        + " | ".join(f"PSNR {v}" for v in VARIANTS)
+        + " | zeroed - trained | fixed - trained |"
+    )
     print("|---" * (5 + len(VARIANTS)) + "|")
     for ckpt in args.checkpoints:
         av = load_avatar(ckpt, progress=False)
@@ -75,8 +84,11 @@ def main(argv=None) -> int:
         for v in VARIANTS[1:]:
             d = np.array(psnr[v]) - base
             diffs.append(f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f}")
-        print(f"| {Path(ckpt).parent.name}/{Path(ckpt).parent.parent.name} | {av.settings.vocab.strategy} | "
-              f"{len(items)} | " + " | ".join(cells + diffs) + " |", flush=True)
+        print(
+            f"| {Path(ckpt).parent.name}/{Path(ckpt).parent.parent.name} | {av.settings.vocab.strategy} | "
+            f"{len(items)} | " + " | ".join(cells + diffs) + " |",
+            flush=True,
+        )
     return 0
 
 

@@ -25,6 +25,7 @@ The 8-bit PSNR column (images quantised to 1/255, as written to a file) is an ex
 70-90 dB both marchers are far below one quantisation step, which is why the float
 PSNR, not the 8-bit one, is compared.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,8 +41,7 @@ from texvocab.render import MarchSettings, mesh_bbox, ray_box, render_image, ren
 from texvocab.render.analytic import MeshSDFField
 
 # the marcher configuration the 10x / 0.3 dB target is checked on (see TARGET)
-HEADLINE = ("shell 13+8, δ = 2.5 cm",
-            MarchSettings.from_flat(shell_width=0.025, coarse_samples=13))
+HEADLINE = ("shell 13+8, δ = 2.5 cm", MarchSettings.from_flat(shell_width=0.025, coarse_samples=13))
 VARIANTS: list[tuple[str, MarchSettings]] = [
     HEADLINE,
     ("shell 18+8 (default)", MarchSettings()),
@@ -75,8 +75,10 @@ def psnr(a: torch.Tensor, b: torch.Tensor, box: tuple[slice, slice]) -> float:
 def psnr8(a: torch.Tensor, b: torch.Tensor, box: tuple[slice, slice]) -> float:
     """PSNR (dB) of the two images after 8-bit quantisation (round(255 x) / 255): what
     an image file would show. An extra column; the float PSNR is the comparison."""
+
     def q(x):
         return torch.round(x.clamp(0, 1) * 255) / 255
+
     return psnr(q(a), q(b), box)
 
 
@@ -114,13 +116,16 @@ def bench_pose(name: str, view: int, beta: float, field_voxel: float, repeats: i
     ref, ref_s = best_of(lambda: render_image_uniform(field, camera, lo, hi), repeats)
     rows = [("uniform 64+64 (reference)", ref, ref_s, "")]
     for label, settings in VARIANTS:
-        result, sec = best_of(lambda s=settings: render_image(field, camera, vertices, faces, s),
-                              repeats)
+        result, sec = best_of(lambda s=settings: render_image(field, camera, vertices, faces, s), repeats)
         rows.append((label, result, sec, f" [{result.stats.shell_seconds:.2f}]"))
-    print(f"\n### pose `{name}`, view {view}, {camera.width}x{camera.height}, β = {beta * 1e3:g} mm "
-          f"(ground truth: uniform 256+256, {truth.stats.field_evals:,} evals)\n")
-    print("| method | seconds [shell build] | rays | field evals | ref evals / evals "
-          "| PSNR vs GT (dB) | PSNR vs ref (dB) | 8-bit PSNR vs GT (dB, extra) |")
+    print(
+        f"\n### pose `{name}`, view {view}, {camera.width}x{camera.height}, β = {beta * 1e3:g} mm "
+        f"(ground truth: uniform 256+256, {truth.stats.field_evals:,} evals)\n"
+    )
+    print(
+        "| method | seconds [shell build] | rays | field evals | ref evals / evals "
+        "| PSNR vs GT (dB) | PSNR vs ref (dB) | 8-bit PSNR vs GT (dB, extra) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     ref_evals, ref_psnr = ref.stats.field_evals, psnr(ref.rgb, truth.rgb, box)
     summary = {}
@@ -128,12 +133,18 @@ def bench_pose(name: str, view: int, beta: float, field_voxel: float, repeats: i
         st = result.stats
         gain = psnr(result.rgb, truth.rgb, box)
         delta = "" if result is ref else f" ({gain - ref_psnr:+.2f})"
-        print(f"| {label} | {sec:.3f}{extra} | {st.rays:,} | {st.field_evals:,} "
-              f"| {ref_evals / max(st.field_evals, 1):.1f}x "
-              f"| {gain:.2f}{delta} | {psnr(result.rgb, ref.rgb, box):.2f} "
-              f"| {psnr8(result.rgb, truth.rgb, box):.2f} |")
-        summary[label] = {"evals": st.field_evals, "seconds": sec, "psnr": gain,
-                          "psnr8": psnr8(result.rgb, truth.rgb, box)}
+        print(
+            f"| {label} | {sec:.3f}{extra} | {st.rays:,} | {st.field_evals:,} "
+            f"| {ref_evals / max(st.field_evals, 1):.1f}x "
+            f"| {gain:.2f}{delta} | {psnr(result.rgb, ref.rgb, box):.2f} "
+            f"| {psnr8(result.rgb, truth.rgb, box):.2f} |"
+        )
+        summary[label] = {
+            "evals": st.field_evals,
+            "seconds": sec,
+            "psnr": gain,
+            "psnr8": psnr8(result.rgb, truth.rgb, box),
+        }
     return summary
 
 
@@ -143,10 +154,14 @@ TARGET_RATIO, TARGET_DB = 10.0, 0.3  # >= 10x fewer evaluations at PSNR within 0
 def print_summary(results: list[tuple[str, int, dict]], label: str) -> bool:
     """Side-by-side table of the reference and the shell variant ``label``; True if the
     target holds in every case."""
-    print(f"\n### Target: `{label}` vs uniform 64+64 — >= {TARGET_RATIO:g}x fewer field "
-          f"evaluations at PSNR (float, vs the 256+256 ground truth) within {TARGET_DB} dB\n")
-    print("| pose | view | ref evals | shell evals | ratio | ref s | shell s | ref PSNR | shell PSNR "
-          "| Δ dB | ref 8-bit PSNR (extra) | shell 8-bit PSNR (extra) | target |")
+    print(
+        f"\n### Target: `{label}` vs uniform 64+64 — >= {TARGET_RATIO:g}x fewer field "
+        f"evaluations at PSNR (float, vs the 256+256 ground truth) within {TARGET_DB} dB\n"
+    )
+    print(
+        "| pose | view | ref evals | shell evals | ratio | ref s | shell s | ref PSNR | shell PSNR "
+        "| Δ dB | ref 8-bit PSNR (extra) | shell 8-bit PSNR (extra) | target |"
+    )
     print("|---" * 13 + "|")
     every = True
     for name, view, rows in results:
@@ -154,38 +169,41 @@ def print_summary(results: list[tuple[str, int, dict]], label: str) -> bool:
         ratio, delta = r["evals"] / max(s["evals"], 1), s["psnr"] - r["psnr"]
         ok = ratio >= TARGET_RATIO and delta >= -TARGET_DB
         every &= ok
-        print(f"| {name} | {view} | {r['evals']:,} | {s['evals']:,} | {ratio:.1f}x "
-              f"| {r['seconds']:.2f} | {s['seconds']:.2f} | {r['psnr']:.2f} | {s['psnr']:.2f} "
-              f"| {delta:+.2f} | {r['psnr8']:.2f} | {s['psnr8']:.2f} | {'yes' if ok else 'NO'} |")
+        print(
+            f"| {name} | {view} | {r['evals']:,} | {s['evals']:,} | {ratio:.1f}x "
+            f"| {r['seconds']:.2f} | {s['seconds']:.2f} | {r['psnr']:.2f} | {s['psnr']:.2f} "
+            f"| {delta:+.2f} | {r['psnr8']:.2f} | {s['psnr8']:.2f} | {'yes' if ok else 'NO'} |"
+        )
     return every
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--poses", nargs="+", default=["a_pose", "walk", "squat"])
-    ap.add_argument("--views", type=int, nargs="+", default=[1, 0],
-                    help="synthetic camera indices (0-7 ring, 8-9 raised)")
+    ap.add_argument(
+        "--views", type=int, nargs="+", default=[1, 0], help="synthetic camera indices (0-7 ring, 8-9 raised)"
+    )
     ap.add_argument("--beta", type=float, default=0.003, help="VolSDF β of the field (m)")
     ap.add_argument("--repeats", type=int, default=3, help="timings: best of this many")
-    ap.add_argument("--field-voxel", type=float, default=0.01,
-                    help="SDF grid of the analytic field (m)")
+    ap.add_argument("--field-voxel", type=float, default=0.01, help="SDF grid of the analytic field (m)")
     args = ap.parse_args(argv)
     torch.set_grad_enabled(False)
     print(f"torch threads: {torch.get_num_threads()}")
     results = []
     for name in args.poses:
         for view in args.views:
-            results.append((name, view, bench_pose(name, view, args.beta, args.field_voxel,
-                                                   args.repeats)))
+            results.append((name, view, bench_pose(name, view, args.beta, args.field_voxel, args.repeats)))
     for label in (HEADLINE[0], "shell 18+8 (default)"):
         held = print_summary(results, label)
         print(f"\n`{label}`: target {'holds in every case' if held else 'fails in some case'}.")
     body = default_body()
     out = body.forward(torch.zeros(1, 24, 3), torch.zeros(1, 3))
     rate = field_throughput(MeshSDFField(out.vertices[0], body.faces, voxel=args.field_voxel))
-    print(f"\nAnalytic field: {rate / 1e6:.1f} M evaluations/s on this machine. To estimate a "
-          "frame with a field costing c seconds per evaluation, add c x (field evals) to "
-          "the shell marcher's time (and to the reference's).")
+    print(
+        f"\nAnalytic field: {rate / 1e6:.1f} M evaluations/s on this machine. To estimate a "
+        "frame with a field costing c seconds per evaluation, add c x (field evals) to "
+        "the shell marcher's time (and to the reference's)."
+    )
 
 
 if __name__ == "__main__":

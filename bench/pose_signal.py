@@ -11,6 +11,7 @@ assembled part by part from each part's nearest training pose (the best body-par
 can give; equal to the true pose when every part was seen). A model whose error is far
 larger than the first column cannot show a difference between vocabularies at all.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,29 +37,36 @@ def main(argv=None) -> int:
     novel = list(cap.novel_frames)
     whole = sum(pairwise_part_distance(cap.poses[novel], train, j) for j in BODY_PARTS.values())
     nearest_whole = whole.argmin(1)
-    rows = {"rest-pose folds": [], "nearest training frame's folds": [],
-            "part-wise nearest folds": []}
+    rows = {"rest-pose folds": [], "nearest training frame's folds": [], "part-wise nearest folds": []}
     for i, t in enumerate(novel):
         assembled = np.zeros_like(cap.poses[t])
         for joints in BODY_PARTS.values():
             k = pairwise_part_distance(cap.poses[t][None], train, joints)[0].argmin()
             assembled[list(joints)] = train[k][list(joints)]
-        fold_poses = {"rest-pose folds": np.zeros_like(cap.poses[t]),
-                      "nearest training frame's folds": train[nearest_whole[i]],
-                      "part-wise nearest folds": assembled}
+        fold_poses = {
+            "rest-pose folds": np.zeros_like(cap.poses[t]),
+            "nearest training frame's folds": train[nearest_whole[i]],
+            "part-wise nearest folds": assembled,
+        }
         truth = renderer.render(cap.poses[t], cap.trans[t], [cams[v] for v in args.views])
         for name, fp in fold_poses.items():
-            other = renderer.render(cap.poses[t], cap.trans[t], [cams[v] for v in args.views],
-                                    texture_pose=fp)
+            other = renderer.render(
+                cap.poses[t], cap.trans[t], [cams[v] for v in args.views], texture_pose=fp
+            )
             for (gt, mask), (img, _) in zip(truth, other, strict=True):
                 rows[name].append(metrics_in_bbox(img, gt, mask)["psnr"])
     renderer.close()
     n = len(rows["rest-pose folds"])
-    print(f"# pose-dependent appearance of {args.capture}: {len(novel)} novel frames x views "
-          f"{args.views} = {n} images (PSNR bbox vs truth, mean ± sem)\n")
+    print(
+        f"# pose-dependent appearance of {args.capture}: {len(novel)} novel frames x views "
+        f"{args.views} = {n} images (PSNR bbox vs truth, mean ± sem)\n"
+    )
     print("| " + " | ".join(rows) + " |\n" + "|---" * len(rows) + "|")
-    print("| " + " | ".join(f"{np.mean(v):.2f} ± {np.std(v, ddof=1) / np.sqrt(len(v)):.2f}"
-                            for v in rows.values()) + " |")
+    print(
+        "| "
+        + " | ".join(f"{np.mean(v):.2f} ± {np.std(v, ddof=1) / np.sqrt(len(v)):.2f}" for v in rows.values())
+        + " |"
+    )
     return 0
 
 

@@ -23,6 +23,7 @@ Writes OUT/real_capture.md and OUT/real_capture.json; the last line printed is
 ``summary: novel_psnr_bbox=… novel_iou=… fit_iou_before=… fit_iou_after=… steps=…``.
 Nothing is written into CAPTURE except texvocab's own cache (texvocab_cache/).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,20 +50,39 @@ def body_against_masks(capture: Path, every: int, coverage_every: int) -> dict:
     for name, fit in (("default", False), ("fitted", True)):
         cap = open_capture(capture, fit_body=fit)
         frames = list(range(0, cap.num_frames, every))
-        res = silhouette_fit(cap.body, cap.poses[frames], cap.trans[frames], cap.cameras[0],
-                             (cap.mask(0, t) for t in frames), cap.shape())
+        res = silhouette_fit(
+            cap.body,
+            cap.poses[frames],
+            cap.trans[frames],
+            cap.cameras[0],
+            (cap.mask(0, t) for t in frames),
+            cap.shape(),
+        )
         iou = np.asarray(res.iou)
-        out[name] = {"frames": len(frames), "iou_mean": float(iou.mean()),
-                     "iou_std": float(iou.std(ddof=1)), "iou_min": float(iou.min()),
-                     "precision": float(np.mean(res.precision)),
-                     "recall": float(np.mean(res.recall))}
+        out[name] = {
+            "frames": len(frames),
+            "iou_mean": float(iou.mean()),
+            "iou_std": float(iou.std(ddof=1)),
+            "iou_min": float(iou.min()),
+            "precision": float(np.mean(res.precision)),
+            "recall": float(np.mean(res.recall)),
+        }
         if fit:
             cf = list(range(0, cap.num_frames, coverage_every))
-            cov = shell_coverage(cap.body, cap.poses[cf], cap.trans[cf], cap.cameras[0],
-                                 (cap.mask(0, t) for t in cf), DELTAS, betas=cap.shape())
-            out["coverage"] = {"frames": len(cf), **{f"{d:g}": float(c) for d, c in
-                                                     zip(DELTAS, cov.mean(0), strict=True)},
-                               "worst_4cm": float(cov[:, 1].min())}
+            cov = shell_coverage(
+                cap.body,
+                cap.poses[cf],
+                cap.trans[cf],
+                cap.cameras[0],
+                (cap.mask(0, t) for t in cf),
+                DELTAS,
+                betas=cap.shape(),
+            )
+            out["coverage"] = {
+                "frames": len(cf),
+                **{f"{d:g}": float(c) for d, c in zip(DELTAS, cov.mean(0), strict=True)},
+                "worst_4cm": float(cov[:, 1].min()),
+            }
     return out
 
 
@@ -89,34 +109,48 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     log = args.out / "commands.log"
-    result: dict = {"capture": str(args.capture), "minutes": args.minutes, "seed": args.seed,
-                    "sets": args.sets}
+    result: dict = {
+        "capture": str(args.capture),
+        "minutes": args.minutes,
+        "seed": args.seed,
+        "sets": args.sets,
+    }
     cap = open_capture(args.capture)
     result["capture_info"] = {
-        "layout": cap.layout, "views": cap.num_views, "frames": cap.num_frames,
-        "train_frames": cap.num_train, "novel_frames": cap.num_frames - cap.num_train,
+        "layout": cap.layout,
+        "views": cap.num_views,
+        "frames": cap.num_frames,
+        "train_frames": cap.num_train,
+        "novel_frames": cap.num_frames - cap.num_train,
         "image": f"{cap.cameras[0].width}x{cap.cameras[0].height}",
-        "image_scale": cap.image_scale, "body_fit": cap.meta.get("body_fit")}
+        "image_scale": cap.image_scale,
+        "body_fit": cap.meta.get("body_fit"),
+    }
     print("capture:", result["capture_info"], flush=True)
 
     t0 = time.perf_counter()
     result["body"] = body_against_masks(args.capture, args.fit_every, args.coverage_every)
     print(f"body against masks ({time.perf_counter() - t0:.0f} s):", result["body"], flush=True)
 
-    sets = [a for s in [f"train.seed={args.seed}", f"train.max_minutes={args.minutes}",
-                        *args.sets] for a in ("--set", s)]
+    sets = [
+        a
+        for s in [f"train.seed={args.seed}", f"train.max_minutes={args.minutes}", *args.sets]
+        for a in ("--set", s)
+    ]
     run_dir = args.out / "run"
     t0 = time.perf_counter()
-    size = [a.split("=", 1)[1] for a in args.sets
-            if a.split("=", 1)[0] in ("data.texture_size", "texture_size")]
-    run([*TEXVOCAB, "prepare", str(args.capture), *(["--texture-size", size[-1]] if size else [])],
-        log)
+    size = [
+        a.split("=", 1)[1] for a in args.sets if a.split("=", 1)[0] in ("data.texture_size", "texture_size")
+    ]
+    run([*TEXVOCAB, "prepare", str(args.capture), *(["--texture-size", size[-1]] if size else [])], log)
     result["prepare_seconds"] = time.perf_counter() - t0
     ckpt = run_dir / "checkpoint.pt"
     if not ckpt.is_file():
         t0 = time.perf_counter()
-        run([*TEXVOCAB, "train", str(args.capture), "--out", str(run_dir),
-             "--iterations", "1000000", *sets], log)
+        run(
+            [*TEXVOCAB, "train", str(args.capture), "--out", str(run_dir), "--iterations", "1000000", *sets],
+            log,
+        )
         result["train_seconds"] = time.perf_counter() - t0
     result["steps"] = int(load_checkpoint(ckpt)["step"])
     per_set = [] if args.per_set is None else ["--per-set", str(args.per_set)]
@@ -130,9 +164,11 @@ def main(argv: list[str] | None = None) -> int:
     (args.out / "real_capture.md").write_text(md)
     print(md)
     novel, b = result["table"].get("novel_poses", {}), result["body"]
-    print(f"summary: novel_psnr_bbox={novel.get('psnr_bbox')} novel_iou={novel.get('iou')} "
-          f"fit_iou_before={b['default']['iou_mean']:.3f} fit_iou_after="
-          f"{b['fitted']['iou_mean']:.3f} steps={result['steps']}")
+    print(
+        f"summary: novel_psnr_bbox={novel.get('psnr_bbox')} novel_iou={novel.get('iou')} "
+        f"fit_iou_before={b['default']['iou_mean']:.3f} fit_iou_after="
+        f"{b['fitted']['iou_mean']:.3f} steps={result['steps']}"
+    )
     return 0
 
 
@@ -145,31 +181,44 @@ def _pm(row: dict, key: str, digits: int) -> str:
 
 def format_report(r: dict) -> str:
     c, b = r["capture_info"], r["body"]
-    lines = [f"# Real capture: {r['capture']}", "",
-             f"{c['layout']} layout, {c['views']} view(s), {c['frames']} frames "
-             f"({c['train_frames']} train, {c['novel_frames']} held out), images at "
-             f"{c['image']} (scale {c['image_scale']:g}), body fit {c['body_fit']}. "
-             f"Trained {r['minutes']:g} min (seed {r['seed']}, {r['steps']} steps), settings "
-             f"{' '.join(r['sets']) or 'defaults'}.", "",
-             "| body | frames | IoU mean ± std (min) | precision | recall |", "|---" * 5 + "|"]
+    lines = [
+        f"# Real capture: {r['capture']}",
+        "",
+        f"{c['layout']} layout, {c['views']} view(s), {c['frames']} frames "
+        f"({c['train_frames']} train, {c['novel_frames']} held out), images at "
+        f"{c['image']} (scale {c['image_scale']:g}), body fit {c['body_fit']}. "
+        f"Trained {r['minutes']:g} min (seed {r['seed']}, {r['steps']} steps), settings "
+        f"{' '.join(r['sets']) or 'defaults'}.",
+        "",
+        "| body | frames | IoU mean ± std (min) | precision | recall |",
+        "|---" * 5 + "|",
+    ]
     for name in ("default", "fitted"):
         x = b[name]
-        lines.append(f"| {name} | {x['frames']} | {x['iou_mean']:.3f} ± {x['iou_std']:.3f} "
-                     f"({x['iou_min']:.3f}) | {x['precision']:.3f} | {x['recall']:.3f} |")
+        lines.append(
+            f"| {name} | {x['frames']} | {x['iou_mean']:.3f} ± {x['iou_std']:.3f} "
+            f"({x['iou_min']:.3f}) | {x['precision']:.3f} | {x['recall']:.3f} |"
+        )
     cov = b["coverage"]
-    lines += ["", f"Share of mask pixels whose ray passes within δ of the fitted body "
-              f"({cov['frames']} frames): " + ", ".join(
-                  f"{float(d) * 100:g} cm {cov[d]:.3f}" for d in (f"{x:g}" for x in DELTAS))
-              + f"; worst frame at 4 cm {cov['worst_4cm']:.3f}.", "",
-              "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | kid "
-              "| iou |", "|---" * 9 + "|"]
+    lines += [
+        "",
+        f"Share of mask pixels whose ray passes within δ of the fitted body "
+        f"({cov['frames']} frames): "
+        + ", ".join(f"{float(d) * 100:g} cm {cov[d]:.3f}" for d in (f"{x:g}" for x in DELTAS))
+        + f"; worst frame at 4 cm {cov['worst_4cm']:.3f}.",
+        "",
+        "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | kid | iou |",
+        "|---" * 9 + "|",
+    ]
     for name, row in r["table"].items():
         shown = f"{name} ({row['views']})" if row.get("views") else name
         kid = "n/a" if row.get("kid") is None else f"{row['kid']:.4f}"
-        lines.append(f"| {shown} | {row.get('images')} | {_pm(row, 'psnr_bbox', 2)} | "
-                     f"{_pm(row, 'ssim_bbox', 4)} | {_pm(row, 'psnr_full', 2)} | "
-                     f"{_pm(row, 'ssim_full', 4)} | {_pm(row, 'lpips', 4)} | {kid} | "
-                     f"{_pm(row, 'iou', 3)} |")
+        lines.append(
+            f"| {shown} | {row.get('images')} | {_pm(row, 'psnr_bbox', 2)} | "
+            f"{_pm(row, 'ssim_bbox', 4)} | {_pm(row, 'psnr_full', 2)} | "
+            f"{_pm(row, 'ssim_full', 4)} | {_pm(row, 'lpips', 4)} | {kid} | "
+            f"{_pm(row, 'iou', 3)} |"
+        )
     return "\n".join(lines) + "\n"
 
 

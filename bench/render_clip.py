@@ -8,6 +8,7 @@ The pose sequence is a generated AMASS-layout walk (SMPL-H, 120 fps, Z-up), read
 user's file. Ray's start-up (local cluster, workers importing torch, the model fetched
 from the object store) is timed separately from the frames.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,44 +58,62 @@ def main(argv=None) -> int:
     march = march_settings(settings)
     pelvis = av.model.body.rest_joints[0].double().numpy()
     seq = read_pose_sequence(walk_file(tmp / "walk.npz", args.frames / 30), pelvis=pelvis)
-    poses, trans = seq.poses[:args.frames], seq.trans[:args.frames]
-    ref = np.asarray(av.capture.trans[:av.capture.num_train], dtype=np.float64).mean(0)
+    poses, trans = seq.poses[: args.frames], seq.trans[: args.frames]
+    ref = np.asarray(av.capture.trans[: av.capture.num_train], dtype=np.float64).mean(0)
     cams = frame_cameras(av.capture.cameras[0], trans + pelvis, ref + pelvis, True, 0.0)
     worker = FrameWorker(av.model, march, settings.render.image_scale, 2)
     worker.render(0, poses[0], trans[0], cams[0])  # warm-up (lazy init), not timed
     t0 = time.perf_counter()
     for i in range(len(poses)):
-        save_png(tmp / "serial" / f"frame_{i:05d}.png", worker.render(i, poses[i], trans[i],
-                                                                      cams[i])[1])
+        save_png(tmp / "serial" / f"frame_{i:05d}.png", worker.render(i, poses[i], trans[i], cams[i])[1])
     serial = time.perf_counter() - t0
     t0 = time.perf_counter()
-    ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False,
-             configure_logging=False)
+    ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
     start = time.perf_counter() - t0
     try:
         (tmp / "ray").mkdir()
         t0 = time.perf_counter()
-        render_frames_ray(av.model, dataclasses.replace(march), settings.render.image_scale, poses,
-                          trans, cams, tmp / "ray", workers=args.workers, progress=False)
+        render_frames_ray(
+            av.model,
+            dataclasses.replace(march),
+            settings.render.image_scale,
+            poses,
+            trans,
+            cams,
+            tmp / "ray",
+            workers=args.workers,
+            progress=False,
+        )
         parallel = time.perf_counter() - t0
     finally:
         ray.shutdown()
     from PIL import Image
 
-    diff = max(int(np.abs(np.asarray(Image.open(tmp / "serial" / p.name)).astype(int)
-                          - np.asarray(Image.open(p)).astype(int)).max())
-               for p in sorted((tmp / "ray").glob("frame_*.png")))
+    diff = max(
+        int(
+            np.abs(
+                np.asarray(Image.open(tmp / "serial" / p.name)).astype(int)
+                - np.asarray(Image.open(p)).astype(int)
+            ).max()
+        )
+        for p in sorted((tmp / "ray").glob("frame_*.png"))
+    )
     n = len(poses)
     size = f"{cams[0].width * args.scale:.0f}×{cams[0].height * args.scale:.0f}"
-    print(f"# clip render: {args.checkpoint}, {n} frames at {size} (fast preset), "
-          f"{args.workers} Ray workers\n")
+    print(
+        f"# clip render: {args.checkpoint}, {n} frames at {size} (fast preset), {args.workers} Ray workers\n"
+    )
     print("| path | seconds | frames/s | × serial |")
     print("|---|---|---|---|")
     print(f"| serial (1 process, 2 threads) | {serial:.2f} | {n / serial:.2f} | 1.00 |")
-    print(f"| --ray, {args.workers} local workers (1 thread each, incl. their start-up) | {parallel:.2f} "
-          f"| {n / parallel:.2f} | {serial / parallel:.2f} |")
-    print(f"\nRay start-up (local cluster): {start:.1f} s, not in the rows above; largest "
-          f"pixel difference ray vs serial: {diff} (8-bit levels)")
+    print(
+        f"| --ray, {args.workers} local workers (1 thread each, incl. their start-up) | {parallel:.2f} "
+        f"| {n / parallel:.2f} | {serial / parallel:.2f} |"
+    )
+    print(
+        f"\nRay start-up (local cluster): {start:.1f} s, not in the rows above; largest "
+        f"pixel difference ray vs serial: {diff} (8-bit levels)"
+    )
     return 0
 
 

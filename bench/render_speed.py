@@ -33,6 +33,7 @@ temporary folder. Uses 2 threads (the machine's 2 cores) with OMP_WAIT_POLICY=PA
 unless set otherwise: when another process holds a core, OpenMP threads that spin while
 waiting made a frame ~10x slower (measured 22-28 s instead of 2.7 s per frame).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -60,8 +61,10 @@ def parse_variant(text: str):
     for item in filter(None, body.split(",")):
         key, eq, value = item.partition("=")
         if not eq or key not in known:
-            raise SystemExit(f"error: --variant {text!r}: expected name:key=value,... with keys "
-                             f"from MarchSettings ({', '.join(known)})")
+            raise SystemExit(
+                f"error: --variant {text!r}: expected name:key=value,... with keys "
+                f"from MarchSettings ({', '.join(known)})"
+            )
         kw[key] = _value(value)
     return name, kw
 
@@ -87,9 +90,15 @@ def small_capture(root: Path) -> Path:
     from texvocab.capture.synth import SynthSettings, synthesize
 
     poses, trans = make_sequence([("walk", 4), ("arm_raise", 2)], seed=3)
-    return synthesize(root / "capture", poses, trans, 4, default_body(),
-                      SynthSettings(ring_views=4, raised_views=0, size=256, texture_size=512),
-                      progress=False)
+    return synthesize(
+        root / "capture",
+        poses,
+        trans,
+        4,
+        default_body(),
+        SynthSettings(ring_views=4, raised_views=0, size=256, texture_size=512),
+        progress=False,
+    )
 
 
 def load(args):
@@ -121,8 +130,11 @@ def items_of(cap, settings, frames: int):
     views = list(settings.data.eval_views)[:2]
     pool = list(cap.novel_frames) or list(cap.train_frames)
     picks = sorted({pool[int(i)] for i in np.linspace(0, len(pool) - 1, max(frames - 1, 1))})
-    items = [(f"frame {t} view {v}", cap.poses[t], cap.trans[t], cap.cameras[v],
-              cap.image(v, t), cap.mask(v, t)) for t in picks for v in views[:1]]
+    items = [
+        (f"frame {t} view {v}", cap.poses[t], cap.trans[t], cap.cameras[v], cap.image(v, t), cap.mask(v, t))
+        for t in picks
+        for v in views[:1]
+    ]
     if cap.synthetic:
         from texvocab.body.poses import preset
         from texvocab.capture.synth import ground_truth_renderer
@@ -133,7 +145,7 @@ def items_of(cap, settings, frames: int):
             rgb, mask = renderer.render(pose, trans, [cams[v]])[0]
             items.append((f"squat view {v}", pose, trans, cams[v], rgb, mask))
         renderer.close()
-    return items[:max(frames, 1)]
+    return items[: max(frames, 1)]
 
 
 class Timed:
@@ -171,12 +183,25 @@ def timed_render(model, item, march):
         # the surface-guided marcher builds what it needs of the shell itself
         shell = prepare_shell(march, ctx.vertices, model.body.faces, index=ctx.index)
         t2 = time.perf_counter()
-        out = render_image(Timed(model.for_pose(ctx), spent), cam, ctx.vertices,
-                           model.body.faces, march, shell=shell, index=ctx.index)
+        out = render_image(
+            Timed(model.for_pose(ctx), spent),
+            cam,
+            ctx.vertices,
+            model.body.faces,
+            march,
+            shell=shell,
+            index=ctx.index,
+        )
     t3 = time.perf_counter()
-    row = {"context": t1 - wall0, "shell": t2 - t1, "field": spent["field"],
-           "evals": spent["evals"], "march": t3 - t2 - spent["field"], "total": t3 - wall0,
-           "cpu": time.process_time() - cpu0}
+    row = {
+        "context": t1 - wall0,
+        "shell": t2 - t1,
+        "field": spent["field"],
+        "evals": spent["evals"],
+        "march": t3 - t2 - spent["field"],
+        "total": t3 - wall0,
+        "cpu": time.process_time() - cpu0,
+    }
     return out.rgb.numpy().astype(np.float32), row
 
 
@@ -192,9 +217,14 @@ def reference_render(model, item, coarse: int, fine: int):
         out = render_image_uniform(model.for_pose(ctx), cam, lo, hi, coarse, fine)
     total = time.perf_counter() - wall0
     return out.rgb.numpy().astype(np.float32), {
-        "context": float("nan"), "shell": 0.0, "field": float("nan"),
-        "evals": out.stats.field_evals, "march": float("nan"), "total": total,
-        "cpu": time.process_time() - cpu0}
+        "context": float("nan"),
+        "shell": 0.0,
+        "field": float("nan"),
+        "evals": out.stats.field_evals,
+        "march": float("nan"),
+        "total": total,
+        "cpu": time.process_time() - cpu0,
+    }
 
 
 def compare(model, settings, items, what: str, repeats: int = 1, save: Path | None = None) -> int:
@@ -210,12 +240,17 @@ def compare(model, settings, items, what: str, repeats: int = 1, save: Path | No
         knobs = [f"{k}={v}" for k, v in PRESETS[preset].items() if k != "image_scale"]
         return march_settings(settings.with_overrides(knobs + [f"guide={guide}"]))
 
-    paths = {"new": march("fast", "raster"), "previous": march("fast", "shell"),
-             "quality": march("quality", "shell")}
-    print(f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
-          f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
-          f"{max(repeats, 1)} per frame, incl. pose context and shell; PSNR in the mask's "
-          "bounding box.\n")
+    paths = {
+        "new": march("fast", "raster"),
+        "previous": march("fast", "shell"),
+        "quality": march("quality", "shell"),
+    }
+    print(
+        f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
+        f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
+        f"{max(repeats, 1)} per frame, incl. pose context and shell; PSNR in the mask's "
+        "bounding box.\n"
+    )
     print("| path | frame | seconds | field evals | PSNR vs truth | PSNR vs reference |")
     print("|---|---|---|---|---|---|")
     rows = {name: [] for name in (*paths, "reference")}
@@ -236,22 +271,32 @@ def compare(model, settings, items, what: str, repeats: int = 1, save: Path | No
             rows[name].append((row["total"], row["evals"], p_gt, p_ref))
             if save is not None:
                 np.save(save / f"{name}_{i}.npy", img)
-            print(f"| {name} | {item[0]} | {row['total']:.3f} | {int(row['evals']):,} | "
-                  f"{p_gt:.3f} | {min(p_ref, 99.0):.2f} |", flush=True)
+            print(
+                f"| {name} | {item[0]} | {row['total']:.3f} | {int(row['evals']):,} | "
+                f"{p_gt:.3f} | {min(p_ref, 99.0):.2f} |",
+                flush=True,
+            )
     if save is not None:
-        (save / "evals.json").write_text(json.dumps(
-            {n: [int(r[1]) for r in rs] for n, rs in rows.items()}, indent=1) + "\n")
+        (save / "evals.json").write_text(
+            json.dumps({n: [int(r[1]) for r in rs] for n, rs in rows.items()}, indent=1) + "\n"
+        )
     mean = {n: np.mean(np.array(r, dtype=np.float64), 0) for n, r in rows.items()}
     print()
     for n, (sec, ev, p_gt, p_ref) in mean.items():
-        print(f"- {n}: {sec:.3f} s/frame, {ev:,.0f} field evaluations, PSNR {p_gt:.3f} dB vs "
-              f"truth, {min(p_ref, 99.0):.2f} dB vs reference")
-    print(f"- previous / new: {mean['previous'][0] / mean['new'][0]:.2f}x time; reference / "
-          f"new: {mean['reference'][1] / mean['new'][1]:.1f}x field evaluations")
-    print(f"summary: new_s={mean['new'][0]:.3f} previous_s={mean['previous'][0]:.3f} "
-          f"reference_s={mean['reference'][0]:.3f} new_evals={mean['new'][1]:.0f} "
-          f"reference_evals={mean['reference'][1]:.0f} "
-          f"psnr_delta_vs_quality_db={mean['new'][2] - mean['quality'][2]:+.3f}")
+        print(
+            f"- {n}: {sec:.3f} s/frame, {ev:,.0f} field evaluations, PSNR {p_gt:.3f} dB vs "
+            f"truth, {min(p_ref, 99.0):.2f} dB vs reference"
+        )
+    print(
+        f"- previous / new: {mean['previous'][0] / mean['new'][0]:.2f}x time; reference / "
+        f"new: {mean['reference'][1] / mean['new'][1]:.1f}x field evaluations"
+    )
+    print(
+        f"summary: new_s={mean['new'][0]:.3f} previous_s={mean['previous'][0]:.3f} "
+        f"reference_s={mean['reference'][0]:.3f} new_evals={mean['new'][1]:.0f} "
+        f"reference_evals={mean['reference'][1]:.0f} "
+        f"psnr_delta_vs_quality_db={mean['new'][2] - mean['quality'][2]:+.3f}"
+    )
     return 0
 
 
@@ -276,21 +321,38 @@ def fmt(row: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("checkpoint", nargs="?", default=None, help="trained checkpoint (optional)")
-    ap.add_argument("--capture", default=None, help="capture folder (default: the checkpoint's, "
-                    "or a small synthetic one made in a temporary folder)")
+    ap.add_argument(
+        "--capture",
+        default=None,
+        help="capture folder (default: the checkpoint's, "
+        "or a small synthetic one made in a temporary folder)",
+    )
     ap.add_argument("--frames", type=int, default=3, help="frames (pose, view) to render")
-    ap.add_argument("--variant", action="append", default=[], metavar="NAME:KEY=VALUE,...",
-                    help="extra marcher variant on top of the checkpoint's settings")
-    ap.add_argument("--reference", type=int, default=1,
-                    help="frames also rendered by the uniform 64+64 reference marcher")
+    ap.add_argument(
+        "--variant",
+        action="append",
+        default=[],
+        metavar="NAME:KEY=VALUE,...",
+        help="extra marcher variant on top of the checkpoint's settings",
+    )
+    ap.add_argument(
+        "--reference", type=int, default=1, help="frames also rendered by the uniform 64+64 reference marcher"
+    )
     ap.add_argument("--repeats", type=int, default=1, help="renders per frame (best kept)")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--compare", action="store_true",
-                    help="new (guided, fast knobs) vs previous (shell, fast) vs quality vs "
-                    "the uniform 64+32 reference; ends with a summary line")
-    ap.add_argument("--save", type=Path, default=None, metavar="DIR",
-                    help="with --compare: write each path's images (.npy) and field "
-                    "evaluations (evals.json) to DIR")
+    ap.add_argument(
+        "--compare",
+        action="store_true",
+        help="new (guided, fast knobs) vs previous (shell, fast) vs quality vs "
+        "the uniform 64+32 reference; ends with a summary line",
+    )
+    ap.add_argument(
+        "--save",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="with --compare: write each path's images (.npy) and field evaluations (evals.json) to DIR",
+    )
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
@@ -298,8 +360,7 @@ def main(argv=None) -> int:
         model, settings, cap, what = load(args)
         if args.save is not None:
             args.save.mkdir(parents=True, exist_ok=True)
-        return compare(model, settings, items_of(cap, settings, args.frames), what,
-                       args.repeats, args.save)
+        return compare(model, settings, items_of(cap, settings, args.frames), what, args.repeats, args.save)
 
     from texvocab.metrics import evaluate_pair
     from texvocab.pipeline.settings import march_settings
@@ -308,11 +369,13 @@ def main(argv=None) -> int:
     base = march_settings(settings)
     variants = [("settings", {})] + [parse_variant(v) for v in args.variant]
     items = items_of(cap, settings, args.frames)
-    print(f"# render speed: {what}\n\n{len(items)} frames at {items[0][3].width}x"
-          f"{items[0][3].height}, {torch.get_num_threads()} threads, OMP_WAIT_POLICY="
-          f"{os.environ.get('OMP_WAIT_POLICY')}; seconds are wall time "
-          "(cpu: process CPU seconds); march = marcher work other than field calls "
-          "(bounds, paths, samples, compositing); PSNR against ground truth.\n")
+    print(
+        f"# render speed: {what}\n\n{len(items)} frames at {items[0][3].width}x"
+        f"{items[0][3].height}, {torch.get_num_threads()} threads, OMP_WAIT_POLICY="
+        f"{os.environ.get('OMP_WAIT_POLICY')}; seconds are wall time "
+        "(cpu: process CPU seconds); march = marcher work other than field calls "
+        "(bounds, paths, samples, compositing); PSNR against ground truth.\n"
+    )
     print("| variant | frame | " + " | ".join(COLS) + " |")
     print("|---" * (len(COLS) + 2) + "|")
     means, rows_of = {}, {}
@@ -334,7 +397,7 @@ def main(argv=None) -> int:
         rows_of[name] = rows
         print(f"| **{name} mean** | | {fmt(means[name])} |", flush=True)
     ref = []
-    for item in items[:args.reference]:
+    for item in items[: args.reference]:
         img, row = reference_render(model, item, 64, 64)
         m = evaluate_pair(img, item[4], item[5])
         row.update(psnr_bbox=m["psnr_bbox"], psnr_full=m["psnr_full"])
@@ -342,22 +405,28 @@ def main(argv=None) -> int:
         print(f"| uniform 64+64 (reference) | {item[0]} | {fmt(row)} |", flush=True)
     print()
     for name in means:
-        line = (f"- {name}: {means[name]['total']:.3f} s/frame (cpu {means[name]['cpu']:.3f} s), "
-                f"{means[name]['evals']:,.0f} field evaluations, PSNR bbox "
-                f"{means[name]['psnr_bbox']:.3f} dB")
+        line = (
+            f"- {name}: {means[name]['total']:.3f} s/frame (cpu {means[name]['cpu']:.3f} s), "
+            f"{means[name]['evals']:,.0f} field evaluations, PSNR bbox "
+            f"{means[name]['psnr_bbox']:.3f} dB"
+        )
         if name != "settings":
-            line += (f" ({means[name]['psnr_bbox'] - means['settings']['psnr_bbox']:+.3f} dB, "
-                     f"{means['settings']['total'] / means[name]['total']:.2f}x faster than "
-                     "settings)")
+            line += (
+                f" ({means[name]['psnr_bbox'] - means['settings']['psnr_bbox']:+.3f} dB, "
+                f"{means['settings']['total'] / means[name]['total']:.2f}x faster than "
+                "settings)"
+            )
         print(line)
     for item, row in ref:
         k = next(i for i, it in enumerate(items) if it is item)
         img, shell_row = timed_render(model, item, base)
-        print(f"- reference uniform 64+64 on {item[0]}: {row['total']:.2f} s, {row['evals']:,} "
-              f"evaluations; the shell marcher ({variants[0][0]}) is "
-              f"{row['total'] / shell_row['total']:.1f}x faster with "
-              f"{row['evals'] / shell_row['evals']:.1f}x fewer evaluations; PSNR bbox "
-              f"{row['psnr_bbox']:.3f} (reference) vs {rows_of['settings'][k]['psnr_bbox']:.3f} dB")
+        print(
+            f"- reference uniform 64+64 on {item[0]}: {row['total']:.2f} s, {row['evals']:,} "
+            f"evaluations; the shell marcher ({variants[0][0]}) is "
+            f"{row['total'] / shell_row['total']:.1f}x faster with "
+            f"{row['evals'] / shell_row['evals']:.1f}x fewer evaluations; PSNR bbox "
+            f"{row['psnr_bbox']:.3f} (reference) vs {rows_of['settings'][k]['psnr_bbox']:.3f} dB"
+        )
     return 0
 
 

@@ -20,6 +20,7 @@ process's full level over two processes', without load).
 
     .venv/bin/python bench/render_worker.py RUN/checkpoint.pt [--rounds 4]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -68,8 +69,12 @@ def timed_render(worker, job: RenderJob) -> tuple[float, float]:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("checkpoint")
-    p.add_argument("--rounds", type=int, default=4, help="timed rounds (default 4; 2 renders "
-                   "per worker and load each, after one warm-up round)")
+    p.add_argument(
+        "--rounds",
+        type=int,
+        default=4,
+        help="timed rounds (default 4; 2 renders per worker and load each, after one warm-up round)",
+    )
     p.add_argument("--ui-ms", type=float, default=25.0)
     p.add_argument("--gap-ms", type=float, default=60.0)
     p.add_argument("--res", type=int, default=256, help="long side of the render (default 256)")
@@ -78,10 +83,11 @@ def main() -> int:
     if data.model is None:
         sys.exit(f"error: {args.checkpoint}: not a checkpoint")
     state, march = ViewerState(data), march_settings(data.settings)
-    workers = {"thread": ProgressiveWorker(model_renderer(data.model, march), threads=1),
-               "process": ProcessWorker(model_renderer, (data.model, march), threads=1),
-               "process x2": ProcessWorker(model_renderer, (data.model, march), threads=1,
-                                           processes=2)}
+    workers = {
+        "thread": ProgressiveWorker(model_renderer(data.model, march), threads=1),
+        "process": ProcessWorker(model_renderer, (data.model, march), threads=1),
+        "process x2": ProcessWorker(model_renderer, (data.model, march), threads=1, processes=2),
+    }
     w, h = round(args.res * 132 / 256), args.res
     version = 0
 
@@ -90,10 +96,8 @@ def main() -> int:
         version += 1
         state.reset_all()
         state.apply_preset(POSES[version % len(POSES)])
-        cam = OrbitCamera(target=np.asarray(DEFAULT_TARGET) + state.trans, yaw=0.0, pitch=0.0,
-                          distance=3.2)
-        return RenderJob(version, state.pose.copy(), state.trans.copy(),
-                         cam.to_texvocab_camera(w, h))
+        cam = OrbitCamera(target=np.asarray(DEFAULT_TARGET) + state.trans, yaw=0.0, pitch=0.0, distance=3.2)
+        return RenderJob(version, state.pose.copy(), state.trans.copy(), cam.to_texvocab_camera(w, h))
 
     times = {(name, load): [] for name in workers for load in ("none", "ui")}
     try:
@@ -113,23 +117,31 @@ def main() -> int:
     finally:
         for worker in workers.values():
             worker.stop()
-    print(f"{w}x{h} renders, {args.rounds} rounds x 2 per cell; UI load: {args.ui_ms:g} ms of "
-          f"Python, then {args.gap_ms:g} ms asleep, repeated\n")
-    print("| worker | UI load | renders | first level ms (median) | full level s (median) | "
-          "full / no load |\n|---|---|---|---|---|---|")
+    print(
+        f"{w}x{h} renders, {args.rounds} rounds x 2 per cell; UI load: {args.ui_ms:g} ms of "
+        f"Python, then {args.gap_ms:g} ms asleep, repeated\n"
+    )
+    print(
+        "| worker | UI load | renders | first level ms (median) | full level s (median) | "
+        "full / no load |\n|---|---|---|---|---|---|"
+    )
     slowdown = {}
     for (name, load), runs in times.items():
         a = np.asarray(runs)
         base = np.median(np.asarray(times[(name, "none")])[:, 1])
         ratio = np.median(a[:, 1]) / base
         slowdown[name] = ratio if load == "ui" else slowdown.get(name, 1.0)
-        print(f"| {name} | {load} | {len(a)} | {1000 * np.median(a[:, 0]):.0f} | "
-              f"{np.median(a[:, 1]):.3f} | {ratio:.2f} |")
+        print(
+            f"| {name} | {load} | {len(a)} | {1000 * np.median(a[:, 0]):.0f} | "
+            f"{np.median(a[:, 1]):.3f} | {ratio:.2f} |"
+        )
     full = {name: np.median(np.asarray(times[(name, "none")])[:, 1]) for name in workers}
-    print(f"\nsummary: thread_slowdown={slowdown['thread']:.2f} "
-          f"process_slowdown={slowdown['process']:.2f} "
-          f"process_x2_slowdown={slowdown['process x2']:.2f} "
-          f"split_speedup={full['process'] / full['process x2']:.2f}")
+    print(
+        f"\nsummary: thread_slowdown={slowdown['thread']:.2f} "
+        f"process_slowdown={slowdown['process']:.2f} "
+        f"process_x2_slowdown={slowdown['process x2']:.2f} "
+        f"split_speedup={full['process'] / full['process x2']:.2f}"
+    )
     return 0
 
 

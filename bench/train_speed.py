@@ -19,6 +19,7 @@ Like the ``texvocab`` command, the bench keeps numpy's BLAS to one thread
 (texvocab/blas.py); the second row runs the reference with OpenBLAS's own default (a
 thread per core, which spin between calls), as training ran before that change.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,10 +44,12 @@ VARIANTS = {
     "encoder small (trained)": ["encoder=small"] + SHELL[1:],
     "encoder resnet34-scratch": ["encoder=resnet34-scratch"] + SHELL[1:],
     "texture maps cosine-weighted": SHELL + ["view_weighting=cosine"],
-    "train_guide raster (surface band)": SHELL[:2] + ["train_guide=raster",
-                                                    "train_coarse_samples=none"] + EARLIER_RAYS,
-    "train_guide raster, train_coarse_samples 9": SHELL[:2] + ["train_guide=raster",
-                                                             "train_coarse_samples=9"] + EARLIER_RAYS,
+    "train_guide raster (surface band)": SHELL[:2]
+    + ["train_guide=raster", "train_coarse_samples=none"]
+    + EARLIER_RAYS,
+    "train_guide raster, train_coarse_samples 9": SHELL[:2]
+    + ["train_guide=raster", "train_coarse_samples=9"]
+    + EARLIER_RAYS,
     "the earlier defaults (5-sample band, the rest marched)": EARLIER_RAYS,
     "Newton band, the rest marched": ["train_residual=off"],
     "Newton band, residual rays everywhere (train_residual=all)": ["train_residual=all"],
@@ -75,10 +78,16 @@ def measure(capture, overrides: list[str], steps: int, warmup: int) -> dict:
     wall = time.perf_counter() - t0
     per_step = wall / steps
     steady = (wall - (trainer.cache_seconds - cache0)) / steps
-    return {"setup_s": setup, "step_s": per_step, "steady_s": steady, "evals": evals / steps,
-            "encoder": pf.encoder.name,
-            "perceptual": getattr(trainer.perceptual, "name", type(trainer.perceptual).__name__)
-            if trainer.perceptual is not None else "off"}
+    return {
+        "setup_s": setup,
+        "step_s": per_step,
+        "steady_s": steady,
+        "evals": evals / steps,
+        "encoder": pf.encoder.name,
+        "perceptual": getattr(trainer.perceptual, "name", type(trainer.perceptual).__name__)
+        if trainer.perceptual is not None
+        else "off",
+    }
 
 
 def main(argv=None) -> int:
@@ -99,23 +108,31 @@ def main(argv=None) -> int:
     for name, overrides in VARIANTS.items():
         if args.only and not any(o in name for o in args.only):
             continue
-        blas = (threadpool_limits(limits=max(own_blas, 1), user_api="blas")
-                if name == UNBUDGETED else contextlib.nullcontext())
+        blas = (
+            threadpool_limits(limits=max(own_blas, 1), user_api="blas")
+            if name == UNBUDGETED
+            else contextlib.nullcontext()
+        )
         with blas:
             r = measure(cap, overrides, args.steps, args.warmup)
         rows.append((name, r))
-        print(f"{name}: {r['step_s']:.3f} s/step, {r['steady_s']:.3f} without cache builds",
-              flush=True)
+        print(f"{name}: {r['step_s']:.3f} s/step, {r['steady_s']:.3f} without cache builds", flush=True)
     ref, ref_steady = rows[0][1]["step_s"], rows[0][1]["steady_s"]
-    print(f"\n{args.steps} timed steps each after {args.warmup} warm-up steps, 1024 rays per "
-          f"step, {args.threads} threads, capture {args.capture}\n")
-    print("| variant | encoder | perceptual | s/step | time ÷ reference | s/step without cache "
-          "builds | time ÷ reference | field evals/step | setup s |")
+    print(
+        f"\n{args.steps} timed steps each after {args.warmup} warm-up steps, 1024 rays per "
+        f"step, {args.threads} threads, capture {args.capture}\n"
+    )
+    print(
+        "| variant | encoder | perceptual | s/step | time ÷ reference | s/step without cache "
+        "builds | time ÷ reference | field evals/step | setup s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for name, r in rows:
-        print(f"| {name} | {r['encoder']} | {r['perceptual']} | {r['step_s']:.3f} | "
-              f"{r['step_s'] / ref:.2f} | {r['steady_s']:.3f} | {r['steady_s'] / ref_steady:.2f} "
-              f"| {r['evals']:.0f} | {r['setup_s']:.1f} |")
+        print(
+            f"| {name} | {r['encoder']} | {r['perceptual']} | {r['step_s']:.3f} | "
+            f"{r['step_s'] / ref:.2f} | {r['steady_s']:.3f} | {r['steady_s'] / ref_steady:.2f} "
+            f"| {r['evals']:.0f} | {r['setup_s']:.1f} |"
+        )
     return 0
 
 

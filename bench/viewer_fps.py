@@ -10,6 +10,7 @@ measured in the same run.
 SOURCE: a capture folder or checkpoint (its vocabulary and texture maps); default a
 stand-in vocabulary (random training poses, 20 procedural 256² texture maps).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,11 +50,22 @@ def stand_in_data() -> ViewerData:
     poses = rng.normal(0, 0.2, (20, 24, 3))
     poses[:, 0] = 0
     yy, xx = np.mgrid[0:256, 0:256] / 256.0
-    textures = np.stack([np.stack([0.5 + 0.5 * np.sin(2 * np.pi * (xx * (3 + t % 5) + t / 7)),
-                                   0.5 + 0.5 * np.cos(2 * np.pi * yy * (2 + t % 3)),
-                                   np.full_like(xx, t / 20)], -1) for t in range(20)])
-    return ViewerData(default_body(), Vocabulary.build(poses), textures.astype(np.float32),
-                      source="stand-in vocabulary")
+    textures = np.stack(
+        [
+            np.stack(
+                [
+                    0.5 + 0.5 * np.sin(2 * np.pi * (xx * (3 + t % 5) + t / 7)),
+                    0.5 + 0.5 * np.cos(2 * np.pi * yy * (2 + t % 3)),
+                    np.full_like(xx, t / 20),
+                ],
+                -1,
+            )
+            for t in range(20)
+        ]
+    )
+    return ViewerData(
+        default_body(), Vocabulary.build(poses), textures.astype(np.float32), source="stand-in vocabulary"
+    )
 
 
 class Case:
@@ -106,17 +118,21 @@ def main(argv=None) -> int:
     data = load_viewer_data(args.source) if args.source else stand_in_data()
     ctx = create_headless_context()
     threads = os.environ.get("LP_NUM_THREADS", "default")
-    print(f"# 3D view frame rate: {ctx.info['GL_RENDERER']}, {os.cpu_count()} CPUs "
-          f"(LP_NUM_THREADS={threads}), {data.source}, "
-          f"{data.body.num_vertices} vertices / {len(data.body.faces)} faces\n")
+    print(
+        f"# 3D view frame rate: {ctx.info['GL_RENDERER']}, {os.cpu_count()} CPUs "
+        f"(LP_NUM_THREADS={threads}), {data.source}, "
+        f"{data.body.num_vertices} vertices / {len(data.body.faces)} faces\n"
+    )
     print("| size | view | ms / frame | fps | ratio vs textured |")
     print("|---|---|---:|---:|---:|")
     for size in SIZES:
         fps = measure_size(ctx, data, size, args.seconds)
         base = fps["textured"]
         for name, value in fps.items():
-            print(f"| {size[0]}x{size[1]} | {name} | {1000 / value:.1f} | {value:.1f} | "
-                  f"{value / base:.2f} |", flush=True)
+            print(
+                f"| {size[0]}x{size[1]} | {name} | {1000 / value:.1f} | {value:.1f} | {value / base:.2f} |",
+                flush=True,
+            )
     release(ctx)
     return 0
 

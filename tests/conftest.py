@@ -1,5 +1,6 @@
 """Shared fixtures. PyOpenGL binds its platform at first import: choose OSMesa here,
 before any test module imports pyrender/OpenGL (one platform per process)."""
+
 import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
@@ -22,24 +23,30 @@ def toy_smpl_arrays(seed: int = 0, num_betas: int = 10) -> dict:
         joints[j] = joints[parents[j]] + rng.normal(0, 0.15, 3)
     tet = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) * 0.03
     v = (joints[:, None] + tet[None]).reshape(-1, 3)
-    faces = np.concatenate([np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]) + 4 * j
-                            for j in range(24)])
+    faces = np.concatenate(
+        [np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]) + 4 * j for j in range(24)]
+    )
     weights = np.zeros((96, 24))
     for j in range(24):
-        weights[4 * j:4 * j + 4, j] = 0.8 if j else 1.0
+        weights[4 * j : 4 * j + 4, j] = 0.8 if j else 1.0
         if j:
-            weights[4 * j:4 * j + 4, parents[j]] = 0.2
+            weights[4 * j : 4 * j + 4, parents[j]] = 0.2
     J_regressor = np.zeros((24, 96))
     for j in range(24):
-        J_regressor[j, 4 * j:4 * j + 4] = 0.25
+        J_regressor[j, 4 * j : 4 * j + 4] = 0.25
     kintree = np.stack([parents, np.arange(24)]).astype(np.int64)
     kintree[0, 0] = SMPL_ROOT_SENTINEL
     return {
-        "v_template": v, "f": faces.astype(np.uint32), "weights": weights,
-        "J_regressor": J_regressor, "kintree_table": kintree,
+        "v_template": v,
+        "f": faces.astype(np.uint32),
+        "weights": weights,
+        "J_regressor": J_regressor,
+        "kintree_table": kintree,
         "shapedirs": rng.normal(0, 0.01, (96, 3, num_betas)),
         "posedirs": rng.normal(0, 0.001, (96, 3, 207)),
-        "J": joints, "bs_style": "lbs", "bs_type": "lrotmin",
+        "J": joints,
+        "bs_style": "lbs",
+        "bs_type": "lrotmin",
     }
 
 
@@ -49,6 +56,7 @@ def toy_arrays():
 
 
 # --- torch caches: pretrained weights present or absent, without touching the user's ---
+
 
 @pytest.fixture
 def empty_torch_home(tmp_path, monkeypatch):
@@ -64,6 +72,7 @@ def empty_torch_home(tmp_path, monkeypatch):
 
 
 # --- shared scenes: the posed default body with its analytic field, a tiny synthetic capture ---
+
 
 @pytest.fixture(scope="module")
 def body():
@@ -81,10 +90,14 @@ def body():
     pose, trans = preset("walk")
     out = model.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
     v, f = out.vertices[0], model.faces
-    return {"v": v, "f": f, "joints": out.joints[0],
-            "field": MeshSDFField(v, f, beta=0.003, voxel=0.015),
-            "shell": ShellGeometry.build(v, f, DELTA),
-            "camera": default_cameras(SynthSettings())[1].scaled(0.25)}
+    return {
+        "v": v,
+        "f": f,
+        "joints": out.joints[0],
+        "field": MeshSDFField(v, f, beta=0.003, voxel=0.015),
+        "shell": ShellGeometry.build(v, f, DELTA),
+        "camera": default_cameras(SynthSettings())[1].scaled(0.25),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +108,13 @@ def capture(tmp_path_factory):
     from texvocab.capture.synth import SynthSettings, synthesize
 
     poses, trans = make_sequence([("walk", 3), ("arm_raise", 2)], seed=5)
-    root = synthesize(tmp_path_factory.mktemp("e2e") / "cap", poses, trans, 4, default_body(),
-                      SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=256),
-                      progress=False)
+    root = synthesize(
+        tmp_path_factory.mktemp("e2e") / "cap",
+        poses,
+        trans,
+        4,
+        default_body(),
+        SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=256),
+        progress=False,
+    )
     return root

@@ -1,6 +1,7 @@
 """A ZJU-MoCap subject in the HumanNeRF layout, written by the tests from a synthetic person
 (one 64² camera, 10 frames): what prepare_dataset.py writes, with an optional lens and a
 subject whose skeleton differs from the body's."""
+
 import pickle
 
 import numpy as np
@@ -33,8 +34,7 @@ def distort(image: np.ndarray, cam, dist: np.ndarray) -> np.ndarray:
     distorted position q shows the ideal image at D⁻¹(q) (fixed-point inversion)."""
     h, w = image.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-    q = np.stack([(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0],
-                  (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1)
+    q = np.stack([(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0], (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1)
     lens = type(cam)(cam.K, cam.R, cam.t, w, h, dist)
     p = q.copy()
     for _ in range(40):
@@ -69,8 +69,11 @@ def write_standin(root, body, truth, dist=None, pelvis_offset=(0.0, 0.0, 0.0)):
         save_png(root / "masks" / f"{name}.png", np.repeat(mask[..., None], 3, -1).astype(np.uint8) * 255)
         E = np.eye(4)
         E[:3, :3], E[:3, 3] = cam.R, cam.t
-        cams[name] = {"intrinsics": cam.K.astype(np.float32), "extrinsics": E,
-                      "distortions": dist.astype(np.float32)}
+        cams[name] = {
+            "intrinsics": cam.K.astype(np.float32),
+            "extrinsics": E,
+            "distortions": dist.astype(np.float32),
+        }
         rh = poses[t][0].astype(np.float64)
         R = rotvec_to_rotmat(torch.as_tensor(rh)).numpy()
         # the project's body: world = R(v − J0b) + J0b + trans, J0b = rest[0] − offset;
@@ -80,9 +83,13 @@ def write_standin(root, body, truth, dist=None, pelvis_offset=(0.0, 0.0, 0.0)):
         smpl_pose = poses[t].astype(np.float64).copy()
         smpl_pose[0] = 0.0
         joints = body.forward(torch.as_tensor(smpl_pose)[None]).joints[0].double().numpy()
-        infos[name] = {"Rh": rh.astype(np.float32), "Th": th.astype(np.float32),
-                       "poses": smpl_pose.reshape(72).astype(np.float32), "joints": joints,
-                       "tpose_joints": rest}
+        infos[name] = {
+            "Rh": rh.astype(np.float32),
+            "Th": th.astype(np.float32),
+            "poses": smpl_pose.reshape(72).astype(np.float32),
+            "joints": joints,
+            "tpose_joints": rest,
+        }
     for fname, data in (("cameras.pkl", cams), ("mesh_infos.pkl", infos)):
         with open(root / fname, "wb") as fh:
             pickle.dump(data, fh)

@@ -1,5 +1,6 @@
 """Shared render-test cases: the shell width, PSNR, march settings and pixel rays of a
 camera, used by the render, guided, band, residual and training-ray tests."""
+
 import numpy as np
 import torch
 
@@ -20,13 +21,13 @@ def looking_away(camera: Camera) -> Camera:
     return Camera(camera.K, R, -R @ camera.center, camera.width, camera.height)
 
 
-SHELL = MarchSettings.from_flat(shell_width=DELTA, coarse_samples=36, fine_samples=16,
-                                early_stop_eps=1e-4)
+SHELL = MarchSettings.from_flat(shell_width=DELTA, coarse_samples=36, fine_samples=16, early_stop_eps=1e-4)
 GUIDED = SHELL.replace(guide="raster")
 
 
-MARCH = MarchSettings.from_flat(shell_width=DELTA, coarse_samples=36, fine_samples=16,
-                                early_stop_eps=0, segment=512, scout_threshold=None)
+MARCH = MarchSettings.from_flat(
+    shell_width=DELTA, coarse_samples=36, fine_samples=16, early_stop_eps=0, segment=512, scout_threshold=None
+)
 
 
 def rays_of(body, camera):
@@ -38,7 +39,13 @@ def rays_of(body, camera):
     plan = plan_surface(body["v"], body["f"], camera, d, DELTA, DELTA, MARCH.min_cos)
     t_band = torch.where(plan.band, plan.t_hit, torch.inf)
     passing = plan.passby & ~plan.hit
-    t_pass = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind], 1),
-                         torch.inf)
-    return (o[pix], d[pix], bounds.near.view(-1)[pix], bounds.far.view(-1)[pix], t_band[pix],
-            plan.cos[pix], t_pass[pix])
+    t_pass = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind], 1), torch.inf)
+    return (
+        o[pix],
+        d[pix],
+        bounds.near.view(-1)[pix],
+        bounds.far.view(-1)[pix],
+        t_band[pix],
+        plan.cos[pix],
+        t_pass[pix],
+    )

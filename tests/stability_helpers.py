@@ -1,6 +1,7 @@
 """Builders and checks shared by tests/pipeline/test_stability.py: a small real avatar (default
 body, a vocabulary of a few random training poses, 32² texture maps, a small encoder and
 field), cameras around a posed body, and finiteness checks for values and gradients."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -19,11 +20,9 @@ from texvocab.render import MarchSettings, ShellGeometry, render_rays
 
 NUM_FRAMES = 6
 TEXTURE_SIZE = 32
-FIELD = FieldSettings(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4, dir_freqs=2,
-                      feature_proj=16)
+FIELD = FieldSettings(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4, dir_freqs=2, feature_proj=16)
 #: the trainer's march (all coarse samples in one call), small enough for tests
-MARCH = MarchSettings.from_flat(coarse_samples=8, fine_samples=4, segment=512,
-                                scout_threshold=None)
+MARCH = MarchSettings.from_flat(coarse_samples=8, fine_samples=4, segment=512, scout_threshold=None)
 
 
 class PassThrough(nn.Module):
@@ -43,8 +42,13 @@ def training_poses(seed: int = 0) -> np.ndarray:
     return poses
 
 
-def make_field(body, vocab: Vocabulary, textures: torch.Tensor | None = None,
-               encoder: nn.Module | str = "small", seed: int = 0) -> AvatarField:
+def make_field(
+    body,
+    vocab: Vocabulary,
+    textures: torch.Tensor | None = None,
+    encoder: nn.Module | str = "small",
+    seed: int = 0,
+) -> AvatarField:
     """An AvatarField over ``vocab`` with random (seeded) 32² textures unless given.
 
     The SDF net's last layer, zero at initialisation, is randomised like a trained one's,
@@ -119,24 +123,38 @@ class Rendered:
     rays: int
 
 
-def render_and_backprop(field: AvatarField, ctx: PoseContext, origins: torch.Tensor,
-                        dirs: torch.Tensor, shell: ShellGeometry | None = None,
-                        seed: int = 0) -> Rendered:
+def render_and_backprop(
+    field: AvatarField,
+    ctx: PoseContext,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    shell: ShellGeometry | None = None,
+    seed: int = 0,
+) -> Rendered:
     """The training path: render_rays with the trainer's march and random samples, a
     colour + mask + depth loss, backward to the model parameters (zeroed first).
 
     Args: origins, dirs (R, 3); rays that miss the shell are kept (they must cost nothing).
     """
-    shell = shell or ShellGeometry.build(ctx.vertices.detach(), field.body.faces,
-                                         FIELD.shell_width, index=ctx.index)
+    shell = shell or ShellGeometry.build(
+        ctx.vertices.detach(), field.body.faces, FIELD.shell_width, index=ctx.index
+    )
     hit, near, far = shell.ray_bounds(origins, dirs)
     field.zero_grad(set_to_none=True)
-    out = render_rays(field.for_pose(ctx), origins, dirs, near, far, MARCH,
-                      torch.Generator().manual_seed(seed), shell, background=(0.2, 0.4, 0.6))
+    out = render_rays(
+        field.for_pose(ctx),
+        origins,
+        dirs,
+        near,
+        far,
+        MARCH,
+        torch.Generator().manual_seed(seed),
+        shell,
+        background=(0.2, 0.4, 0.6),
+    )
     assert_finite(rgb=out.rgb, opacity=out.opacity, depth=out.depth)
     if out.rgb.requires_grad:
-        loss = (out.rgb - 0.5).square().mean() + (out.opacity - 1).abs().mean() \
-            + 0.01 * out.depth.mean()
+        loss = (out.rgb - 0.5).square().mean() + (out.opacity - 1).abs().mean() + 0.01 * out.depth.mean()
         loss.backward()
     return Rendered(out.rgb.detach(), out.opacity.detach(), out.depth.detach(), int(hit.sum()))
 

@@ -1,4 +1,5 @@
 """Shared training-test cases: a tiny model's settings, and settings from the flat names."""
+
 import sys
 from pathlib import Path
 
@@ -26,15 +27,23 @@ def flat_dict(s: Settings) -> dict:
     """``s`` as checkpoints stored settings before the groups: one flat dict of
     ``FLAT_NAMES`` (view tuples as lists) and ``field``, a dict."""
     dotted = s.dotted()
-    return {**{flat: dotted[name] for flat, name in FLAT_NAMES.items()},
-            "field": s.to_dict()["field"]}
+    return {**{flat: dotted[name] for flat, name in FLAT_NAMES.items()}, "field": s.to_dict()["field"]}
 
 
 def tiny_settings(**kw) -> Settings:
     """A tiny model's settings, ``kw`` (flat names, as :func:`flat_settings`) applied."""
-    base = dict(texture_size=64, num_keys=3, k=2, encoder="small", rays_per_batch=256,
-                coarse_samples=8, fine_samples=8, iterations=40, checkpoint_every=10,
-                field=FieldSettings(hidden=48, sdf_layers=2, color_layers=1, pos_freqs=4),
-                lr=2e-3)
+    base = dict(
+        texture_size=64,
+        num_keys=3,
+        k=2,
+        encoder="small",
+        rays_per_batch=256,
+        coarse_samples=8,
+        fine_samples=8,
+        iterations=40,
+        checkpoint_every=10,
+        field=FieldSettings(hidden=48, sdf_layers=2, color_layers=1, pos_freqs=4),
+        lr=2e-3,
+    )
     base.update(kw)
     return flat_settings(**base)

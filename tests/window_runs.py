@@ -1,4 +1,5 @@
 """Run the viewer window for real under Xvfb with a scripted driver (app/testing/scripts.py)."""
+
 from __future__ import annotations
 
 import json
@@ -12,17 +13,39 @@ PYTHON = sys.executable
 XVFB = shutil.which("xvfb-run")
 
 
-def run_window(source, script: str, tmp_path: Path, *extra: str, timeout: float = 150,
-               command: tuple[str, ...] = (PYTHON, "-m", "texvocab_viewer"), env=None,
-               cwd: Path = ROOT):
+def run_window(
+    source,
+    script: str,
+    tmp_path: Path,
+    *extra: str,
+    timeout: float = 150,
+    command: tuple[str, ...] = (PYTHON, "-m", "texvocab_viewer"),
+    env=None,
+    cwd: Path = ROOT,
+):
     """(process, report dict, screenshot path) of ``command SOURCE --script SCRIPT`` in a
     1280x800 window with a 48 px neural render (``extra``: more arguments)."""
     assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
     report, shot = tmp_path / f"{script}.json", tmp_path / f"{script}.png"
-    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", *command,
-           *([] if source is None else [str(source)]), "--size", "1280x800", "--script", script,
-           "--report", str(report), "--screenshot", str(shot), "--neural-resolution", "48", *extra]
+    cmd = [
+        XVFB,
+        "-a",
+        "-s",
+        "-screen 0 1280x1024x24",
+        *command,
+        *([] if source is None else [str(source)]),
+        "--size",
+        "1280x800",
+        "--script",
+        script,
+        "--report",
+        str(report),
+        "--screenshot",
+        str(shot),
+        "--neural-resolution",
+        "48",
+        *extra,
+    ]
     proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
-    assert report.is_file(), (f"no report; rc {proc.returncode}\n{proc.stdout[-3000:]}\n"
-                              f"{proc.stderr[-3000:]}")
+    assert report.is_file(), f"no report; rc {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc, json.loads(report.read_text()), shot

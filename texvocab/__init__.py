@@ -1,4 +1,5 @@
 """TexVocab: pose-driven avatars from multi-view video (CVPR 2024)."""
+
 import os as _os
 
 # OpenMP threads that spin while waiting for work made CPU rendering ~10x slower whenever

@@ -11,6 +11,7 @@ samples; with one BLAS thread the window process's CPU per frame fell from 130-1
 83-99 ms and the frame from 72-95 to 56-78 ms (bench/viewer_ui.py, dragging row). In
 training (torch on 2 threads) a step took 13-23% less time (bench/train_speed.py).
 """
+
 from __future__ import annotations
 
 import os
@@ -41,5 +42,6 @@ def budget_blas_threads(threads: int = 1) -> bool:
 
 def blas_threads() -> int:
     """The largest thread count of the BLAS libraries loaded in this process (0: none)."""
-    return max((int(p.get("num_threads", 0)) for p in threadpool_info()
-                if p.get("user_api") == "blas"), default=0)
+    return max(
+        (int(p.get("num_threads", 0)) for p in threadpool_info() if p.get("user_api") == "blas"), default=0
+    )

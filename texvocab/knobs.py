@@ -12,6 +12,7 @@ setting as ``group.field`` with its value and what was expected, e.g.
 
 Imports nothing but :mod:`texvocab.errors`: every layer's settings may use it.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -52,9 +53,11 @@ def above(low: float, unit: str = "") -> Check:
     return Check(lambda v, _: v > low, f"> {_num(low)}{unit}")
 
 
-def within(low: float, high: float, *, open_low: bool = False, open_high: bool = False,
-           unit: str = "") -> Check:
+def within(
+    low: float, high: float, *, open_low: bool = False, open_high: bool = False, unit: str = ""
+) -> Check:
     """``low <= v <= high``, either end open."""
+
     def ok(v, _) -> bool:
         return (v > low if open_low else v >= low) and (v < high if open_high else v <= high)
 
@@ -102,8 +105,7 @@ def _kind(hint) -> tuple[Callable[[Any], bool], str]:
         choices = typing.get_args(hint)
         return (lambda v: isinstance(v, str) and v in choices), one_of(choices)
     if typing.get_origin(hint) is tuple:
-        return (lambda v: isinstance(v, tuple) and all(type(x) is int for x in v)), \
-            "a list of view indices"
+        return (lambda v: isinstance(v, tuple) and all(type(x) is int for x in v)), "a list of view indices"
     if hint is bool:
         return (lambda v: isinstance(v, bool)), "true or false"
     if hint is int:
@@ -138,8 +140,9 @@ def check_group(group) -> None:
         for check in f.metadata.get("checks", ()):
             if not check.ok(value, group):
                 none = " or none" if _optional(hints[f.name])[1] else ""
-                raise TexvocabError(f"setting {prefix}{f.name}={value!r}: expected "
-                                    f"{check.words(group)}{none}")
+                raise TexvocabError(
+                    f"setting {prefix}{f.name}={value!r}: expected {check.words(group)}{none}"
+                )
 
 
 def parse_value(raw: str, hint, item: str, name: str):

@@ -2,6 +2,7 @@
 viewer's 3D view of the same pose and camera with the pose's blended vocabulary texture
 (``vocab``) or each part's novelty, its distance to the nearest key (``novelty``, Eq. 4),
 rendered headless (OSMesa) as ``texvocab shot`` does."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -11,8 +12,10 @@ from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer
 from texvocab_viewer.state import ViewerData, ViewerState
 
 PANELS = ("neural", "vocab", "novelty")
-OPTIONS = {"vocab": SceneOptions(textured=True, lighting=False, background=(0.0, 0.0, 0.0)),
-           "novelty": SceneOptions(novelty=True, background=(0.0, 0.0, 0.0))}
+OPTIONS = {
+    "vocab": SceneOptions(textured=True, lighting=False, background=(0.0, 0.0, 0.0)),
+    "novelty": SceneOptions(novelty=True, background=(0.0, 0.0, 0.0)),
+}
 
 
 class GLPanels:

@@ -3,6 +3,7 @@ sequence (or the current pose) from the 3D view's camera, in a background thread
 window stays live; files go to ``exports/`` under the working folder with names that
 never replace an existing file. The same frame renderer and MP4 writer as
 ``texvocab render`` (:mod:`texvocab.pipeline.clip`)."""
+
 from __future__ import annotations
 
 import tempfile
@@ -34,9 +35,19 @@ class Export:
     ``background`` as ``texvocab shot``. ``done`` / ``total`` count frames; ``path`` is
     set when written, ``error`` on failure."""
 
-    def __init__(self, model, march, camera, poses, trans, stem: str, fps: float = 30.0,
-                 view3d: np.ndarray | None = None, folder: Path = EXPORT_DIR,
-                 background=(0.0, 0.0, 0.0)):
+    def __init__(
+        self,
+        model,
+        march,
+        camera,
+        poses,
+        trans,
+        stem: str,
+        fps: float = 30.0,
+        view3d: np.ndarray | None = None,
+        folder: Path = EXPORT_DIR,
+        background=(0.0, 0.0, 0.0),
+    ):
         self.model, self.march, self.camera = model, march, camera
         self.poses, self.trans, self.fps, self.view3d = poses, trans, float(fps), view3d
         self.stem, self.folder = stem, Path(folder)
@@ -58,9 +69,12 @@ class Export:
                 out = fresh_path(self.folder, self.stem, "")
                 out.mkdir()
                 if self.model is not None:  # as texvocab shot renders it
-                    save_png(out / "neural.png", render_neural(
-                        self.model, self.march, self.poses[0], self.trans[0], self.camera,
-                        self.background))
+                    save_png(
+                        out / "neural.png",
+                        render_neural(
+                            self.model, self.march, self.poses[0], self.trans[0], self.camera, self.background
+                        ),
+                    )
                 if self.view3d is not None:
                     save_png(out / "view3d.png", self.view3d)
                 self.done, self.path = 1, out
@@ -71,8 +85,12 @@ class Export:
                 paths = []
                 for i in range(self.total):
                     cam = self.camera[i] if isinstance(self.camera, list) else self.camera
-                    paths.append(save_png(Path(tmp) / f"frame_{i:05d}.png", worker.render(
-                        i, self.poses[i], self.trans[i], cam)[1]))
+                    paths.append(
+                        save_png(
+                            Path(tmp) / f"frame_{i:05d}.png",
+                            worker.render(i, self.poses[i], self.trans[i], cam)[1],
+                        )
+                    )
                     self.done = i + 1
                 write_mp4(paths, out, self.fps)
             self.path = out

@@ -1,5 +1,6 @@
 """``texvocab shot``: the viewer's 3D view (and, for a checkpoint, the neural render from
 the same camera) for one pose, written as PNGs with no display (moderngl over OSMesa)."""
+
 from __future__ import annotations
 
 import argparse
@@ -56,8 +57,10 @@ def apply_pose(state: ViewerState, spec: str) -> None:
             raise TexvocabError(f"--pose {spec}: {path} has poses 0..{len(poses) - 1}")
         state.set_pose(poses[n], trans[n])
         return
-    raise TexvocabError(f"--pose {spec!r}: expected a preset ({', '.join(sorted(PRESETS))}), a "
-                        "capture frame index N (or frame:N) or FILE.npz[:N]")
+    raise TexvocabError(
+        f"--pose {spec!r}: expected a preset ({', '.join(sorted(PRESETS))}), a "
+        "capture frame index N (or frame:N) or FILE.npz[:N]"
+    )
 
 
 def parse_camera(spec: str, data: ViewerData, state: ViewerState):
@@ -73,12 +76,13 @@ def parse_camera(spec: str, data: ViewerData, state: ViewerState):
     try:
         yaw, pitch, dist = (float(v) for v in spec.split(","))
     except ValueError:
-        raise TexvocabError(f"--camera {spec!r}: expected a capture view index or "
-                            "'yaw,pitch,distance' (degrees, degrees, metres)") from None
+        raise TexvocabError(
+            f"--camera {spec!r}: expected a capture view index or "
+            "'yaw,pitch,distance' (degrees, degrees, metres)"
+        ) from None
     if not (np.isfinite([yaw, pitch, dist]).all() and dist > 0 and abs(pitch) < 90):
         raise TexvocabError(f"--camera {spec!r}: need distance > 0 and |pitch| < 90")
-    return OrbitCamera(target=np.asarray(DEFAULT_TARGET) + state.trans, yaw=yaw, pitch=pitch,
-                       distance=dist)
+    return OrbitCamera(target=np.asarray(DEFAULT_TARGET) + state.trans, yaw=yaw, pitch=pitch, distance=dist)
 
 
 @dataclass
@@ -98,13 +102,28 @@ def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
         shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
-        out = render_image(model.for_pose(ctx), camera, ctx.vertices, model.body.faces, march,
-                           background=tuple(background), shell=shell, index=ctx.index)
+        out = render_image(
+            model.for_pose(ctx),
+            camera,
+            ctx.vertices,
+            model.body.faces,
+            march,
+            background=tuple(background),
+            shell=shell,
+            index=ctx.index,
+        )
     return to_uint8(out.rgb.numpy())
 
 
-def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int],
-              options: SceneOptions, neural: bool, ctx=None) -> Shot:
+def take_shot(
+    data: ViewerData,
+    state: ViewerState,
+    camera,
+    size: tuple[int, int],
+    options: SceneOptions,
+    neural: bool,
+    ctx=None,
+) -> Shot:
     """Render the 3D view (on ``ctx``, or a fresh OSMesa context released afterwards) and,
     when ``neural`` and a model is loaded, the neural render from the same camera."""
     own = ctx is None
@@ -123,8 +142,14 @@ def take_shot(data: ViewerData, state: ViewerState, camera, size: tuple[int, int
     shot = Shot(view, None, time.perf_counter() - t0)
     if neural and data.model is not None:
         t0 = time.perf_counter()
-        shot.neural = render_neural(data.model, march_settings(data.settings), state.pose,
-                                    state.trans, as_camera(camera, *size), options.background)
+        shot.neural = render_neural(
+            data.model,
+            march_settings(data.settings),
+            state.pose,
+            state.trans,
+            as_camera(camera, *size),
+            options.background,
+        )
         shot.neural_seconds = time.perf_counter() - t0
     return shot
 
@@ -166,20 +191,29 @@ def cmd_shot(args: argparse.Namespace) -> int:
     options = SceneOptions(**{name: True for name in args.overlay})
     shot = take_shot(data, state, camera, size, options, neural=args.neural is not False)
     paths = write_shot(args.out, shot)
-    print(f"3D view {size[0]}x{size[1]} in {shot.gl_seconds:.2f} s"
-          + (f", neural render in {shot.neural_seconds:.2f} s" if shot.neural is not None else ""))
+    print(
+        f"3D view {size[0]}x{size[1]} in {shot.gl_seconds:.2f} s"
+        + (f", neural render in {shot.neural_seconds:.2f} s" if shot.neural is not None else "")
+    )
     for p in paths:
         print(f"  {p.resolve()}")
     return 0
 
 
-DEMO_LOOKS = (("3D view: vocabulary texture", {}),
-              ("part colours", {"part_colors": True}),
-              ("novelty + skeleton", {"novelty": True, "skeleton": True}))
+DEMO_LOOKS = (
+    ("3D view: vocabulary texture", {}),
+    ("part colours", {"part_colors": True}),
+    ("novelty + skeleton", {"novelty": True, "skeleton": True}),
+)
 
 
-def demo_shots(source: str | Path, out_dir: str | Path, poses: tuple[str, ...] | None = None,
-               view: int = 1, smpl: str | None = None) -> Path:
+def demo_shots(
+    source: str | Path,
+    out_dir: str | Path,
+    poses: tuple[str, ...] | None = None,
+    view: int = 1,
+    smpl: str | None = None,
+) -> Path:
     """What the viewer would show, for a display-less demo: for each pose (default: the
     last novel frame of the capture, then 'kick' and 'arms_up'), the 3D view textured,
     with part colours and with the novelty overlay, and the neural render (checkpoints),
@@ -201,8 +235,7 @@ def demo_shots(source: str | Path, out_dir: str | Path, poses: tuple[str, ...] |
             size = (camera.width, camera.height)
             tiles = []
             for i, (_, flags) in enumerate(DEMO_LOOKS):
-                shot = take_shot(data, state, camera, size, SceneOptions(**flags),
-                                 neural=i == 0, ctx=ctx)
+                shot = take_shot(data, state, camera, size, SceneOptions(**flags), neural=i == 0, ctx=ctx)
                 if i == 0:
                     write_shot(out / f"pose_{spec}", shot)
                     neural = shot.neural

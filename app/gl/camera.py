@@ -5,6 +5,7 @@ of the same camera line up pixel for pixel).
 GL and OpenCV differ in two ways handled here only: camera axes (GL looks down -z with
 +y up, OpenCV down +z with +y down) and pixel centres (GL at i + 0.5, OpenCV at i).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -17,8 +18,7 @@ CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV camera axes -> GL camera ax
 DEFAULT_TARGET = (0.0, -0.3, 0.0)  # the default body's centre (its synthetic captures aim here)
 
 
-def gl_projection_from_K(K: np.ndarray, width: int, height: int, near: float,
-                         far: float) -> np.ndarray:
+def gl_projection_from_K(K: np.ndarray, width: int, height: int, near: float, far: float) -> np.ndarray:
     """(4, 4) clip-space matrix for OpenCV camera coordinates (x right, y down, z forward).
 
     OpenCV pixel (u, v) with centres at integers maps to GL window pixel (u + 0.5,
@@ -26,12 +26,14 @@ def gl_projection_from_K(K: np.ndarray, width: int, height: int, near: float,
     """
     fx, s, cx = K[0]
     fy, cy = K[1, 1], K[1, 2]
-    return np.array([
-        [2 * fx / width, 2 * s / width, 2 * (cx + 0.5) / width - 1, 0.0],
-        [0.0, -2 * fy / height, 1 - 2 * (cy + 0.5) / height, 0.0],
-        [0.0, 0.0, (far + near) / (far - near), -2 * far * near / (far - near)],
-        [0.0, 0.0, 1.0, 0.0],
-    ])
+    return np.array(
+        [
+            [2 * fx / width, 2 * s / width, 2 * (cx + 0.5) / width - 1, 0.0],
+            [0.0, -2 * fy / height, 1 - 2 * (cy + 0.5) / height, 0.0],
+            [0.0, 0.0, (far + near) / (far - near), -2 * far * near / (far - near)],
+            [0.0, 0.0, 1.0, 0.0],
+        ]
+    )
 
 
 def gl_mvp(camera: Camera, near: float = 0.05, far: float = 100.0) -> np.ndarray:
@@ -67,8 +69,7 @@ class OrbitCamera:
     def eye(self) -> np.ndarray:
         """(3,) camera centre in world coordinates."""
         yaw, pitch = np.radians(self.yaw), np.radians(self.pitch)
-        offset = np.array([np.cos(pitch) * np.sin(yaw), np.sin(pitch),
-                           np.cos(pitch) * np.cos(yaw)])
+        offset = np.array([np.cos(pitch) * np.sin(yaw), np.sin(pitch), np.cos(pitch) * np.cos(yaw)])
         return self.target + self.distance * offset
 
     def orbit(self, dx: float, dy: float) -> None:
@@ -98,8 +99,14 @@ class OrbitCamera:
         """(4, 4) GL perspective projection for width / height = ``aspect``."""
         f = 1.0 / np.tan(np.radians(self.fov) / 2)
         n, fa = self.near, self.far
-        return np.array([[f / aspect, 0, 0, 0], [0, f, 0, 0],
-                         [0, 0, (fa + n) / (n - fa), 2 * fa * n / (n - fa)], [0, 0, -1, 0]])
+        return np.array(
+            [
+                [f / aspect, 0, 0, 0],
+                [0, f, 0, 0],
+                [0, 0, (fa + n) / (n - fa), 2 * fa * n / (n - fa)],
+                [0, 0, -1, 0],
+            ]
+        )
 
     def intrinsics(self, width: int, height: int) -> np.ndarray:
         """OpenCV K (3, 3): vertical fov ``fov``, principal point at the image centre."""
@@ -159,8 +166,10 @@ class CaptureViewCamera:
             return cam
         factor = width / cam.width
         if abs(cam.height * factor - height) > 1.0:
-            raise ValueError(f"capture view {self.index} is {cam.width}x{cam.height}; cannot "
-                             f"draw it at {width}x{height} (different aspect ratio)")
+            raise ValueError(
+                f"capture view {self.index} is {cam.width}x{cam.height}; cannot "
+                f"draw it at {width}x{height} (different aspect ratio)"
+            )
         return cam.scaled(factor)
 
     def key(self) -> tuple:

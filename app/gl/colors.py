@@ -1,4 +1,5 @@
 """Colours of the 3D view's overlays: one per body part, and the novelty heat scale."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,13 +14,15 @@ PART_COLORS: dict[str, tuple[float, float, float]] = {
 }
 
 #: Heat scale stops (t, RGB): t = novelty / novelty_scale, clipped to [0, 1].
-HEAT_STOPS = np.array([
-    [0.00, 0.10, 0.20, 0.80],
-    [0.25, 0.10, 0.75, 0.95],
-    [0.50, 0.20, 0.85, 0.30],
-    [0.75, 0.98, 0.85, 0.15],
-    [1.00, 0.90, 0.12, 0.10],
-])
+HEAT_STOPS = np.array(
+    [
+        [0.00, 0.10, 0.20, 0.80],
+        [0.25, 0.10, 0.75, 0.95],
+        [0.50, 0.20, 0.85, 0.30],
+        [0.75, 0.98, 0.85, 0.15],
+        [1.00, 0.90, 0.12, 0.10],
+    ]
+)
 
 
 def heat_color(t) -> np.ndarray:
@@ -27,4 +30,3 @@ def heat_color(t) -> np.ndarray:
     vocabulary has seen) through green and yellow to red (far from every key)."""
     t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
     return np.stack([np.interp(t, HEAT_STOPS[:, 0], HEAT_STOPS[:, c]) for c in (1, 2, 3)], -1)
-

@@ -11,6 +11,7 @@ EGL or GLX contexts. pyrender makes its own context current when it renders, so 
 that interleaves the two calls :func:`make_current` (or ``with ctx:``)
 before drawing with moderngl.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -47,13 +48,20 @@ def load_osmesa() -> ctypes.CDLL:
         except OSError:
             continue
     else:
-        raise TexvocabError("libOSMesa not found (tried " + ", ".join(names) + "): install the "
-                            "Debian package libosmesa6 for headless rendering")
+        raise TexvocabError(
+            "libOSMesa not found (tried " + ", ".join(names) + "): install the "
+            "Debian package libosmesa6 for headless rendering"
+        )
     lib.OSMesaCreateContextAttribs.restype = ctypes.c_void_p
     lib.OSMesaCreateContextAttribs.argtypes = [ctypes.POINTER(ctypes.c_int), ctypes.c_void_p]
     lib.OSMesaMakeCurrent.restype = ctypes.c_ubyte
-    lib.OSMesaMakeCurrent.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint,
-                                      ctypes.c_int, ctypes.c_int]
+    lib.OSMesaMakeCurrent.argtypes = [
+        ctypes.c_void_p,
+        ctypes.c_void_p,
+        ctypes.c_uint,
+        ctypes.c_int,
+        ctypes.c_int,
+    ]
     lib.OSMesaGetProcAddress.restype = ctypes.c_void_p
     lib.OSMesaGetProcAddress.argtypes = [ctypes.c_char_p]
     lib.OSMesaDestroyContext.restype = None
@@ -68,22 +76,38 @@ class OSMesaLoader:
 
     def __init__(self, major: int = 3, minor: int = 3):
         self.lib = load_osmesa()
-        attribs = [OSMESA_FORMAT, GL_RGBA, OSMESA_DEPTH_BITS, 24, OSMESA_STENCIL_BITS, 8,
-                   OSMESA_ACCUM_BITS, 0, OSMESA_PROFILE, OSMESA_CORE_PROFILE,
-                   OSMESA_CONTEXT_MAJOR_VERSION, major, OSMESA_CONTEXT_MINOR_VERSION, minor, 0]
+        attribs = [
+            OSMESA_FORMAT,
+            GL_RGBA,
+            OSMESA_DEPTH_BITS,
+            24,
+            OSMESA_STENCIL_BITS,
+            8,
+            OSMESA_ACCUM_BITS,
+            0,
+            OSMESA_PROFILE,
+            OSMESA_CORE_PROFILE,
+            OSMESA_CONTEXT_MAJOR_VERSION,
+            major,
+            OSMESA_CONTEXT_MINOR_VERSION,
+            minor,
+            0,
+        ]
         arr = (ctypes.c_int * len(attribs))(*attribs)
         self.handle = self.lib.OSMesaCreateContextAttribs(arr, None)
         if not self.handle:
-            raise TexvocabError(f"OSMesa could not create an OpenGL {major}.{minor} core "
-                                "context (Mesa too old?)")
+            raise TexvocabError(
+                f"OSMesa could not create an OpenGL {major}.{minor} core context (Mesa too old?)"
+            )
         self.buffer = (ctypes.c_ubyte * (BUFFER_SIZE * BUFFER_SIZE * 4))()
         self.make_current()
 
     def make_current(self) -> None:
         if self.handle is None:
             raise TexvocabError("the OSMesa context was released")
-        ok = self.lib.OSMesaMakeCurrent(self.handle, ctypes.cast(self.buffer, ctypes.c_void_p),
-                                        GL_UNSIGNED_BYTE, BUFFER_SIZE, BUFFER_SIZE)
+        ok = self.lib.OSMesaMakeCurrent(
+            self.handle, ctypes.cast(self.buffer, ctypes.c_void_p), GL_UNSIGNED_BYTE, BUFFER_SIZE, BUFFER_SIZE
+        )
         if not ok:
             raise TexvocabError("OSMesaMakeCurrent failed")
 

@@ -9,6 +9,7 @@ five body parts of Table 1), ``textured`` (the blended vocabulary texture of the
 a neutral grey checker without a vocabulary). ``wireframe`` draws triangle edges over
 it and ``skeleton`` the joints and bones on top of everything.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -49,8 +50,10 @@ def as_camera(camera, width: int, height: int) -> Camera:
         return camera
     factor = width / camera.width
     if round(camera.height * factor) != height:
-        raise ValueError(f"camera {camera.name!r} is {camera.width}x{camera.height}; cannot draw "
-                         f"it at {width}x{height} (different aspect ratio)")
+        raise ValueError(
+            f"camera {camera.name!r} is {camera.width}x{camera.height}; cannot draw "
+            f"it at {width}x{height} (different aspect ratio)"
+        )
     return camera.scaled(factor)
 
 
@@ -97,10 +100,19 @@ class SceneRenderer:
         self.vbo_col = ctx.buffer(reserve=n * 12, dynamic=True)
         self.vbo_uv = ctx.buffer(uv.astype("f4").tobytes())
         self.vbo_bary = ctx.buffer(bary.astype("f4").tobytes())
-        self.mesh_vao = ctx.vertex_array(self.mesh_prog, self._bindings(self.mesh_prog, [
-            (self.vbo_pos, "3f", "in_position"), (self.vbo_nrm, "3f", "in_normal"),
-            (self.vbo_uv, "2f", "in_uv"), (self.vbo_col, "3f", "in_color"),
-            (self.vbo_bary, "3f", "in_bary")]))
+        self.mesh_vao = ctx.vertex_array(
+            self.mesh_prog,
+            self._bindings(
+                self.mesh_prog,
+                [
+                    (self.vbo_pos, "3f", "in_position"),
+                    (self.vbo_nrm, "3f", "in_normal"),
+                    (self.vbo_uv, "2f", "in_uv"),
+                    (self.vbo_col, "3f", "in_color"),
+                    (self.vbo_bary, "3f", "in_bary"),
+                ],
+            ),
+        )
         # Indexed (without the wireframe): one GL vertex per distinct (vertex, uv) pair, so
         # the per-pose upload and the vertex stage handle ~V vertices instead of 3F corners
         # (the default body: 7.8k against 41k; llvmpipe runs the vertex stage on the UI thread).
@@ -115,22 +127,32 @@ class SceneRenderer:
         self.ivbo_col = ctx.buffer(reserve=m * 12, dynamic=True)
         self.ivbo_uv = ctx.buffer(uv_indexed.astype("f4").tobytes())
         self.ibo = ctx.buffer(inverse.reshape(-1).astype("i4").tobytes())
-        self.indexed_vao = ctx.vertex_array(self.mesh_prog, self._bindings(self.mesh_prog, [
-            (self.ivbo_pos, "3f", "in_position"), (self.ivbo_nrm, "3f", "in_normal"),
-            (self.ivbo_uv, "2f", "in_uv"), (self.ivbo_col, "3f", "in_color")]),
-            index_buffer=self.ibo, index_element_size=4)
+        self.indexed_vao = ctx.vertex_array(
+            self.mesh_prog,
+            self._bindings(
+                self.mesh_prog,
+                [
+                    (self.ivbo_pos, "3f", "in_position"),
+                    (self.ivbo_nrm, "3f", "in_normal"),
+                    (self.ivbo_uv, "2f", "in_uv"),
+                    (self.ivbo_col, "3f", "in_color"),
+                ],
+            ),
+            index_buffer=self.ibo,
+            index_element_size=4,
+        )
         parents = body.parents.numpy()
         self.bones = np.stack([parents[1:], np.arange(1, len(parents))], 1)
         self.vbo_bones = ctx.buffer(reserve=len(self.bones) * 24, dynamic=True)
         self.vbo_joints = ctx.buffer(reserve=len(parents) * 12, dynamic=True)
-        self.bone_vao = ctx.vertex_array(self.bone_prog, [
-            (self.vbo_bones, "3f 3f/i", "in_a", "in_b")])
+        self.bone_vao = ctx.vertex_array(self.bone_prog, [(self.vbo_bones, "3f 3f/i", "in_a", "in_b")])
         self.joint_vao = ctx.vertex_array(self.joint_prog, [(self.vbo_joints, "3f", "in_position")])
         # vertex -> incident faces, for smooth normals: (V, F) sparse incidence
         rows = faces.reshape(-1)
         cols = np.repeat(np.arange(len(faces)), 3)
-        self._incidence = sparse.csr_matrix((np.ones(len(rows), np.float32), (rows, cols)),
-                                            shape=(body.num_vertices, len(faces)))
+        self._incidence = sparse.csr_matrix(
+            (np.ones(len(rows), np.float32), (rows, cols)), shape=(body.num_vertices, len(faces))
+        )
         #: the winding GL culls against ("ccw"/"cw"), None to draw both sides: a closed,
         #: consistently wound body seen from outside never shows a back face (each lies
         #: behind a front face), so llvmpipe need not set up or shade them (measured at
@@ -179,7 +201,7 @@ class SceneRenderer:
         self.size = size
 
     def _layout(self, options: SceneOptions) -> str:
-        """"unrolled" with the wireframe (it needs barycentrics), else "indexed"."""
+        """ "unrolled" with the wireframe (it needs barycentrics), else "indexed"."""
         return "unrolled" if options.wireframe or self.force_unrolled else "indexed"
 
     def _per_vertex(self, values: np.ndarray, layout: str) -> bytes:
@@ -194,8 +216,7 @@ class SceneRenderer:
         verts, joints = state.posed()
         vn = self._incidence @ face_normals(verts.astype(np.float32, copy=False), self.faces)
         vn /= np.maximum(np.sqrt((vn * vn).sum(1, keepdims=True)), 1e-12)
-        pos, nrm = (self.vbo_pos, self.vbo_nrm) if layout == "unrolled" else (self.ivbo_pos,
-                                                                               self.ivbo_nrm)
+        pos, nrm = (self.vbo_pos, self.vbo_nrm) if layout == "unrolled" else (self.ivbo_pos, self.ivbo_nrm)
         pos.write(self._per_vertex(verts, layout))
         nrm.write(self._per_vertex(vn, layout))
         j = joints.astype("f4")
@@ -232,21 +253,20 @@ class SceneRenderer:
         return heat_color(per_vertex / max(scale, 1e-9))
 
     def _update_colors(self, state, options: SceneOptions, layout: str) -> None:
-        key = (id(state), state.version, options.novelty, options.part_colors,
-               options.novelty_scale, layout)
+        key = (id(state), state.version, options.novelty, options.part_colors, options.novelty_scale, layout)
         if key == self._color_key:
             return
         if options.novelty:
             rgb = self.novelty_colors(state, options.novelty_scale)
         else:
             rgb = self._part_rgb
-        (self.vbo_col if layout == "unrolled" else self.ivbo_col).write(
-            self._per_vertex(rgb, layout))
+        (self.vbo_col if layout == "unrolled" else self.ivbo_col).write(self._per_vertex(rgb, layout))
         self._color_key = key
 
     # -- drawing ----------------------------------------------------------------------
-    def render(self, state, camera, size: tuple[int, int] = (1280, 800),
-               options: SceneOptions | None = None) -> moderngl.Texture:
+    def render(
+        self, state, camera, size: tuple[int, int] = (1280, 800), options: SceneOptions | None = None
+    ) -> moderngl.Texture:
         """Draw ``state`` seen by ``camera`` (an :class:`~texvocab_viewer.gl.camera.OrbitCamera` or a
         capture :class:`Camera`) at ``size`` = (width, height); returns the RGBA colour
         texture (rows bottom-up, as GL stores them)."""
@@ -291,8 +311,10 @@ class SceneRenderer:
         if o.skeleton:
             ctx.disable(moderngl.DEPTH_TEST)
             scale = max(h / 800.0, 0.45)  # sizes in pixels for an 800-pixel-high view
-            for p, color, extra in ((self.bone_prog, o.bone_color, {"width": 3.0 * scale}),
-                                    (self.joint_prog, o.joint_color, {"size": 9.0 * scale})):
+            for p, color, extra in (
+                (self.bone_prog, o.bone_color, {"width": 3.0 * scale}),
+                (self.joint_prog, o.joint_color, {"size": 9.0 * scale}),
+            ):
                 set_uniform(p, "mvp", mvp)
                 set_uniform(p, "color", tuple(color))
                 set_uniform(p, "viewport", (float(w), float(h)))

@@ -14,6 +14,7 @@ The neural render's preview is drawn the same way, scaled (:func:`image_rects`,
 PyOpenGL is imported at the first copy, once the window has chosen its platform
 (texvocab_viewer.window._choose_gl_platform).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,8 +35,7 @@ class ViewBlit:
     clip: tuple[float, float, float, float]  # x0, y0, x1, y1
 
 
-def blit_rects(blit: ViewBlit, framebuffer_size: tuple[int, int],
-               scale: tuple[float, float] = (1.0, 1.0)):
+def blit_rects(blit: ViewBlit, framebuffer_size: tuple[int, int], scale: tuple[float, float] = (1.0, 1.0)):
     """(src, dst) rectangles (x0, y0, x1, y1) of ``glBlitFramebuffer``, rows counted from
     the bottom in both framebuffers, for the part of ``blit``'s image inside its clip
     rectangle; None when none of it is in the window. ``scale``: ImGui's display
@@ -51,15 +51,20 @@ def blit_rects(blit: ViewBlit, framebuffer_size: tuple[int, int],
     if right <= left or bottom <= top:
         return None
     src = (left, blit.h - bottom, right, blit.h - top)
-    dst = (round((blit.x + left) * sx), round(fh - (blit.y + bottom) * sy),
-           round((blit.x + right) * sx), round(fh - (blit.y + top) * sy))
+    dst = (
+        round((blit.x + left) * sx),
+        round(fh - (blit.y + bottom) * sy),
+        round((blit.x + right) * sx),
+        round(fh - (blit.y + top) * sy),
+    )
     if dst[2] <= 0 or dst[3] <= 0 or dst[0] >= fw or dst[1] >= fh:
         return None
     return src, dst
 
 
-def blit_view(blit: ViewBlit, framebuffer_size: tuple[int, int],
-              scale: tuple[float, float] = (1.0, 1.0)) -> bool:
+def blit_view(
+    blit: ViewBlit, framebuffer_size: tuple[int, int], scale: tuple[float, float] = (1.0, 1.0)
+) -> bool:
     """Copy the scene's framebuffer into the window's (GL framebuffer 0) at ``blit``'s
     rectangle (:func:`blit_rects`). False when nothing of it is visible."""
     rects = blit_rects(blit, framebuffer_size, scale)
@@ -69,8 +74,12 @@ def blit_view(blit: ViewBlit, framebuffer_size: tuple[int, int],
     return True
 
 
-def image_rects(rect: tuple[float, float, float, float], texture_size: tuple[int, int],
-                framebuffer_size: tuple[int, int], scale: tuple[float, float] = (1.0, 1.0)):
+def image_rects(
+    rect: tuple[float, float, float, float],
+    texture_size: tuple[int, int],
+    framebuffer_size: tuple[int, int],
+    scale: tuple[float, float] = (1.0, 1.0),
+):
     """(src, dst) rectangles of ``glBlitFramebuffer`` that draw a whole texture (w, h) whose
     row 0 is the image's top (as the neural render's levels are uploaded) into ``rect``
     (x0, y0, x1, y1 in ImGui's coordinates); None when the rectangle is empty or not
@@ -93,8 +102,9 @@ def blit_image(fbo: int, rects, linear: bool = True) -> None:
     GL.glDisable(GL.GL_SCISSOR_TEST)
     GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fbo)
     GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, 0)
-    GL.glBlitFramebuffer(*rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT,
-                         GL.GL_LINEAR if linear else GL.GL_NEAREST)
+    GL.glBlitFramebuffer(
+        *rects[0], *rects[1], GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR if linear else GL.GL_NEAREST
+    )
     GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
 
 

@@ -35,6 +35,7 @@ The same protocol as the thread worker, over two pipes and one shared integer:
   (no window, 1 torch thread per process, 256x132): a full level in 0.577 s in one
   process, 0.412 s in two.
 """
+
 from __future__ import annotations
 
 import multiprocessing as mp
@@ -64,8 +65,7 @@ def _newest_job(jobs, job):
     return job
 
 
-def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results,
-           newest, previewed) -> None:
+def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results, newest, previewed) -> None:
     """The child process: build the renderer, then render the newest job, level by
     level, until told to stop (None) or the viewer's end of ``jobs`` closes. A shard
     after the first starts a job with a preview only once the first shard is past it
@@ -106,14 +106,25 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results,
 
         def cancelled() -> bool:
             return newest.value < 0 or (shown[0] and stale())
+
         try:
             for level, rgb, seconds, *owned in render(job, cancelled):
                 image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32))
                 mask = np.asarray(owned[0], dtype=bool) if owned else None
                 if cancelled():
                     break
-                results.send(("level", job.version, int(level), image, float(seconds),
-                              time.perf_counter() - start, not shown[0], mask))
+                results.send(
+                    (
+                        "level",
+                        job.version,
+                        int(level),
+                        image,
+                        float(seconds),
+                        time.perf_counter() - start,
+                        not shown[0],
+                        mask,
+                    )
+                )
                 shown[0] = True
                 previewed.value = max(previewed.value, job.version)
                 if stale():
@@ -145,8 +156,15 @@ class ProcessWorker(DeliveredLevels):
 
     in_process = False  # its CPU time is not the viewer process's
 
-    def __init__(self, factory, args: tuple = (), threads: int | None = 1, nice: int = 0,
-                 on_frame=None, processes: int = 1):
+    def __init__(
+        self,
+        factory,
+        args: tuple = (),
+        threads: int | None = 1,
+        nice: int = 0,
+        on_frame=None,
+        processes: int = 1,
+    ):
         super().__init__()
         self._on_frame = on_frame
         self._newest = _SPAWN.RawValue("q", -1)
@@ -157,9 +175,20 @@ class ProcessWorker(DeliveredLevels):
             child_jobs, jobs = _SPAWN.Pipe(duplex=False)
             results, child_results = _SPAWN.Pipe(duplex=False)
             proc = _SPAWN.Process(
-                target=_serve, name=f"texvocab-neural-{k}", daemon=True,
-                args=(factory, blob, threads, min(nice + (SHARD_NICE if k else 0), 19),
-                      child_jobs, child_results, self._newest, self._previewed))
+                target=_serve,
+                name=f"texvocab-neural-{k}",
+                daemon=True,
+                args=(
+                    factory,
+                    blob,
+                    threads,
+                    min(nice + (SHARD_NICE if k else 0), 19),
+                    child_jobs,
+                    child_results,
+                    self._newest,
+                    self._previewed,
+                ),
+            )
             proc.start()
             child_jobs.close()  # the child's ends: only the child holds them now, so
             child_results.close()  # either side sees EOF when the other goes away
@@ -169,8 +198,7 @@ class ProcessWorker(DeliveredLevels):
         self.pid = self._processes[0].pid
         self.pids = [p.pid for p in self._processes]
         self._merge: dict = {}  # the newest job's levels as its shards send them
-        self._listener = threading.Thread(target=self._listen, name="texvocab-neural-results",
-                                          daemon=True)
+        self._listener = threading.Thread(target=self._listen, name="texvocab-neural-results", daemon=True)
         self._listener.start()
 
     # --- UI thread --------------------------------------------------------------------
@@ -183,14 +211,21 @@ class ProcessWorker(DeliveredLevels):
                 return
             self._version, self._busy = job.version, True
             size = None if n == 1 else (job.camera.height, job.camera.width)
-            self._merge = {"size": size, "canvas": None,
-                           "got": {}, "sent": set(), "done": set()}
+            self._merge = {"size": size, "canvas": None, "got": {}, "sent": set(), "done": set()}
         self._newest.value = job.version
         try:
             for k, jobs in enumerate(self._jobs):
-                jobs.send(job if n == 1 else replace(
-                    job, shard=k, shards=n, finish_preview=job.finish_preview and k == 0,
-                    after_preview=job.finish_preview and k > 0))
+                jobs.send(
+                    job
+                    if n == 1
+                    else replace(
+                        job,
+                        shard=k,
+                        shards=n,
+                        finish_preview=job.finish_preview and k == 0,
+                        after_preview=job.finish_preview and k > 0,
+                    )
+                )
         except (BrokenPipeError, OSError) as exc:
             self._ended(f"the render process is gone ({type(exc).__name__})")
 

@@ -9,6 +9,7 @@ bench/viewer_ui.py (render process, 256x132, 4 renders each): 6-8 UI frames per 
 the empty event. GLFW here is the library imgui_bundle's extension is linked against (the
 same shared object, so the same initialised instance); without it the refresh is used.
 """
+
 from __future__ import annotations
 
 import ctypes

@@ -13,6 +13,7 @@ instead of none until it stops (``RenderJob.finish_preview``).
 Torch in the worker runs with few intra-op threads (``threads``, default 1) so the UI
 thread keeps a core for drawing on small machines.
 """
+
 from __future__ import annotations
 
 import os
@@ -36,7 +37,7 @@ LevelRenderer = Callable[["RenderJob", Callable[[], bool]], Iterator[tuple[int, 
 
 
 def describe(exc: BaseException) -> str:
-    """"Type: message (file:line)" of the innermost frame, for the panel."""
+    """ "Type: message (file:line)" of the innermost frame, for the panel."""
     where = traceback.extract_tb(exc.__traceback__)[-1]
     return f"{type(exc).__name__}: {exc} ({Path(where.filename).name}:{where.lineno})"
 
@@ -107,8 +108,7 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
         borrow = job.shard == 0
         count = len(job.levels or levels)
         with torch.no_grad():
-            ctx = model.pose_feature.context(job.pose, job.trans,
-                                             like=previous[0] if borrow else None)
+            ctx = model.pose_feature.context(job.pose, job.trans, like=previous[0] if borrow else None)
             previous[0] = ctx.index
             if cancelled():
                 return
@@ -118,13 +118,25 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             # first, preview level; the shell marcher needs it at once (its render path)
             shell = prepare_shell(m, ctx.vertices, model.body.faces, ctx.index)
             field = model.for_pose(ctx)
-        for i, out in enumerate(progressive_shard(
-                field, job.camera, ctx.vertices, model.body.faces, m,
-                levels=job.levels or levels, cancelled=cancelled, background=job.background,
-                shell=shell, index=ctx.index, shard=(job.shard, job.shards))):
+        for i, out in enumerate(
+            progressive_shard(
+                field,
+                job.camera,
+                ctx.vertices,
+                model.body.faces,
+                m,
+                levels=job.levels or levels,
+                cancelled=cancelled,
+                background=job.background,
+                shell=shell,
+                index=ctx.index,
+                shard=(job.shard, job.shards),
+            )
+        ):
             yield out
             if i + 1 < count:  # a finer level follows: it searches this pose's own split
                 ctx.index.relayout()
+
     return render
 
 
@@ -191,8 +203,13 @@ class ProgressiveWorker(DeliveredLevels):
 
     in_process = True  # its CPU time is part of the viewer process's
 
-    def __init__(self, render: LevelRenderer, threads: int | None = 1, nice: int = 0,
-                 on_frame: Callable[[], None] | None = None):
+    def __init__(
+        self,
+        render: LevelRenderer,
+        threads: int | None = 1,
+        nice: int = 0,
+        on_frame: Callable[[], None] | None = None,
+    ):
         super().__init__()
         self._render = render
         self._on_frame = on_frame
@@ -265,11 +282,13 @@ class ProgressiveWorker(DeliveredLevels):
 
         def cancelled() -> bool:
             return self._stop or (shown and self._stale(job))
+
         try:
             for level, rgb, seconds, *_ in self._render(job, cancelled):
                 image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32))
-                frame = RenderFrame(job.version, int(level), image, float(seconds),
-                                    time.perf_counter() - start)
+                frame = RenderFrame(
+                    job.version, int(level), image, float(seconds), time.perf_counter() - start
+                )
                 with self._lock:
                     if cancelled():
                         return

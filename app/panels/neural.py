@@ -7,6 +7,7 @@ Without a checkpoint it says why it is empty.
 Widget IDs: window "Neural render", ``**/Live``, ``**/resolution``, ``**/Render now``,
 ``**/preset``.
 """
+
 from __future__ import annotations
 
 import time
@@ -39,11 +40,23 @@ class NeuralView:
     finish): the worker renders the newest pose at one level (:attr:`playback_level`),
     and when it is done the then-newest pose follows."""
 
-    def __init__(self, ctx, model, march, threads: int = 1, nice: int = 0, settings=None,
-                 on_frame=None, worker="process"):
+    def __init__(
+        self,
+        ctx,
+        model,
+        march,
+        threads: int = 1,
+        nice: int = 0,
+        settings=None,
+        on_frame=None,
+        worker="process",
+    ):
         self.ctx = ctx
-        self.worker = worker if not isinstance(worker, str) else \
-            start_worker(worker, model, march, threads, nice, on_frame)
+        self.worker = (
+            worker
+            if not isinstance(worker, str)
+            else start_worker(worker, model, march, threads, nice, on_frame)
+        )
         self.settings = settings  # the checkpoint's Settings (for the presets)
         self.preset = "checkpoint"  # or a texvocab.pipeline.settings.PRESETS name
         self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
@@ -90,8 +103,17 @@ class NeuralView:
         """(w, h) of the full-resolution level for a view of ``aspect``."""
         return _fit(max(8, round(self.resolution * self.image_scale)), aspect)
 
-    def update(self, state, camera, aspect: float, force: bool = False, label: str = "",
-               playing: bool = False, background=(0.0, 0.0, 0.0), poll: bool = True) -> None:
+    def update(
+        self,
+        state,
+        camera,
+        aspect: float,
+        force: bool = False,
+        label: str = "",
+        playing: bool = False,
+        background=(0.0, 0.0, 0.0),
+        poll: bool = True,
+    ) -> None:
         """Submit a job when the pose, camera or size changed (while ``playing``: only
         once the previous one is done); with ``poll``, upload a new level (not while the
         panel's image may already be in this frame's draw list). ``label`` names the
@@ -115,13 +137,25 @@ class NeuralView:
             levels = (self.playback_level,) if playing else None
             now = time.perf_counter()
             paused = now - self._submitted_at >= PREVIEW_PAUSE
-            self._await = ((self.version, now + self.preview_wait)
-                           if paused and not playing and self.preview_wait > 0 else None)
+            self._await = (
+                (self.version, now + self.preview_wait)
+                if paused and not playing and self.preview_wait > 0
+                else None
+            )
             self._submitted_at = now
             # playback renders one level and is never cancelled by the timeline anyway
-            self.worker.submit(RenderJob(self.version, state.pose.copy(), state.trans.copy(),
-                                         camera.to_texvocab_camera(w, h), self.march, levels,
-                                         tuple(background), finish_preview=not playing))
+            self.worker.submit(
+                RenderJob(
+                    self.version,
+                    state.pose.copy(),
+                    state.trans.copy(),
+                    camera.to_texvocab_camera(w, h),
+                    self.march,
+                    levels,
+                    tuple(background),
+                    finish_preview=not playing,
+                )
+            )
         self._playing = playing
         if poll:
             self._take(self.worker.poll())
@@ -147,8 +181,11 @@ class NeuralView:
         """True when this frame submitted a pose after a pause whose preview is not shown
         yet: :meth:`wait_preview` would wait for it."""
         pending = self._await
-        return (pending is not None and pending[0] == self.version
-                and (self.frame is None or self.frame.version < pending[0]))
+        return (
+            pending is not None
+            and pending[0] == self.version
+            and (self.frame is None or self.frame.version < pending[0])
+        )
 
     def cancel_wait(self) -> None:
         """This frame does not wait for its preview (it shows a frame later)."""
@@ -186,7 +223,7 @@ class NeuralView:
         self.march, self.image_scale = march_settings(s), s.render.image_scale
 
     def stale_line(self) -> str:
-        """"stale: shows frame 12; rendering frame 15" (or "" when the image is current)."""
+        """ "stale: shows frame 12; rendering frame 15" (or "" when the image is current)."""
         if not self.stale:
             return ""
         shown = self.labels.get(self.frame.version, "an older pose")
@@ -204,8 +241,7 @@ class NeuralView:
             self.texture.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
         self.texture.write(img.tobytes())
         self.frame = frame
-        self.history.append((frame.version, frame.level, frame.seconds * 1000, frame.elapsed,
-                             img.shape[:2]))
+        self.history.append((frame.version, frame.level, frame.seconds * 1000, frame.elapsed, img.shape[:2]))
 
     def close(self) -> None:
         self.worker.stop()
@@ -214,17 +250,16 @@ class NeuralView:
             self.texture = None
 
 
-def start_worker(kind: str, model, march, threads: int = 1, nice: int = 0, on_frame=None,
-                 processes: int = 1):
+def start_worker(kind: str, model, march, threads: int = 1, nice: int = 0, on_frame=None, processes: int = 1):
     """The neural render's worker: "process" (``processes`` processes of their own, which
     split each view: the UI's Python does not slow the render; about 3.5-4 s from start
     to the first level, torch imported and the model unpickled there) or "thread" (in
     the viewer's interpreter)."""
     if kind == "process":
-        return ProcessWorker(model_renderer, (model, march), threads=threads, nice=nice,
-                             on_frame=on_frame, processes=processes)
-    return ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice,
-                             on_frame=on_frame)
+        return ProcessWorker(
+            model_renderer, (model, march), threads=threads, nice=nice, on_frame=on_frame, processes=processes
+        )
+    return ProgressiveWorker(model_renderer(model, march), threads=threads, nice=nice, on_frame=on_frame)
 
 
 def _fit(long_side: int, aspect: float) -> tuple[int, int]:
@@ -238,13 +273,18 @@ def camera_key(camera) -> tuple:
     """What identifies the view of an orbit camera or a capture-camera preset."""
     if hasattr(camera, "key"):
         return camera.key()
-    return (float(camera.yaw), float(camera.pitch), float(camera.distance), float(camera.fov),
-            *(float(v) for v in camera.target))
+    return (
+        float(camera.yaw),
+        float(camera.pitch),
+        float(camera.distance),
+        float(camera.fov),
+        *(float(v) for v in camera.target),
+    )
 
 
-
-def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | None = None,
-                stale: bool = False) -> str:
+def status_line(
+    frame: RenderFrame | None, busy: bool, playback_level: int | None = None, stale: bool = False
+) -> str:
     """What the shown image is and how long it took; during playback, the level the render
     follows the timeline at."""
     if frame is None:
@@ -253,8 +293,10 @@ def status_line(frame: RenderFrame | None, busy: bool, playback_level: int | Non
     h, w = frame.image.shape[:2]
     if playback_level is not None:
         nxt = "full" if playback_level == 1 else f"1/{playback_level}"
-        return (f"playback: {level} ({w}x{h}) in {frame.elapsed:.2f} s per frame; following "
-                f"the timeline at {nxt} resolution")
+        return (
+            f"playback: {level} ({w}x{h}) in {frame.elapsed:.2f} s per frame; following "
+            f"the timeline at {nxt} resolution"
+        )
     if stale:
         return f"shown: {level} ({w}x{h}) of the previous view; rendering the new one..."
     total = f"{frame.elapsed:.1f} s so far, refining..." if busy else f"{frame.elapsed:.1f} s in all"
@@ -290,8 +332,11 @@ def draw_neural_panel(viewer) -> None:
     # the status lines and the image are drawn by late_draw, after the frame's last poll
     # (NeuralView.late_poll): a level that arrives while this frame is built is in it
     line = imgui.get_text_line_height()
-    canvas = {"draw": imgui.get_window_draw_list(), "status": imgui.get_cursor_screen_pos(),
-              "playing": playing}
+    canvas = {
+        "draw": imgui.get_window_draw_list(),
+        "status": imgui.get_cursor_screen_pos(),
+        "playing": playing,
+    }
     imgui.dummy(imgui.ImVec2(1.0, line))
     if playing:
         canvas["playback"] = imgui.get_cursor_screen_pos()
@@ -320,12 +365,18 @@ def late_draw(viewer) -> None:
     text = imgui.get_color_u32(imgui.Col_.text)
     draw.push_clip_rect(*canvas["clip"])
     try:
-        draw.add_text(canvas["status"], text, status_line(
-            nv.frame, nv.busy, nv.playback_level if playing else None, nv.stale))
+        draw.add_text(
+            canvas["status"],
+            text,
+            status_line(nv.frame, nv.busy, nv.playback_level if playing else None, nv.stale),
+        )
         if "playback" in canvas and nv.frame is not None:
-            draw.add_text(canvas["playback"], imgui.get_color_u32(imgui.Col_.text_disabled),
-                          f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
-                          f"the timeline is at {viewer.pose_label()}")
+            draw.add_text(
+                canvas["playback"],
+                imgui.get_color_u32(imgui.Col_.text_disabled),
+                f"shows {nv.labels.get(nv.frame.version, 'an earlier frame')}; "
+                f"the timeline is at {viewer.pose_label()}",
+            )
         line = nv.stale_line()
         if nv.texture is not None:
             nv.image_rect = _draw_image(draw, nv, *canvas["image"], "" if playing else line)
@@ -342,13 +393,14 @@ def _draw_image(draw, nv, pos, avail, banner: str) -> tuple[float, float, float,
     scale = min(avail.x / tw, avail.y / th) if avail.x > 0 and avail.y > 0 else 1.0
     end = imgui.ImVec2(pos.x + tw * scale, pos.y + th * scale)
     tint = imgui.get_color_u32(imgui.ImVec4(*(STALE_TINT if nv.stale else (1, 1, 1, 1))))
-    draw.add_image(imgui.ImTextureRef(nv.texture.glo), pos, end, imgui.ImVec2(0, 0),
-                   imgui.ImVec2(1, 1), tint)
+    draw.add_image(imgui.ImTextureRef(nv.texture.glo), pos, end, imgui.ImVec2(0, 0), imgui.ImVec2(1, 1), tint)
     if banner:  # within the image, which a preview drawn before the swap covers wholly
         draw.push_clip_rect(pos, end, True)
-        draw.add_rect_filled(pos, imgui.ImVec2(end.x, pos.y + 22),
-                             imgui.get_color_u32(imgui.ImVec4(0.0, 0.0, 0.0, 0.6)))
-        draw.add_text(imgui.ImVec2(pos.x + 6, pos.y + 4),
-                      imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), banner)
+        draw.add_rect_filled(
+            pos, imgui.ImVec2(end.x, pos.y + 22), imgui.get_color_u32(imgui.ImVec4(0.0, 0.0, 0.0, 0.6))
+        )
+        draw.add_text(
+            imgui.ImVec2(pos.x + 6, pos.y + 4), imgui.get_color_u32(imgui.ImVec4(1.0, 0.8, 0.3, 1.0)), banner
+        )
         draw.pop_clip_rect()
     return pos.x, pos.y, end.x, end.y

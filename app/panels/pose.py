@@ -9,6 +9,7 @@ Widget IDs (for the ImGui Test Engine): window "Pose", a joint's sliders under
 A joint value outside its limits (a pose from a file or a key) is shown in red with its
 exact value, and stays as it is until its own slider moves.
 """
+
 from __future__ import annotations
 
 import time
@@ -34,8 +35,7 @@ class PoseSequence:
     states one). ``shown_version``: the viewer state's version when it last showed a frame
     of the sequence (an edit after that leaves the timeline, and it says so)."""
 
-    def __init__(self, path: str, poses: np.ndarray, trans: np.ndarray,
-                 fps: float | None = None):
+    def __init__(self, path: str, poses: np.ndarray, trans: np.ndarray, fps: float | None = None):
         self.path, self.poses, self.trans = path, poses, trans
         self.file_fps = fps
         self.frame, self.playing, self.fps = 0, False, float(fps or DEFAULT_FPS)
@@ -67,8 +67,12 @@ def _joint_sliders(viewer, j: int) -> None:
     imgui.push_id(JOINT_NAMES[j])
     deg = state.joint_deg(j)
     outside = state.out_of_limits(j)
-    width = (imgui.get_content_region_avail().x - imgui.get_style().item_spacing.x * 3
-             - imgui.calc_text_size("reset").x - 2 * imgui.get_style().frame_padding.x) / 3
+    width = (
+        imgui.get_content_region_avail().x
+        - imgui.get_style().item_spacing.x * 3
+        - imgui.calc_text_size("reset").x
+        - 2 * imgui.get_style().frame_padding.x
+    ) / 3
     new = deg.copy()
     for a, axis in enumerate(AXES):
         if a:
@@ -140,8 +144,11 @@ def load_sequence(viewer, path: str) -> None:
 def _sequence(viewer) -> None:
     imgui.push_id("Sequence")
     dialogs = viewer.dialogs
-    buttons = imgui.calc_text_size("LoadOpen...").x + 4 * imgui.get_style().frame_padding.x \
+    buttons = (
+        imgui.calc_text_size("LoadOpen...").x
+        + 4 * imgui.get_style().frame_padding.x
         + 2 * imgui.get_style().item_spacing.x
+    )
     imgui.set_next_item_width(imgui.get_content_region_avail().x - buttons)
     _, viewer.sequence_path = imgui.input_text_with_hint("##path", "poses.npz", viewer.sequence_path)
     imgui.same_line()
@@ -178,15 +185,14 @@ def _sequence(viewer) -> None:
         imgui.set_next_item_width(100)
         _, seq.fps = imgui.slider_float("fps", seq.fps, 1.0, 120.0, "%.0f fps")
         imgui.same_line()
-        rate = f"file: {seq.file_fps:g} fps" if seq.file_fps else \
-            f"file states no rate: {DEFAULT_FPS:g}"
+        rate = f"file: {seq.file_fps:g} fps" if seq.file_fps else f"file states no rate: {DEFAULT_FPS:g}"
         imgui.text_disabled(f"{Path(seq.path).name}, {len(seq.poses)} frames, {rate}")
     _export_buttons(viewer)
     imgui.pop_id()
 
 
 def _export_buttons(viewer) -> None:
-    """"Export video": the loaded sequence rendered in the background from the 3D view's
+    """ "Export video": the loaded sequence rendered in the background from the 3D view's
     camera at the neural panel's resolution (texvocab_viewer.export.job); progress, or the result's
     path or error, underneath (the 3D view's Screenshot job shows here too)."""
     if viewer.neural is None or viewer.sequence is None:
@@ -198,11 +204,12 @@ def _export_buttons(viewer) -> None:
     if imgui.button("Export video"):
         seq = viewer.sequence
         step = max(1, round(seq.fps / EXPORT_FPS))  # every step-th frame: at most ~30 fps
-        viewer.start_export(seq.poses[::step], seq.trans[::step], Path(seq.path).stem,
-                            seq.fps / step)
+        viewer.start_export(seq.poses[::step], seq.trans[::step], Path(seq.path).stem, seq.fps / step)
     if imgui.is_item_hovered():
-        imgui.set_tooltip(f"the sequence at its playback speed, at most {EXPORT_FPS:g} frames "
-                          "per second of video (a 120 fps file: every 4th frame)")
+        imgui.set_tooltip(
+            f"the sequence at its playback speed, at most {EXPORT_FPS:g} frames "
+            "per second of video (a 120 fps file: every 4th frame)"
+        )
     if job is not None:
         if job.error:
             imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), job.error)
@@ -232,8 +239,9 @@ def draw_pose_panel(viewer) -> None:
         _root(viewer)
     for part, joints in BODY_PARTS.items():
         imgui.push_id(part)
-        open_ = imgui.collapsing_header(f"{part.replace('_', ' ')}###header",
-                                        imgui.TreeNodeFlags_.default_open)
+        open_ = imgui.collapsing_header(
+            f"{part.replace('_', ' ')}###header", imgui.TreeNodeFlags_.default_open
+        )
         if open_:
             if imgui.small_button("Reset part"):
                 viewer.state.reset_part(part)

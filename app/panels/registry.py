@@ -1,6 +1,7 @@
 """The viewer's docked panels, in the order the window lists them: each one's title (its
 window's, and the ImGui Test Engine's reference), the dock space it opens in and its
 ``draw(viewer)``; and the dock spaces, split off the window's main one."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -44,8 +45,10 @@ PANELS = (
 def dock_splits(has_model: bool) -> list[hello_imgui.DockingSplit]:
     """The dock spaces: Pose on the left, Vocabulary on the right and, with a model, the
     Neural render between the 3D view and Vocabulary."""
-    splits = [hello_imgui.DockingSplit(MAIN_SPACE, "PoseSpace", imgui.Dir.left, 0.22),
-              hello_imgui.DockingSplit(MAIN_SPACE, "VocabSpace", imgui.Dir.right, 0.30)]
+    splits = [
+        hello_imgui.DockingSplit(MAIN_SPACE, "PoseSpace", imgui.Dir.left, 0.22),
+        hello_imgui.DockingSplit(MAIN_SPACE, "VocabSpace", imgui.Dir.right, 0.30),
+    ]
     if has_model:
         splits.append(hello_imgui.DockingSplit(MAIN_SPACE, "NeuralSpace", imgui.Dir.right, 0.5))
     return splits

@@ -9,6 +9,7 @@ Widget IDs: window "3D view", checkboxes ``**/Texture``, ``**/Part colours``,
 ``**/##camera``, buttons ``**/Reset camera``, ``**/Screenshot``, the viewport
 ``**/##viewport``.
 """
+
 from __future__ import annotations
 
 from imgui_bundle import imgui
@@ -16,8 +17,13 @@ from imgui_bundle import imgui
 from texvocab_viewer.gl.camera import CaptureViewCamera, fit_aspect
 from texvocab_viewer.gl.view_blit import ViewBlit
 
-TOGGLES = (("textured", "Texture"), ("part_colors", "Part colours"), ("novelty", "Novelty"),
-           ("wireframe", "Wireframe"), ("skeleton", "Skeleton"))
+TOGGLES = (
+    ("textured", "Texture"),
+    ("part_colors", "Part colours"),
+    ("novelty", "Novelty"),
+    ("wireframe", "Wireframe"),
+    ("skeleton", "Skeleton"),
+)
 ORBIT_DEG_PER_PIXEL = 0.4
 ZOOM_PER_NOTCH = 0.9
 
@@ -61,8 +67,7 @@ def _camera_row(viewer, right: float) -> None:
     if changed:
         viewer.set_capture_view(None if index == 0 else index - 1)
     if imgui.is_item_hovered():
-        imgui.set_tooltip("camera: orbit, or one of the capture's cameras "
-                          "(as texvocab shot --camera N)")
+        imgui.set_tooltip("camera: orbit, or one of the capture's cameras (as texvocab shot --camera N)")
     box = imgui.get_frame_height() + imgui.get_style().item_inner_spacing.x
     _same_line_if_fits(box + imgui.calc_text_size("Follow").x, right)
     changed, on = imgui.checkbox("Follow", viewer.follow)
@@ -80,8 +85,7 @@ def _camera_row(viewer, right: float) -> None:
         viewer.screenshot()
     imgui.end_disabled()
     if imgui.is_item_hovered(imgui.HoveredFlags_.allow_when_disabled):
-        imgui.set_tooltip("write the 3D view and the neural render of this pose under "
-                          "exports/ (F12)")
+        imgui.set_tooltip("write the 3D view and the neural render of this pose under exports/ (F12)")
 
 
 def _interact(viewer, height: float) -> None:
@@ -91,13 +95,14 @@ def _interact(viewer, height: float) -> None:
         if d.x or d.y:
             if imgui.is_mouse_down(imgui.MouseButton_.left):
                 viewer.orbit_camera().orbit(-d.x * ORBIT_DEG_PER_PIXEL, d.y * ORBIT_DEG_PER_PIXEL)
-            elif imgui.is_mouse_down(imgui.MouseButton_.right) or \
-                    imgui.is_mouse_down(imgui.MouseButton_.middle):
+            elif imgui.is_mouse_down(imgui.MouseButton_.right) or imgui.is_mouse_down(
+                imgui.MouseButton_.middle
+            ):
                 viewer.orbit_camera().pan(-d.x / height, d.y / height)
                 if viewer.follow:
                     viewer.set_follow(True)  # keep the panned framing while following
     if imgui.is_item_hovered() and io.mouse_wheel:
-        viewer.orbit_camera().zoom(ZOOM_PER_NOTCH ** io.mouse_wheel)
+        viewer.orbit_camera().zoom(ZOOM_PER_NOTCH**io.mouse_wheel)
     if imgui.is_key_pressed(imgui.Key.f12, repeat=False) and not io.want_text_input:
         viewer.screenshot()
 
@@ -116,8 +121,7 @@ def _legend(viewer, pos, size) -> None:
         draw.add_rect_filled_multi_color(imgui.ImVec2(xa, y1 - h), imgui.ImVec2(xb, y1), a, b, b, a)
     white = imgui.get_color_u32(imgui.ImVec4(1, 1, 1, 1))
     lo, hi = viewer.novelty_range()
-    draw.add_text(imgui.ImVec2(x0, y1 - h - 18), white,
-                  f"distance to nearest key: {lo:.2f} .. {hi:.2f}")
+    draw.add_text(imgui.ImVec2(x0, y1 - h - 18), white, f"distance to nearest key: {lo:.2f} .. {hi:.2f}")
 
 
 def draw_view_panel(viewer) -> None:
@@ -131,8 +135,11 @@ def draw_view_panel(viewer) -> None:
         viewer.framed = True
     pos = imgui.get_cursor_screen_pos()
     size = imgui.ImVec2(w, h)
-    flags = (imgui.ButtonFlags_.mouse_button_left | imgui.ButtonFlags_.mouse_button_right
-             | imgui.ButtonFlags_.mouse_button_middle)
+    flags = (
+        imgui.ButtonFlags_.mouse_button_left
+        | imgui.ButtonFlags_.mouse_button_right
+        | imgui.ButtonFlags_.mouse_button_middle
+    )
     imgui.invisible_button("##viewport", size, flags)
     viewer.view_rect = (pos.x, pos.y, float(w), float(h))
     _interact(viewer, float(h))
@@ -144,8 +151,7 @@ def draw_view_panel(viewer) -> None:
     draw = imgui.get_window_draw_list()
     if tex is not None:  # copied into the window's framebuffer before the GUI is drawn
         lo, hi = draw.get_clip_rect_min(), draw.get_clip_rect_max()
-        viewer.view_blit = ViewBlit(viewer.scene.fbo.glo, x0, y0, iw, ih,
-                                    (lo.x, lo.y, hi.x, hi.y))
+        viewer.view_blit = ViewBlit(viewer.scene.fbo.glo, x0, y0, iw, ih, (lo.x, lo.y, hi.x, hi.y))
     grey = imgui.get_color_u32(imgui.ImVec4(0.85, 0.85, 0.85, 1.0))
     draw.add_text(imgui.ImVec2(pos.x + 8, pos.y + 6), grey, viewer.view_caption())
     if viewer.options.novelty:

@@ -8,6 +8,7 @@ Clicking a key moves that part's pose to the key.
 Widget IDs: window "Vocabulary", key buttons ``<part>/keys/key<K>`` (K = key id; the
 test engine's "**" wildcard does not reach into the table).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,8 +34,7 @@ class ThumbnailCache:
         if tex is None:
             img = self.textures[frame]
             step = max(1, img.shape[0] // self.side)
-            small = np.ascontiguousarray((np.clip(img[::step, ::step], 0, 1) * 255 + 0.5)
-                                         .astype(np.uint8))
+            small = np.ascontiguousarray((np.clip(img[::step, ::step], 0, 1) * 255 + 0.5).astype(np.uint8))
             tex = self.ctx.texture((small.shape[1], small.shape[0]), 3, small.tobytes())
             tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
             self._cache[frame] = tex
@@ -57,15 +57,14 @@ def raw_weight(weighting: str, num_joints: int, d: float) -> float:
 
 
 def key_caption(weighting: str, num_joints: int, d: float, share: float, k: int) -> str:
-    """"d 0.0123 · w 2.988 · 33.4% (+0.1)" — distance, raw weight, share and its offset
+    """ "d 0.0123 · w 2.988 · 33.4% (+0.1)" — distance, raw weight, share and its offset
     from uniform 1/K in percentage points."""
     w = raw_weight(weighting, num_joints, d)
     w_text = "exact" if w == float("inf") else f"{w:.4g}"
     return f"d {d:.4f}  w {w_text}  {100 * share:.1f}% ({100 * (share - 1 / k):+.1f})"
 
 
-def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float, d: float,
-              num_joints: int) -> None:
+def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float, d: float, num_joints: int) -> None:
     """Thumbnail button, key id and source frame beside it; d, raw weight and share below,
     the share as a bar."""
     size = imgui.ImVec2(THUMB_PX, THUMB_PX)
@@ -75,8 +74,10 @@ def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float, d: floa
     else:
         clicked = imgui.button(f"{key_id}##key{key_id}", size)
     if imgui.is_item_hovered():
-        imgui.set_tooltip(f"key {key_id} of {part.replace('_', ' ')}: the texture map of "
-                          f"training frame t = {frame}.\nClick to move the part to this key.")
+        imgui.set_tooltip(
+            f"key {key_id} of {part.replace('_', ' ')}: the texture map of "
+            f"training frame t = {frame}.\nClick to move the part to this key."
+        )
     if clicked:
         viewer.state.set_part_to_key(part, key_id)
     imgui.same_line()
@@ -85,8 +86,9 @@ def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float, d: floa
     imgui.text_disabled(f"t = {frame}")
     imgui.end_group()
     vocab = viewer.data.vocab
-    imgui.progress_bar(weight, imgui.ImVec2(-1, 0),
-                       f"{100 * weight:.1f}% ({100 * (weight - 1 / vocab.k):+.1f})")
+    imgui.progress_bar(
+        weight, imgui.ImVec2(-1, 0), f"{100 * weight:.1f}% ({100 * (weight - 1 / vocab.k):+.1f})"
+    )
     caption = key_caption(vocab.weighting, num_joints, d, weight, vocab.k)
     imgui.text_disabled(caption.rsplit("  ", 1)[0])
     if imgui.is_item_hovered():
@@ -95,13 +97,17 @@ def _key_cell(viewer, part: str, key_id: int, frame: int, weight: float, d: floa
 
 def _weight_tooltip(weighting: str, num_joints: int, caption: str) -> str:
     if weighting == "paper":
-        return (f"{caption}\nd: quaternion distance of the part's pose to this key (Eq. 4).\n"
-                f"w = J_p - d with J_p = {num_joints} joints (Eq. 6), then normalised over the "
-                "K keys.\nWith d much smaller than J_p every key gets about 1/K: the shares "
-                "show how little d moves them.")
-    return (f"{caption}\nd: quaternion distance of the part's pose to this key (Eq. 4).\n"
-            "w = 1/d (inverse weighting), normalised over the K keys: the nearest key "
-            "dominates.")
+        return (
+            f"{caption}\nd: quaternion distance of the part's pose to this key (Eq. 4).\n"
+            f"w = J_p - d with J_p = {num_joints} joints (Eq. 6), then normalised over the "
+            "K keys.\nWith d much smaller than J_p every key gets about 1/K: the shares "
+            "show how little d moves them."
+        )
+    return (
+        f"{caption}\nd: quaternion distance of the part's pose to this key (Eq. 4).\n"
+        "w = 1/d (inverse weighting), normalised over the K keys: the nearest key "
+        "dominates."
+    )
 
 
 def _part_row(viewer, q) -> None:
@@ -110,8 +116,7 @@ def _part_row(viewer, q) -> None:
     imgui.text(q.part.replace("_", " "))
     imgui.same_line()
     imgui.text_disabled(f"  nearest key d = {q.novelty:.4f}")
-    keys = [(int(k), int(f), float(w)) for k, f, w in
-            zip(q.key_ids, q.frames, q.weights, strict=True)]
+    keys = [(int(k), int(f), float(w)) for k, f, w in zip(q.key_ids, q.frames, q.weights, strict=True)]
     viewer.drawn_keys[q.part] = keys
     vocab = viewer.data.vocab
     num_joints = len(vocab.part_joints[vocab.part_names.index(q.part)])
@@ -129,12 +134,14 @@ def draw_vocab_panel(viewer) -> None:
     vocab = viewer.data.vocab
     if vocab is None:
         imgui.push_text_wrap_pos(0.0)
-        imgui.text_disabled("No vocabulary: open a capture folder or a checkpoint "
-                            "(texvocab view CAPTURE | CHECKPOINT.pt).")
+        imgui.text_disabled(
+            "No vocabulary: open a capture folder or a checkpoint (texvocab view CAPTURE | CHECKPOINT.pt)."
+        )
         imgui.pop_text_wrap_pos()
         return
-    imgui.text_disabled(f"{vocab.strategy}: {len(vocab.key_frames[0])} keys/part, "
-                        f"K = {vocab.k}, weights: {vocab.weighting}")
+    imgui.text_disabled(
+        f"{vocab.strategy}: {len(vocab.key_frames[0])} keys/part, K = {vocab.k}, weights: {vocab.weighting}"
+    )
     imgui.separator()
     for q in viewer.state.query():
         _part_row(viewer, q)

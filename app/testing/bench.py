@@ -20,6 +20,7 @@ Phases, in order:
   window at full speed (input keeps it awake): UI frame times and CPU per frame, and
   the neural images shown meanwhile (each pose's preview is finished, app/neural/worker.py).
 """
+
 from __future__ import annotations
 
 import os
@@ -41,8 +42,7 @@ SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default -
 class BenchDriver(Driver):
     """See the module docstring; writes the measurements into the report."""
 
-    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256,
-                 renders: int = RENDERS):
+    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256, renders: int = RENDERS):
         super().__init__("bench", viewer)
         self.seconds, self.resolution, self.render_count = seconds, resolution, renders
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
@@ -78,8 +78,11 @@ class BenchDriver(Driver):
         now = self._clock()
         wall = now[0] - mark[0]
         ui = now[1] - mark[1]
-        return {"seconds": wall, "ui_cpu_share": ui / max(wall, 1e-9),
-                "render_cpu_share": (now[2] - mark[2]) / max(wall, 1e-9)}
+        return {
+            "seconds": wall,
+            "ui_cpu_share": ui / max(wall, 1e-9),
+            "render_cpu_share": (now[2] - mark[2]) / max(wall, 1e-9),
+        }
 
     # -- the phases -------------------------------------------------------------------------
     def _tick(self) -> None:
@@ -123,8 +126,10 @@ class BenchDriver(Driver):
             self.drag_levels.append(int(shown.level))
         dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
         process = self._clock()[1]  # the window process's CPU outside a render thread
-        dp, self._last_process = (None if self._last_process is None
-                                  else (process - self._last_process) * 1000), process
+        dp, self._last_process = (
+            (None if self._last_process is None else (process - self._last_process) * 1000),
+            process,
+        )
         if dt is not None and v.frame_cpu_ms:
             self.drag_ms.append(dt)
             self.drag_cpu_ms.append(v.frame_cpu_ms[-1])
@@ -142,10 +147,16 @@ class BenchDriver(Driver):
         v.state.reset_all()
         v.state.apply_preset(pose)
         yaw, pitch, dist = SHOT_CAMERA
-        v.camera = OrbitCamera(target=np.asarray(DEFAULT_TARGET) + v.state.trans, yaw=yaw,
-                               pitch=pitch, distance=dist)
-        self._render = {"pose": pose, "start": now, "levels": [], "seen": len(v.neural.history),
-                        "first_frame": self.count}
+        v.camera = OrbitCamera(
+            target=np.asarray(DEFAULT_TARGET) + v.state.trans, yaw=yaw, pitch=pitch, distance=dist
+        )
+        self._render = {
+            "pose": pose,
+            "start": now,
+            "levels": [],
+            "seen": len(v.neural.history),
+            "first_frame": self.count,
+        }
         self._mark = self._clock()
 
     def _swapped(self) -> None:
@@ -157,11 +168,17 @@ class BenchDriver(Driver):
         now = time.perf_counter()
         r.setdefault("pose_frame_s", now - r["start"])  # the frame that changed the pose
         history = list(nv.history)
-        for version, level, ms, elapsed, shape in history[r["seen"]:]:
+        for version, level, ms, elapsed, shape in history[r["seen"] :]:
             if version == nv.version:
-                r["levels"].append({"level": level, "on_screen_s": now - r["start"],
-                                    "worker_elapsed_s": elapsed, "level_ms": ms,
-                                    "size": [int(x) for x in shape]})
+                r["levels"].append(
+                    {
+                        "level": level,
+                        "on_screen_s": now - r["start"],
+                        "worker_elapsed_s": elapsed,
+                        "level_ms": ms,
+                        "size": [int(x) for x in shape],
+                    }
+                )
         r["seen"] = len(history)
 
     def _render_tick(self, now: float) -> None:
@@ -175,8 +192,9 @@ class BenchDriver(Driver):
         if done or now - r["start"] > 600:
             r.update(self._ui_share(self._mark))
             # the pose frame's wait for the preview (NeuralView.wait_preview): ms, whether it came
-            r["preview_wait"] = next(([round(s * 1000, 2), came] for v, s, came in nv.waits
-                                      if v == nv.version), None)
+            r["preview_wait"] = next(
+                ([round(s * 1000, 2), came] for v, s, came in nv.waits if v == nv.version), None
+            )
             r["frames"] = self.count - r.pop("first_frame")
             r.pop("seen")
             r.pop("start")
@@ -189,8 +207,10 @@ class BenchDriver(Driver):
         """Frames drawn in the AFTER seconds after the last render finished: a level's wake
         draws one frame, it does not keep the window at full speed."""
         if now - self.t0 >= AFTER:
-            self.report["after_render"] = {"seconds": now - self.t0,
-                                           "frames": self.count - self._frames_at_mark}
+            self.report["after_render"] = {
+                "seconds": now - self.t0,
+                "frames": self.count - self._frames_at_mark,
+            }
             self.phase, self.t0 = "dragging", now
             self._drag_shown = self.viewer.neural.frame
 
@@ -200,17 +220,19 @@ class BenchDriver(Driver):
         if error:
             self.report["error"] = error
         self.report["renders"] = self.renders
-        self.report["dragging"] = {"frame_ms": self.drag_ms, "cpu_ms": self.drag_cpu_ms,
-                                   "process_cpu_ms": self.drag_process_ms,
-                                   "levels_shown": self.drag_levels,
-                                   "panel_cpu_ms": self.drag_panels,
-                                   "seconds": time.perf_counter() - self.t0}
+        self.report["dragging"] = {
+            "frame_ms": self.drag_ms,
+            "cpu_ms": self.drag_cpu_ms,
+            "process_cpu_ms": self.drag_process_ms,
+            "levels_shown": self.drag_levels,
+            "panel_cpu_ms": self.drag_panels,
+            "seconds": time.perf_counter() - self.t0,
+        }
         self.report["window"] = list(v.size)
         if v.neural is not None:
             self.report["resolution"] = self.resolution
             self.report["neural_threads"] = v.neural_threads
-            self.report["neural_processes"] = (v.neural_processes
-                                               if v.neural.worker.in_process is False else 0)
+            self.report["neural_processes"] = v.neural_processes if v.neural.worker.in_process is False else 0
             self.report["neural_worker"] = v.neural_worker
             self.report["window_pid"] = os.getpid()
             self.report["blas_threads"] = blas_threads()

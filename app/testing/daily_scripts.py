@@ -1,6 +1,7 @@
 """Scripted runs of the viewer as a daily tool (ImGui Test Engine, as app/testing/scripts.py):
 stale renders, capture-camera presets and follow, playback, the File menu's dialogs and
 its reopen, and ``look-*`` scripts that end in a state worth a screenshot."""
+
 from __future__ import annotations
 
 import time
@@ -75,7 +76,8 @@ def script_playback(ctx, viewer, report: dict) -> None:
         ctx.yield_()
     report["played_frames"], report["played_seconds"] = seq.frame - f0, time.perf_counter() - t0
     report["versions_shown_while_playing"] = len(
-        {v for v, _, _, _, _ in viewer.neural.history if v > first_version})
+        {v for v, _, _, _, _ in viewer.neural.history if v > first_version}
+    )
     report["playback_level"] = viewer.neural.playback_level
     ctx.item_click("**/Sequence/Pause")
     ctx.set_ref("Pose")
@@ -161,8 +163,14 @@ def script_look_playback(ctx, viewer, report: dict) -> None:
         ctx.yield_()
 
 
-DAILY_SCRIPTS = {"stale": script_stale, "camera-view": script_camera_view,
-                 "playback": script_playback, "open-dialog": script_open_dialog,
-                 "open-checkpoint": script_open_checkpoint, "reopened": script_reopened,
-                 "look-stale": script_look_stale, "look-views": script_look_views,
-                 "look-playback": script_look_playback}
+DAILY_SCRIPTS = {
+    "stale": script_stale,
+    "camera-view": script_camera_view,
+    "playback": script_playback,
+    "open-dialog": script_open_dialog,
+    "open-checkpoint": script_open_checkpoint,
+    "reopened": script_reopened,
+    "look-stale": script_look_stale,
+    "look-views": script_look_views,
+    "look-playback": script_look_playback,
+}

@@ -1,5 +1,6 @@
 """The common end of a scripted run of the viewer window (its JSON report and its last
 frame) and the driver that runs one ImGui Test Engine script in the window."""
+
 from __future__ import annotations
 
 import json

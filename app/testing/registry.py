@@ -2,6 +2,7 @@
 scripts (:mod:`.scripts`, :mod:`.daily_scripts`) and the benchmark's per-frame driver
 (``bench[:SECONDS[:RES[:RENDERS]]]``, :mod:`.bench`). :class:`Script` is what
 :func:`texvocab_viewer.window.run_viewer` calls on each window it opens."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -38,8 +39,9 @@ def make_driver(name: str, viewer, rp) -> Driver:
 def check_script(name: str) -> None:
     """TexvocabError naming --script unless ``name`` is a script or a bench spec."""
     if name not in SCRIPTS and not name.startswith("bench"):
-        raise TexvocabError(f"--script {name!r}: expected one of {sorted(SCRIPTS)} or "
-                            "bench[:SECONDS[:RESOLUTION[:RENDERS]]]")
+        raise TexvocabError(
+            f"--script {name!r}: expected one of {sorted(SCRIPTS)} or bench[:SECONDS[:RESOLUTION[:RENDERS]]]"
+        )
 
 
 @dataclass(frozen=True)

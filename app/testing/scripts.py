@@ -2,6 +2,7 @@
 the camera and the timeline (``slider``), the export buttons (``export``), and states
 worth a screenshot (``shot-*``). Each one acts as a person would with the mouse (widgets
 by their IDs) and writes what it saw into ``report``."""
+
 from __future__ import annotations
 
 import time
@@ -143,6 +144,10 @@ def script_export(ctx, viewer, report: dict) -> None:
     report["screenshot"] = wait_export(ctx, viewer)
 
 
-ENGINE_SCRIPTS = {"slider": script_slider, "shot-default": script_shot_default,
-                  "export": script_export, "shot-left-arm": script_shot_left_arm,
-                  "shot-novelty": script_shot_novelty}
+ENGINE_SCRIPTS = {
+    "slider": script_slider,
+    "shot-default": script_shot_default,
+    "export": script_export,
+    "shot-left-arm": script_shot_left_arm,
+    "shot-novelty": script_shot_novelty,
+}

@@ -2,6 +2,7 @@
 says so, capture cameras as presets give what ``texvocab shot --camera N`` gives,
 sequences start from ``--poses`` and play at their file's rate, the native file dialog
 loads a pose file, follow keeps the camera on the root, and the weights panel's numbers."""
+
 from __future__ import annotations
 
 import os
@@ -43,20 +44,19 @@ def fake_zenity(tmp_path: Path, answer: Path) -> tuple[dict, Path]:
     bin_dir.mkdir()
     log = tmp_path / "zenity.log"
     fake = bin_dir / "zenity"
-    fake.write_text(f'#!/bin/sh\necho "$@" >> {log}\n'
-                    f'case "$*" in *--version*) echo 3.44.0 ;; *) echo {answer} ;; esac\n')
+    fake.write_text(
+        f'#!/bin/sh\necho "$@" >> {log}\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {answer} ;; esac\n'
+    )
     fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
     return dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}"), log
 
 
 def ok(proc, rep):
-    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"),
-                                                proc.stderr[-2000:])
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"), proc.stderr[-2000:])
     assert "Traceback" not in proc.stderr
 
 
-def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(checkpoint,
-                                                                          tmp_path):
+def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(checkpoint, tmp_path):
     # the frame that changes the pose does not wait for the preview here, so the old
     # image is shown stale for at least that frame (with the wait, the preview usually
     # comes in that frame and nothing is ever stale: test_app_window's bench run)
@@ -71,16 +71,14 @@ def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(check
     assert "" in lines[first:] and lines[-1] == "" and rep["stale_at_end"] is False
     assert rep["neural"]["level"] == 1 and rep["neural"]["errors"] == []
     # with Live off nothing new renders: the image stays marked, and the banner says why
-    assert rep["live_off_line"] == ("stale: shows left shoulder z -70°; Live is off "
-                                    "(Render now)")
+    assert rep["live_off_line"] == ("stale: shows left shoulder z -70°; Live is off (Render now)")
 
 
 def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
     poses = walk_file(tmp_path / "walk.npz", 5, None)
     work = tmp_path / "work"
     work.mkdir()
-    proc, rep, _ = run_window(checkpoint, "camera-view", tmp_path, "--poses", str(poses),
-                              cwd=work)
+    proc, rep, _ = run_window(checkpoint, "camera-view", tmp_path, "--poses", str(poses), cwd=work)
     ok(proc, rep)
     assert rep["camera_index"] == 1
     shot = rep["shot_export"]
@@ -88,8 +86,21 @@ def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
     assert rep["f12_export"]["path"].endswith("exports/shot_2")  # F12: the same, no overwrite
     assert (work / "exports" / "shot_2" / "neural.png").is_file()
     proc_shot = subprocess.run(
-        [TEXVOCAB, "shot", str(checkpoint), "--pose", f"{poses}:0", "--camera", "1", "--out",
-         str(tmp_path / "cli")], capture_output=True, text=True, timeout=300)
+        [
+            TEXVOCAB,
+            "shot",
+            str(checkpoint),
+            "--pose",
+            f"{poses}:0",
+            "--camera",
+            "1",
+            "--out",
+            str(tmp_path / "cli"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc_shot.returncode == 0, proc_shot.stderr
     for name in ("view3d.png", "neural.png"):
         window = np.asarray(Image.open(work / "exports" / "shot" / name).convert("RGB"), np.int16)
@@ -109,8 +120,9 @@ def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
 
 def test_texvocab_view_starts_on_poses_and_plays_at_the_files_rate(checkpoint, tmp_path):
     poses = walk_file(tmp_path / "walk.npz", 200, 20.0)
-    proc, rep, shot = run_window(checkpoint, "playback", tmp_path, "--poses", str(poses),
-                                 command=(TEXVOCAB, "view"))
+    proc, rep, shot = run_window(
+        checkpoint, "playback", tmp_path, "--poses", str(poses), command=(TEXVOCAB, "view")
+    )
     ok(proc, rep)
     assert rep["start_pose_matches"] is True  # --poses: frame 0 shown at start
     assert rep["fps"] == 20.0 and rep["file_fps"] == 20.0
@@ -137,8 +149,7 @@ def test_file_open_checkpoint_loads_it_and_reopens_the_window(checkpoint, tmp_pa
     env, _ = fake_zenity(tmp_path, checkpoint)
     poses = walk_file(tmp_path / "walk.npz", 6, 30.0)
     # the body alone with a pose sequence; File > Open checkpoint...; the window reopens
-    proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, "--poses", str(poses),
-                              env=env)
+    proc, rep, _ = run_window(None, "open-checkpoint", tmp_path, "--poses", str(poses), env=env)
     ok(proc, rep)
     assert rep["script"] == "reopened"  # the report of the second window
     assert rep["source"].startswith(f"checkpoint {checkpoint}") and rep["has_neural"] is True
@@ -186,8 +197,7 @@ def test_follow_centres_the_root_in_an_orbit_view_and_keeps_it_there():
     v.state.set_trans([0.5, 0.1, -0.4])
     v.follow_root()
     moved = v.root_position()
-    np.testing.assert_allclose(v.camera.target, [moved[0], -0.2 + moved[1] - root[1], moved[2]],
-                               atol=1e-9)
+    np.testing.assert_allclose(v.camera.target, [moved[0], -0.2 + moved[1] - root[1], moved[2]], atol=1e-9)
     v.set_follow(False)
     v.state.set_trans([0.0, 0.0, 0.0])
     v.follow_root()
@@ -198,8 +208,9 @@ def test_export_video_follows_the_root_when_follow_is_on():
     from texvocab.pipeline import Camera
     from texvocab_viewer.viewer import follow_cameras
 
-    cam = Camera(np.array([[100.0, 0, 32], [0, 100.0, 32], [0, 0, 1]]), np.eye(3),
-                 np.array([0.0, 0.0, 3.0]), 64, 64)
+    cam = Camera(
+        np.array([[100.0, 0, 32], [0, 100.0, 32], [0, 0, 1]]), np.eye(3), np.array([0.0, 0.0, 3.0]), 64, 64
+    )
     trans = np.array([[0.0, 0, 0], [0.3, 0, 0], [0.6, 0.1, 0]])
     cams = follow_cameras(cam, trans, now=trans[1])
     for c, t in zip(cams, trans, strict=True):
@@ -218,8 +229,17 @@ def test_screenshot_without_a_model_writes_the_3d_view_alone(tmp_path):
 
     cam = Camera(np.eye(3), np.eye(3), np.zeros(3), 8, 8)
     view = np.full((8, 8, 3), 200, np.uint8)
-    job = Export(None, None, cam, np.zeros((1, 24, 3)), np.zeros((1, 3)), "shot", 1.0, view,
-                 folder=tmp_path / "exports")
+    job = Export(
+        None,
+        None,
+        cam,
+        np.zeros((1, 24, 3)),
+        np.zeros((1, 3)),
+        "shot",
+        1.0,
+        view,
+        folder=tmp_path / "exports",
+    )
     job.thread.join(30)
     assert job.error == "" and job.path == tmp_path / "exports" / "shot"
     assert sorted(p.name for p in job.path.iterdir()) == ["view3d.png"]
@@ -386,8 +406,12 @@ def test_the_preview_blit_rectangles():
 
     src, dst = image_rects((10.0, 20.0, 110.0, 70.0), (32, 17), (1280, 800))
     assert src == (0, 0, 32, 17) and dst == (10, 780, 110, 730)  # flipped: y0 > y1
-    assert image_rects((10.0, 20.0, 110.0, 70.0), (32, 17), (2560, 1600), (2.0, 2.0))[1] == \
-        (20, 1560, 220, 1460)
+    assert image_rects((10.0, 20.0, 110.0, 70.0), (32, 17), (2560, 1600), (2.0, 2.0))[1] == (
+        20,
+        1560,
+        220,
+        1460,
+    )
     assert image_rects((10.0, 20.0, 10.0, 70.0), (32, 17), (1280, 800)) is None
     assert image_rects((1200.0, 20.0, 1300.0, 70.0), (32, 17), (1280, 800)) is None
     assert image_rects((10.0, 780.0, 110.0, 810.0), (32, 17), (1280, 800)) is None

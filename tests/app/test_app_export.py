@@ -2,6 +2,7 @@
 (GLFW under Xvfb, ImGui Test Engine): an MP4 of the loaded AMASS-layout sequence whose
 frame count is read back, and a screenshot folder with the neural render and the 3D
 view; both under exports/ of the working folder, never replacing a file."""
+
 from __future__ import annotations
 
 import json
@@ -30,9 +31,26 @@ def test_export_video_and_screenshot_buttons(tmp_path):
     (work / "exports" / "walk.mp4").write_bytes(b"mine")  # must survive the export
     report = tmp_path / "export.json"
     assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
-    cmd = [XVFB, "-a", "-s", "-screen 0 1280x1024x24", sys.executable, "-m", "texvocab_viewer",
-           str(ckpt), "--size", "1280x800", "--script", "export", "--report", str(report),
-           "--neural-resolution", "48", "--poses", str(tmp_path / "walk.npz")]
+    cmd = [
+        XVFB,
+        "-a",
+        "-s",
+        "-screen 0 1280x1024x24",
+        sys.executable,
+        "-m",
+        "texvocab_viewer",
+        str(ckpt),
+        "--size",
+        "1280x800",
+        "--script",
+        "export",
+        "--report",
+        str(report),
+        "--neural-resolution",
+        "48",
+        "--poses",
+        str(tmp_path / "walk.npz"),
+    ]
     proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=300)
     assert report.is_file(), f"rc {proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
     rep = json.loads(report.read_text())

@@ -1,6 +1,7 @@
 """Viewer state: clamped joints, versioning, the vocabulary query per part, moving a part
 to a key, and the blended texture of a pose (a tiny capture-like stand-in: training poses
 and random texture maps, no images)."""
+
 import numpy as np
 import pytest
 
@@ -159,8 +160,7 @@ def test_blended_texture_is_the_key_texture_where_its_weight_is_one(body):
     q = paper.query()[0]
     assert np.all(q.weights > 0.2)
     mixed = paper.blended_texture()[covered][vt.attention[:, 0] > 1 - 1e-12]
-    assert np.abs(mixed - data.textures[q.frames[0]][covered][vt.attention[:, 0] > 1 - 1e-12]
-                  ).mean() > 0.05
+    assert np.abs(mixed - data.textures[q.frames[0]][covered][vt.attention[:, 0] > 1 - 1e-12]).mean() > 0.05
 
 
 def test_no_vocabulary_and_bad_sources(tmp_path):
@@ -171,8 +171,7 @@ def test_no_vocabulary_and_bad_sources(tmp_path):
     with pytest.raises(TexvocabError, match="no vocabulary"):
         state.set_part_to_key("left_arm", 0)
     missing = tmp_path / "nope"
-    with pytest.raises(TexvocabError, match=f"{missing}: no such file or folder; expected a "
-                                            "checkpoint"):
+    with pytest.raises(TexvocabError, match=f"{missing}: no such file or folder; expected a checkpoint"):
         load_viewer_data(str(missing))
     with pytest.raises(TexvocabError, match="not a capture folder"):
         load_viewer_data(str(tmp_path))
@@ -191,11 +190,15 @@ def test_numpy_posing_equals_the_body_model(body, toy_arrays):
     from texvocab.body.smpl_io import parents_from_kintree
     from texvocab_viewer.posing import BodyPoser
 
-    toy = BodyModel(v_template=toy_arrays["v_template"], faces=toy_arrays["f"],
-                    weights=toy_arrays["weights"],
-                    parents=parents_from_kintree(toy_arrays["kintree_table"]),
-                    J_regressor=toy_arrays["J_regressor"], posedirs=toy_arrays["posedirs"],
-                    dtype=torch.float64)
+    toy = BodyModel(
+        v_template=toy_arrays["v_template"],
+        faces=toy_arrays["f"],
+        weights=toy_arrays["weights"],
+        parents=parents_from_kintree(toy_arrays["kintree_table"]),
+        J_regressor=toy_arrays["J_regressor"],
+        posedirs=toy_arrays["posedirs"],
+        dtype=torch.float64,
+    )
     rng = np.random.default_rng(3)
     for model in (body, toy):
         pose, trans = rng.normal(0, 0.6, (24, 3)), rng.normal(0, 0.3, 3)

@@ -2,6 +2,7 @@
 (app/testing/scripts.py). It moves a left-arm slider and clicks a vocabulary key the way a
 user would; the vocabulary panel's keys and weights must follow, the screenshot must show
 the body, and the app (and its neural render worker) must exit cleanly."""
+
 from __future__ import annotations
 
 import os
@@ -21,10 +22,21 @@ pytestmark = pytest.mark.slow  # Xvfb windows
 def tiny_checkpoint(tmp_path_factory):
     """A 6-frame, 4-view 64² capture and a checkpoint after 2 steps of a tiny model (its
     vocabulary: 3 keys per part, K = 2; the field still near its body-SDF init)."""
-    return tiny_run(tmp_path_factory.mktemp("viewer"), ([("walk", 4), ("arm_raise", 4)], 5), 6, 4,
-                    dict(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4), texture_size=64,
-                    num_keys=3, k=2, rays_per_batch=128, coarse_samples=8, fine_samples=4,
-                    checkpoint_every=10, eval_views=(1,))
+    return tiny_run(
+        tmp_path_factory.mktemp("viewer"),
+        ([("walk", 4), ("arm_raise", 4)], 5),
+        6,
+        4,
+        dict(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4),
+        texture_size=64,
+        num_keys=3,
+        k=2,
+        rays_per_batch=128,
+        coarse_samples=8,
+        fine_samples=4,
+        checkpoint_every=10,
+        eval_views=(1,),
+    )
 
 
 def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
@@ -32,10 +44,8 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     seq_poses[:, 18, 1] = np.radians([-10, -40, -70, -100])  # left elbow bends
     seq_trans = np.stack([np.zeros(4), np.zeros(4), np.linspace(0, 0.3, 4)], 1).astype(np.float32)
     np.savez(tmp_path / "seq.npz", poses=seq_poses, trans=seq_trans)
-    proc, rep, shot = run_window(tiny_checkpoint, "slider", tmp_path, "--poses",
-                                 str(tmp_path / "seq.npz"))
-    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"),
-                                                proc.stderr[-2000:])
+    proc, rep, shot = run_window(tiny_checkpoint, "slider", tmp_path, "--poses", str(tmp_path / "seq.npz"))
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"), proc.stderr[-2000:])
     assert "Traceback" not in proc.stderr
 
     # the slider moved the joint (left shoulder z, degrees) and bumped the pose version
@@ -44,8 +54,7 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
 
     # the vocabulary panel redrew the left arm's keys/weights; the other parts did not move
     before, after = rep["before"]["keys"], rep["after"]["keys"]
-    assert set(before) == set(after) == {"main_body", "left_leg", "right_leg", "left_arm",
-                                         "right_arm"}
+    assert set(before) == set(after) == {"main_body", "left_leg", "right_leg", "left_arm", "right_arm"}
     assert before["left_arm"] != after["left_arm"]
     for part in ("main_body", "left_leg", "right_leg", "right_arm"):
         assert before[part] == after[part], part
@@ -102,8 +111,8 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     x, y, w, h = (int(round(v)) for v in rep["view_rect"])
     assert w > 200 and h > 400
     bg = np.array((0.13, 0.14, 0.16)) * 255  # SceneOptions.background
-    view = img[y:y + h, x:x + w]
-    corner = view[h - 20:h - 5, 5:20]
+    view = img[y : y + h, x : x + w]
+    corner = view[h - 20 : h - 5, 5:20]
     assert np.abs(corner - bg).max() < 12, "the view's corner should be background"
     body = np.abs(view - bg).max(-1) > 30
     body[:40] = False  # the caption line drawn over the view
@@ -114,13 +123,13 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
 
 
 @pytest.mark.parametrize("worker", ["process", "thread"])
-def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
-        tiny_checkpoint, tmp_path, worker):
+def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(tiny_checkpoint, tmp_path, worker):
     """bench/viewer_ui.py's driver, short: three renders (the script's count) to full
     resolution in the render process (or thread), the CPU of each side measured, and after
     the last level the window idles again (a level's wake draws a frame, app/neural/wake.py)."""
-    proc, rep, _ = run_window(tiny_checkpoint, "bench:1:64:3", tmp_path, "--neural-worker",
-                              worker, "--neural-preview-wait", "200")
+    proc, rep, _ = run_window(
+        tiny_checkpoint, "bench:1:64:3", tmp_path, "--neural-worker", worker, "--neural-preview-wait", "200"
+    )
     assert proc.returncode == 0 and rep["ok"], (rep.get("error"), proc.stderr[-2000:])
     assert rep["neural_worker"] == worker and rep["errors"] == []
     assert (rep["render_pid"] != rep["window_pid"]) == (worker == "process")
@@ -149,8 +158,9 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(
     assert rep["idle"]["frames"] <= 4  # 1 s idle at 1 frame per second
 
 
-@pytest.mark.parametrize("cmd", [[PYTHON, "-m", "texvocab_viewer"],
-                                 [str(Path(PYTHON).parent / "texvocab"), "view"]])
+@pytest.mark.parametrize(
+    "cmd", [[PYTHON, "-m", "texvocab_viewer"], [str(Path(PYTHON).parent / "texvocab"), "view"]]
+)
 def test_viewer_without_display_says_what_to_do(cmd):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
@@ -164,18 +174,24 @@ def test_render_worker_bench_runs_all_workers(tiny_checkpoint):
     """bench/render_worker.py, short: the thread, one process and two processes render
     with and without the UI-like load, and the summary line gives each one's slowdown
     and what the split gains."""
-    proc = subprocess.run([PYTHON, "bench/render_worker.py", str(tiny_checkpoint), "--rounds",
-                           "1", "--res", "32"], cwd=ROOT, capture_output=True, text=True,
-                          timeout=300)
+    proc = subprocess.run(
+        [PYTHON, "bench/render_worker.py", str(tiny_checkpoint), "--rounds", "1", "--res", "32"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    rows = [line for line in proc.stdout.splitlines() if line.startswith("| thread")
-            or line.startswith("| process")]
+    rows = [
+        line
+        for line in proc.stdout.splitlines()
+        if line.startswith("| thread") or line.startswith("| process")
+    ]
     assert len(rows) == 6 and all(" | 2 | " in row for row in rows), proc.stdout
     assert sum(row.startswith("| process x2 |") for row in rows) == 2
     last = proc.stdout.strip().splitlines()[-1]
     values = dict(kv.split("=") for kv in last.removeprefix("summary: ").split())
-    assert set(values) == {"thread_slowdown", "process_slowdown", "process_x2_slowdown",
-                           "split_speedup"}
+    assert set(values) == {"thread_slowdown", "process_slowdown", "process_x2_slowdown", "split_speedup"}
     assert all(float(v) > 0 for v in values.values())
 
 

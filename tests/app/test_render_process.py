@@ -3,6 +3,7 @@ across a process boundary. Levels arrive coarse to fine from another process, a 
 version cancels the job in progress and stale levels never arrive, a failing render is
 reported and the process keeps serving, a crashed process is reported, and stop ends it.
 The renderers are module-level factories: the child imports this module to build them."""
+
 from __future__ import annotations
 
 import os
@@ -19,8 +20,7 @@ def _levels(job, cancelled, levels=(8, 4, 2, 1)):
     for level in levels:
         if cancelled():
             return
-        image = np.full((max(1, 16 // level), max(1, 16 // level), 3), job.version / 10,
-                        np.float32)
+        image = np.full((max(1, 16 // level), max(1, 16 // level), 3), job.version / 10, np.float32)
         yield level, image, 0.001
 
 
@@ -33,6 +33,7 @@ def stalling_renderer():
     """Version 1 blocks after its first level until cancelled, then (uncooperatively)
     yields one more level; version 5 takes 1 s over its first level; other versions
     render at once. Version 3 raises; version 99 ends the process as a crash would."""
+
     def render(job, cancelled):
         if job.version == 3:
             raise ValueError("bad pose")
@@ -51,6 +52,7 @@ def stalling_renderer():
             yield 4, np.ones((4, 4, 3), np.float32), 0.001  # stale: must be dropped
             return
         yield from _levels(job, cancelled, (4, 2, 1))
+
     return render
 
 
@@ -60,6 +62,7 @@ def blas_reporting_renderer():
 
     def render(job, cancelled):
         yield 1, np.full((2, 2, 3), float(blas_threads()), np.float32), 0.001
+
     return render
 
 
@@ -89,6 +92,7 @@ def shard_renderer():
             mine |= now
             image[now] = 1 + job.shard
             yield level, image[::level, ::level].copy(), 0.001, mine[::level, ::level].copy()
+
     return render
 
 
@@ -152,15 +156,16 @@ def test_two_processes_split_a_view_and_their_levels_are_merged():
         assert {1.0, 2.0} <= set(np.unique(frame.image).tolist())
         assert worker.cpu_seconds() > 0
         # the second shard runs nicer, so the first (the preview's) wins a shared core
-        assert os.getpriority(os.PRIO_PROCESS, worker.pids[1]) == \
-            os.getpriority(os.PRIO_PROCESS, worker.pids[0]) + 5
+        assert (
+            os.getpriority(os.PRIO_PROCESS, worker.pids[1])
+            == os.getpriority(os.PRIO_PROCESS, worker.pids[0]) + 5
+        )
     finally:
         assert worker.stop()
     assert not worker.alive
 
 
-def test_later_shards_wait_for_the_preview_and_skip_jobs_superseded_by_then(
-        tmp_path, monkeypatch):
+def test_later_shards_wait_for_the_preview_and_skip_jobs_superseded_by_then(tmp_path, monkeypatch):
     """While a slider is dragged each pose is cancelled after its preview: the second
     shard starts a job only once the first has sent that preview, so it neither slows
     the preview nor works on poses already left. A playback job (no preview) starts on
@@ -172,9 +177,10 @@ def test_later_shards_wait_for_the_preview_and_skip_jobs_superseded_by_then(
 
     worker = ProcessWorker(shard_renderer, processes=2)
     try:
+
         def submit(version, **kw):
-            worker.submit(RenderJob(version, np.zeros((24, 3)), np.zeros(3), camera=Size(),
-                                    **kw))
+            worker.submit(RenderJob(version, np.zeros((24, 3)), np.zeros(3), camera=Size(), **kw))
+
         submit(1)
         wait(lambda: not worker.busy)
         assert mark("start-1-1") >= mark("preview-1")
@@ -219,8 +225,7 @@ def test_new_version_cancels_and_stale_levels_never_arrive():
         assert worker.stop()
 
 
-def test_the_preview_in_progress_is_finished_and_shown_before_the_newest_job(
-        tmp_path, monkeypatch):
+def test_the_preview_in_progress_is_finished_and_shown_before_the_newest_job(tmp_path, monkeypatch):
     started = tmp_path / "started"
     monkeypatch.setenv("TEXVOCAB_TEST_STARTED", str(started))  # the child inherits it
     worker = ProcessWorker(stalling_renderer)

@@ -2,6 +2,7 @@
 CPU rasteriser's and pyrender's for the same camera (in this process, with pyrender on
 PyOpenGL's OSMesa platform), five part colours, a novelty map that follows the pose, and
 the orbit camera's GL matrices equal its OpenCV camera."""
+
 import numpy as np
 import pytest
 import torch
@@ -46,8 +47,9 @@ def test_orbit_camera_gl_matrices_equal_its_opencv_camera():
     cam.pan(0.1, -0.05)
     cam.orbit(10, 5)
     cv = cam.to_texvocab_camera(W, H)
-    np.testing.assert_allclose(gl_mvp(cv, cam.near, cam.far),
-                               cam.projection(W / H) @ cam.view_matrix(), atol=1e-9)
+    np.testing.assert_allclose(
+        gl_mvp(cv, cam.near, cam.far), cam.projection(W / H) @ cam.view_matrix(), atol=1e-9
+    )
     np.testing.assert_allclose(cv.center, cam.eye, atol=1e-12)
     back = OrbitCamera.from_capture_camera(cv, target=cam.target)
     np.testing.assert_allclose(back.to_texvocab_camera(W, H).K, cv.K, atol=1e-9)
@@ -82,8 +84,9 @@ def test_default_body_silhouette_matches_cpu_raster_and_pyrender(ctx, body):
     from texvocab.capture.mesh_renderer import MeshRenderer
 
     with MeshRenderer(W, H) as pr:
-        _, depth = pr.render(verts.numpy(), body.faces.numpy(), capture_cam.K, capture_cam.R,
-                             capture_cam.t, flat=True)
+        _, depth = pr.render(
+            verts.numpy(), body.faces.numpy(), capture_cam.K, capture_cam.R, capture_cam.t, flat=True
+        )
     make_current(ctx)
     renderer.render(state, capture_cam, (W, H), SceneOptions())
     score = iou(gl_mask(renderer), depth > 0)
@@ -141,9 +144,11 @@ def test_novelty_overlay_follows_the_pose(ctx, body):
     assert blue(novel)[mask].mean() > 0.6  # the rest stays cold
 
 
-@pytest.mark.parametrize("options", [SceneOptions(), SceneOptions(part_colors=True),
-                                     SceneOptions(novelty=True), SceneOptions(skeleton=True)],
-                         ids=["textured", "parts", "novelty", "skeleton"])
+@pytest.mark.parametrize(
+    "options",
+    [SceneOptions(), SceneOptions(part_colors=True), SceneOptions(novelty=True), SceneOptions(skeleton=True)],
+    ids=["textured", "parts", "novelty", "skeleton"],
+)
 def test_indexed_mesh_draws_the_unrolled_pixels_with_fewer_vertices(ctx, body, options):
     """Without the wireframe the body is drawn indexed, one GL vertex per (vertex, uv)
     pair: the same pixels as one vertex per triangle corner, and far fewer vertices."""
@@ -223,8 +228,10 @@ def test_missing_osmesa_is_one_clear_error(monkeypatch):
 
     monkeypatch.setattr(gh, "LIBRARY_NAMES", ("libOSMesa-not-here.so.99",))
     monkeypatch.setattr(ctypes.util, "find_library", lambda name: None)
-    with pytest.raises(TexvocabError, match="libOSMesa not found .*libOSMesa-not-here.so.99.*"
-                                            "install the Debian package libosmesa6"):
+    with pytest.raises(
+        TexvocabError,
+        match="libOSMesa not found .*libOSMesa-not-here.so.99.*install the Debian package libosmesa6",
+    ):
         gh.create_headless_context()
 
 
@@ -236,9 +243,11 @@ def test_back_faces_are_culled_without_changing_the_image(ctx, body):
     state = ViewerState(data)
     renderer = SceneRenderer(ctx, data)
     assert renderer.front_face == "ccw"
-    views = (("walk", 30.0, SceneOptions()),
-             ("squat", 160.0, SceneOptions(part_colors=True)),
-             ("kick", -70.0, SceneOptions(wireframe=True, skeleton=True)))
+    views = (
+        ("walk", 30.0, SceneOptions()),
+        ("squat", 160.0, SceneOptions(part_colors=True)),
+        ("kick", -70.0, SceneOptions(wireframe=True, skeleton=True)),
+    )
 
     def both_ways(cam, options):
         images = []
@@ -248,6 +257,7 @@ def test_back_faces_are_culled_without_changing_the_image(ctx, body):
             images.append((renderer.read((W, H)), gl_mask(renderer)))
         renderer.front_face = "ccw"
         return images
+
     for preset, yaw, options in views:
         state.reset_all()
         state.apply_preset(preset)
@@ -258,8 +268,7 @@ def test_back_faces_are_culled_without_changing_the_image(ctx, body):
     pelvis = state.posed()[1][0]
     inside = OrbitCamera(target=pelvis, yaw=0.0, pitch=0.0, distance=0.04)
     (_, culled), (_, drawn) = both_ways(inside.to_texvocab_camera(W, H), SceneOptions())
-    print(f"inside the hips: body covers {drawn.mean():.3f} drawn both ways, "
-          f"{culled.mean():.3f} culled")
+    print(f"inside the hips: body covers {drawn.mean():.3f} drawn both ways, {culled.mean():.3f} culled")
     assert drawn.mean() > 0.99 and culled.mean() < 0.5
 
 

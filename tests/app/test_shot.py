@@ -1,6 +1,7 @@
 """``texvocab shot`` over OSMesa (no display): the default body's 3D view matches committed
 reference PNGs within a tolerance (a diff PNG is saved next to the output on failure), and
 for a tiny checkpoint the neural render is written from the same camera as the 3D view."""
+
 from pathlib import Path
 
 import numpy as np
@@ -32,16 +33,31 @@ def assert_matches_reference(out: Path, ref: Path) -> None:
     if mean >= MEAN_TOL or share >= PIXEL_SHARE:
         diff_path = out.with_suffix(".diff.png")
         save_png(diff_path, np.clip(diff * 4, 0, 255).astype(np.uint8))
-        pytest.fail(f"{out} differs from {ref}: mean |diff| {mean * 255:.2f}/255, "
-                    f"{share:.2%} of pixels off by > {PIXEL_TOL}/255; diff image: {diff_path}")
+        pytest.fail(
+            f"{out} differs from {ref}: mean |diff| {mean * 255:.2f}/255, "
+            f"{share:.2%} of pixels off by > {PIXEL_TOL}/255; diff image: {diff_path}"
+        )
 
 
-@pytest.mark.parametrize("ref,overlays", [("shot_reference.png", []),
-                                          ("shot_reference_overlays.png",
-                                           ["--overlay", "part_colors", "skeleton"])])
+@pytest.mark.parametrize(
+    "ref,overlays",
+    [("shot_reference.png", []), ("shot_reference_overlays.png", ["--overlay", "part_colors", "skeleton"])],
+)
 def test_shot_matches_reference(tmp_path, capsys, ref, overlays):
-    rc = main(["shot", "--pose", "walk", "--camera", "30,10,3.0", "--size", "192x240",
-               "--out", str(tmp_path), *overlays])
+    rc = main(
+        [
+            "shot",
+            "--pose",
+            "walk",
+            "--camera",
+            "30,10,3.0",
+            "--size",
+            "192x240",
+            "--out",
+            str(tmp_path),
+            *overlays,
+        ]
+    )
     assert rc == 0
     printed = capsys.readouterr().out
     for name in ("view3d.png", "shot.png"):
@@ -77,11 +93,11 @@ def tiny_checkpoint(tmp_path_factory):
     return smallest_run(tmp_path_factory.mktemp("shot"))
 
 
-def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(tiny_checkpoint,
-                                                                             tmp_path, capsys):
+def test_shot_of_a_checkpoint_writes_the_neural_render_from_the_same_camera(
+    tiny_checkpoint, tmp_path, capsys
+):
     out = tmp_path / "shot"
-    assert main(["shot", str(tiny_checkpoint), "--pose", "1", "--camera", "1", "--out",
-                 str(out)]) == 0
+    assert main(["shot", str(tiny_checkpoint), "--pose", "1", "--camera", "1", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "neural render in" in printed
     view, neural, both = (read(out / n) for n in ("view3d.png", "neural.png", "shot.png"))
@@ -110,6 +126,8 @@ def test_demo_without_a_display_writes_the_viewer_shots(tiny_checkpoint, tmp_pat
     # two rows (one per pose) of 3D-view looks plus the neural render, 64 px tiles
     assert img.shape[0] > 2 * 64 and img.shape[1] > (len(DEMO_LOOKS) + 1) * 64
     for pose in ("1", "kick"):
-        view, neural = read(tmp_path / "viewer" / f"pose_{pose}" / "view3d.png"), read(
-            tmp_path / "viewer" / f"pose_{pose}" / "neural.png")
+        view, neural = (
+            read(tmp_path / "viewer" / f"pose_{pose}" / "view3d.png"),
+            read(tmp_path / "viewer" / f"pose_{pose}" / "neural.png"),
+        )
         assert view.std() > 5 and neural.std() > 1  # a body is drawn in both

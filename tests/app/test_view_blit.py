@@ -2,6 +2,7 @@
 scene's framebuffer land where in the window's, GL rows counted from the bottom. The copy
 itself runs in the window tests (tests/app/test_app_window.py: the body in the screenshot's
 3D view)."""
+
 from __future__ import annotations
 
 from texvocab_viewer.gl.view_blit import ViewBlit, blit_rects

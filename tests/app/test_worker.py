@@ -1,6 +1,7 @@
 """The viewer's progressive render worker (app/neural/worker.py), no GL: levels arrive coarse to
 fine with timings, a newer version cancels stale work (stale levels never reach the UI),
 and the thread stops cleanly, also in the middle of a render."""
+
 from __future__ import annotations
 
 import threading
@@ -52,11 +53,13 @@ def sphere_renderer(field, levels=(8, 4, 2, 1), after_level=None):
     v, f = sphere_mesh()
 
     def render(job, cancelled):
-        for level, rgb, sec in progressive_render(field, job.camera, v, f, SETTINGS, levels,
-                                                  cancelled=cancelled):
+        for level, rgb, sec in progressive_render(
+            field, job.camera, v, f, SETTINGS, levels, cancelled=cancelled
+        ):
             if after_level is not None:
                 after_level(job, level)
             yield level, rgb, sec
+
     return render
 
 
@@ -174,8 +177,7 @@ def test_a_newer_job_lets_the_preview_in_progress_finish(finish_preview):
             yield level, np.full((64 // level, 64 // level, 3), j.version / 10, np.float32), 0.01
 
     worker = ProgressiveWorker(render, threads=None)
-    first = RenderJob(1, np.zeros((24, 3)), np.zeros(3), sphere_camera(),
-                      finish_preview=finish_preview)
+    first = RenderJob(1, np.zeros((24, 3)), np.zeros(3), sphere_camera(), finish_preview=finish_preview)
     worker.submit(first)
     assert started.wait(10)
     worker.submit(job(2))
@@ -282,6 +284,7 @@ def stub_model(make_field, calls=None, contexts=None):
         @staticmethod
         def for_pose(ctx):
             return make_field()
+
     return Model
 
 

@@ -1,4 +1,5 @@
 """BodyModel / LBS against an independent per-vertex reference, pose validation, parts."""
+
 import numpy as np
 import pytest
 import torch
@@ -11,10 +12,16 @@ from texvocab.errors import PoseError
 
 
 def _model(a, **kw):
-    return BodyModel(v_template=a["v_template"], faces=a["f"], weights=a["weights"],
-                     parents=parents_from_kintree(a["kintree_table"]),
-                     J_regressor=a["J_regressor"], shapedirs=a["shapedirs"], dtype=torch.float64,
-                     **kw)
+    return BodyModel(
+        v_template=a["v_template"],
+        faces=a["f"],
+        weights=a["weights"],
+        parents=parents_from_kintree(a["kintree_table"]),
+        J_regressor=a["J_regressor"],
+        shapedirs=a["shapedirs"],
+        dtype=torch.float64,
+        **kw,
+    )
 
 
 def _reference_lbs(v, joints, parents, weights, pose, trans):
@@ -42,14 +49,14 @@ def test_lbs_matches_reference(toy_arrays):
     trans = np.array([0.1, -0.2, 0.3])
     out = body.forward(torch.tensor(pose)[None], torch.tensor(trans)[None])
     joints = toy_arrays["J_regressor"] @ toy_arrays["v_template"]
-    ref_v, ref_j = _reference_lbs(toy_arrays["v_template"], joints, body.parents.numpy(),
-                                  toy_arrays["weights"], pose, trans)
+    ref_v, ref_j = _reference_lbs(
+        toy_arrays["v_template"], joints, body.parents.numpy(), toy_arrays["weights"], pose, trans
+    )
     np.testing.assert_allclose(out.vertices[0].numpy(), ref_v, atol=1e-10)
     np.testing.assert_allclose(out.joints[0].numpy(), ref_j, atol=1e-10)
     # transforms map rest points rigidly attached to a joint to their posed location
     T = out.transforms[0].numpy()
-    np.testing.assert_allclose(T[:, :3, :3] @ joints[..., None] + T[:, :3, 3:], ref_j[..., None],
-                               atol=1e-10)
+    np.testing.assert_allclose(T[:, :3, :3] @ joints[..., None] + T[:, :3, 3:], ref_j[..., None], atol=1e-10)
 
 
 def test_zero_pose_is_rest_and_betas_move_joints(toy_arrays):
@@ -67,8 +74,9 @@ def test_posedirs_apply_only_when_posed(toy_arrays):
     a = toy_arrays
     plain = _model(a)
     corr = _model(a, posedirs=a["posedirs"])
-    assert torch.allclose(plain.forward(torch.zeros(1, 24, 3)).vertices,
-                          corr.forward(torch.zeros(1, 24, 3)).vertices)
+    assert torch.allclose(
+        plain.forward(torch.zeros(1, 24, 3)).vertices, corr.forward(torch.zeros(1, 24, 3)).vertices
+    )
     pose = torch.full((1, 24, 3), 0.3, dtype=torch.float64)
     diff = (plain.forward(pose).vertices - corr.forward(pose).vertices).abs().max()
     assert diff > 1e-5
@@ -120,5 +128,6 @@ def test_part_attention():
     rand = torch.rand(100, 24)
     np.testing.assert_allclose(part_attention(rand, parts).sum(-1).numpy(), 1.0, rtol=1e-6)
     # Unnormalised weights are normalised (Ω divides by Σ_j ω).
-    np.testing.assert_allclose(part_attention(rand * 7, parts).numpy(),
-                               part_attention(rand, parts).numpy(), rtol=1e-5)
+    np.testing.assert_allclose(
+        part_attention(rand * 7, parts).numpy(), part_attention(rand, parts).numpy(), rtol=1e-5
+    )

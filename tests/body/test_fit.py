@@ -1,6 +1,7 @@
 """Fitting the default body to a subject's rest joints: the joints are reached exactly,
 the surface follows them smoothly (limbs longer along their bones, not thicker), skinning,
 faces and UVs are kept, and the fitted body poses like any other."""
+
 import logging
 
 import numpy as np
@@ -15,8 +16,14 @@ from texvocab.errors import AssetError
 
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
 # bone (named by its child joint) -> length factor; the trunk and hips are left as they are
-STRETCH = {"left_knee": 1.15, "right_ankle": 0.9, "left_elbow": 1.1, "right_wrist": 0.92,
-           "head": 0.95, "left_foot": 1.05}
+STRETCH = {
+    "left_knee": 1.15,
+    "right_ankle": 0.9,
+    "left_elbow": 1.1,
+    "right_wrist": 0.92,
+    "head": 0.95,
+    "left_foot": 1.05,
+}
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +75,9 @@ def test_surface_stays_smooth(body, fitted):
     f = body.faces.numpy()
     v0, v1 = body.v_template.double().numpy(), fitted.v_template.double().numpy()
     edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    ratio = (np.linalg.norm(v1[edges[:, 0]] - v1[edges[:, 1]], axis=1)
-             / np.linalg.norm(v0[edges[:, 0]] - v0[edges[:, 1]], axis=1))
+    ratio = np.linalg.norm(v1[edges[:, 0]] - v1[edges[:, 1]], axis=1) / np.linalg.norm(
+        v0[edges[:, 0]] - v0[edges[:, 1]], axis=1
+    )
     # bones change by 0.9..1.15: edges along them as much, blends between regions a little
     # more (measured: 1.2 % outside, extremes 0.84 and 1.48 on 5 mm edges at the hip)
     within = (ratio > 0.9 - 1e-6) & (ratio < 1.15 + 1e-6)
@@ -110,10 +118,8 @@ def test_the_fitted_body_poses_with_lbs(body, target, fitted):
     out = fitted.forward(pose, trans)
     assert torch.isfinite(out.vertices).all()
     # posed joints are forward kinematics of the target skeleton, whatever the surface
-    bones_only = BodyModel(body.v_template, body.faces, body.weights, body.parents,
-                           joints=target)
-    np.testing.assert_allclose(out.joints.numpy(), bones_only.forward(pose, trans).joints.numpy(),
-                               atol=1e-5)
+    bones_only = BodyModel(body.v_template, body.faces, body.weights, body.parents, joints=target)
+    np.testing.assert_allclose(out.joints.numpy(), bones_only.forward(pose, trans).joints.numpy(), atol=1e-5)
     # a vertex skinned to one joint only keeps its distance to that joint
     elbow = J["left_elbow"]
     rigid = np.nonzero(body.weights[:, elbow].numpy() > 0.999)[0]
@@ -133,9 +139,17 @@ def test_the_log_line_names_the_largest_bone_change(body, target, caplog):
 
 
 def toy_body(a: dict) -> BodyModel:
-    return BodyModel(a["v_template"], a["f"], a["weights"], parents_from_kintree(a["kintree_table"]),
-                     J_regressor=a["J_regressor"], shapedirs=a["shapedirs"],
-                     posedirs=a["posedirs"], name="toy", dtype=torch.float64)
+    return BodyModel(
+        a["v_template"],
+        a["f"],
+        a["weights"],
+        parents_from_kintree(a["kintree_table"]),
+        J_regressor=a["J_regressor"],
+        shapedirs=a["shapedirs"],
+        posedirs=a["posedirs"],
+        name="toy",
+        dtype=torch.float64,
+    )
 
 
 def test_a_joint_regressor_regresses_the_target_from_the_fitted_template(toy_arrays):
@@ -162,8 +176,7 @@ def test_betas_are_recovered_from_rest_joints_of_the_same_model(toy_arrays):
     betas, error = betas_from_rest_joints(toy, joints[0].numpy())
     np.testing.assert_allclose(betas, truth[0].numpy(), atol=1e-8)
     assert error < 1e-10
-    _, error = betas_from_rest_joints(toy, stretched(joints[0].numpy(), toy.parents.numpy(),
-                                                     STRETCH))
+    _, error = betas_from_rest_joints(toy, stretched(joints[0].numpy(), toy.parents.numpy(), STRETCH))
     assert error > 1e-3  # a skeleton outside the shape space is reported as such
 
 
@@ -181,10 +194,13 @@ def test_a_regressor_row_that_cannot_reach_its_joint_spreads_over_all_vertices()
     assert np.count_nonzero(out) > 2
 
 
-@pytest.mark.parametrize("joints, message", [
-    (np.zeros((23, 3)), r"rest joints have shape \(23, 3\), expected \(24, 3\)"),
-    (np.full((24, 3), np.nan), "rest joints are not finite"),
-])
+@pytest.mark.parametrize(
+    "joints, message",
+    [
+        (np.zeros((23, 3)), r"rest joints have shape \(23, 3\), expected \(24, 3\)"),
+        (np.full((24, 3), np.nan), "rest joints are not finite"),
+    ],
+)
 def test_bad_rest_joints_are_refused(body, joints, message):
     with pytest.raises(AssetError, match=message):
         fit_rest_joints(body, joints, source="mesh_infos.pkl")

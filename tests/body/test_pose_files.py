@@ -1,6 +1,7 @@
 """Pose files as they come: AMASS SMPL-H (T, 156) and SMPL-X (T, 165) read into SMPL's 24
 joints, resampled to a chosen frame rate and turned from AMASS's Z-up to +Y up, so a
 person stands upright with no flag."""
+
 import numpy as np
 import pytest
 import torch
@@ -13,8 +14,7 @@ from texvocab.geometry.rotations import rotvec_to_rotmat
 
 
 def posed_joints(seq, i):
-    out = default_body().forward(torch.as_tensor(seq.poses[i])[None],
-                                 torch.as_tensor(seq.trans[i])[None])
+    out = default_body().forward(torch.as_tensor(seq.poses[i])[None], torch.as_tensor(seq.trans[i])[None])
     return out.joints[0].numpy()
 
 
@@ -60,13 +60,16 @@ def test_root_zero_and_no_rate_keep_every_frame(tmp_path):
     assert len(read_pose_sequence(tmp_path / "empty.npz")) == 0  # callers say "0 frames"
 
 
-@pytest.mark.parametrize("poses,extra,match", [
-    (np.zeros((4, 100)), {}, r"'poses' has shape \(4, 100\); expected .*156.*165"),
-    (np.zeros((4, 156)), {"mocap_framerate": -1.0}, "'mocap_framerate' is"),
-    (np.zeros((4, 156)), {"trans": np.zeros((3, 3))}, "'trans' has shape"),
-    (np.zeros(()), {}, r"'poses' has shape \(\)"),
-    (np.zeros((0, 5, 3)), {}, r"'poses' has shape \(0, 5, 3\)"),
-])
+@pytest.mark.parametrize(
+    "poses,extra,match",
+    [
+        (np.zeros((4, 100)), {}, r"'poses' has shape \(4, 100\); expected .*156.*165"),
+        (np.zeros((4, 156)), {"mocap_framerate": -1.0}, "'mocap_framerate' is"),
+        (np.zeros((4, 156)), {"trans": np.zeros((3, 3))}, "'trans' has shape"),
+        (np.zeros(()), {}, r"'poses' has shape \(\)"),
+        (np.zeros((0, 5, 3)), {}, r"'poses' has shape \(0, 5, 3\)"),
+    ],
+)
 def test_bad_pose_files_name_the_array(tmp_path, poses, extra, match):
     np.savez(tmp_path / "bad.npz", poses=poses, **extra)
     with pytest.raises(AssetError, match=match):

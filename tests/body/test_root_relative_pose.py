@@ -1,5 +1,6 @@
 """The root-relative pose condition: blind to which way the body faces, the rest of the
 pose untouched, at every root orientation, batch shape and dtype."""
+
 import numpy as np
 import pytest
 import torch
@@ -16,8 +17,11 @@ from texvocab.geometry.rotations import quat_multiply, quat_to_rotvec, rotvec_to
 def turned(pose: torch.Tensor, rotvec) -> torch.Tensor:
     """The pose with its root rotated by ``rotvec`` in the world: R0' = R · R0."""
     out = pose.clone()
-    out[..., 0, :] = quat_to_rotvec(quat_multiply(rotvec_to_quat(torch.as_tensor(
-        rotvec, dtype=pose.dtype)), rotvec_to_quat(pose[..., 0, :])))
+    out[..., 0, :] = quat_to_rotvec(
+        quat_multiply(
+            rotvec_to_quat(torch.as_tensor(rotvec, dtype=pose.dtype)), rotvec_to_quat(pose[..., 0, :])
+        )
+    )
     return out
 
 
@@ -27,10 +31,16 @@ def random_pose(seed: int, batch=(), scale: float = 0.4) -> torch.Tensor:
 
 # headings about the world's up axis y (±180° included) and root orientations of every kind:
 # tilts, lying down, upside down (no heading is defined there), turns of 2π and beyond
-TURNS = [(0, a, 0) for a in np.radians([0.0, 1e-7, 37.0, 143.0, 179.999, 180.0, -180.0,
-                                        -90.0, 359.0])]
-TURNS += [(np.pi, 0, 0), (0, 0, np.pi), (np.pi / 2, 0, 0), (np.pi / np.sqrt(2), 0, np.pi / np.sqrt(2)),
-          (0, 2 * np.pi, 0), (1.3, -2.1, 0.4), (0, 4 * np.pi - 1e-3, 0)]
+TURNS = [(0, a, 0) for a in np.radians([0.0, 1e-7, 37.0, 143.0, 179.999, 180.0, -180.0, -90.0, 359.0])]
+TURNS += [
+    (np.pi, 0, 0),
+    (0, 0, np.pi),
+    (np.pi / 2, 0, 0),
+    (np.pi / np.sqrt(2), 0, np.pi / np.sqrt(2)),
+    (0, 2 * np.pi, 0),
+    (1.3, -2.1, 0.4),
+    (0, 4 * np.pi - 1e-3, 0),
+]
 
 
 @pytest.mark.parametrize("turn", TURNS)
@@ -88,8 +98,9 @@ def test_global_is_the_pose_itself_and_bad_input_is_refused():
     assert torch.equal(condition_pose(pose, "root-relative"), root_relative_pose(pose))
     assert POSE_CONDITIONS[0] == "root-relative"
     assert ignored_joints("root-relative") == (0,) and ignored_joints("global") == ()
-    with pytest.raises(ValueError, match="unknown pose condition 'facing'; expected one of "
-                                         "root-relative, global"):
+    with pytest.raises(
+        ValueError, match="unknown pose condition 'facing'; expected one of root-relative, global"
+    ):
         condition_pose(pose, "facing")
     with pytest.raises(ValueError, match=r"expected shape \(..., 24, 3\), got \(23, 3\)"):
         root_relative_pose(pose[1:])

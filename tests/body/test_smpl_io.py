@@ -1,5 +1,6 @@
 """The user's SMPL files: official-layout pickles without chumpy, npz, UV obj, and refusal
 of anything else a pickle might name."""
+
 import os
 import pickle
 
@@ -82,8 +83,11 @@ def test_malicious_pickle_is_refused_and_runs_nothing(tmp_path, toy_arrays, prot
     path = tmp_path / "SMPL_NEUTRAL.pkl"
     payload = {"v_template": toy_arrays["v_template"], "weights": _Evil(marker)}
     path.write_bytes(pickle.dumps(payload, protocol=protocol))
-    with pytest.raises(AssetError, match=r"refusing to load .*SMPL_NEUTRAL\.pkl: it names "
-                                         r"(posix|os|nt)\.system"):
+    with pytest.raises(
+        AssetError,
+        match=r"refusing to load .*SMPL_NEUTRAL\.pkl: it names "
+        r"(posix|os|nt)\.system",
+    ):
         load_smpl(path)
     assert not marker.exists()
 
@@ -92,7 +96,7 @@ def test_reconstructor_cannot_build_foreign_classes(tmp_path):
     # copyreg._reconstructor(cls=builtins.object, base=builtins.set) is allowed by name but
     # must not construct anything that is not an inert holder.
     path = tmp_path / "SMPL_NEUTRAL.pkl"
-    blob = (b"ccopy_reg\n_reconstructor\n(c__builtin__\nset\nc__builtin__\nobject\nNtR.")
+    blob = b"ccopy_reg\n_reconstructor\n(c__builtin__\nset\nc__builtin__\nobject\nNtR."
     path.write_bytes(blob)
     with pytest.raises(AssetError, match="not a readable SMPL pickle"):
         read_model_arrays(path)

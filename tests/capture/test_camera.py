@@ -1,4 +1,5 @@
 """Camera: projection, pixel rays, scaling, undistortion."""
+
 import numpy as np
 import pytest
 
@@ -50,19 +51,20 @@ def test_every_nth_pixel_camera_has_the_same_rays(cam, step):
     o_sub, d_sub = sub.pixel_rays(dtype=torch.float64)
     pick = d_full.view(120, 160, 3)[::step, ::step].reshape(-1, 3)
     np.testing.assert_allclose(d_sub.numpy(), pick.numpy(), atol=1e-12)
-    np.testing.assert_allclose(o_sub.numpy(), o_full[:len(o_sub)].numpy())
+    np.testing.assert_allclose(o_sub.numpy(), o_full[: len(o_sub)].numpy())
 
 
 def test_undistort_recovers_the_ideal_image(cam):
     cam.dist = np.array([-0.25, 0.08, 0.001, -0.002, 0.0])
-    ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(float)
+    ys, xs = np.mgrid[0 : cam.height, 0 : cam.width].astype(float)
 
     def pattern(x, y):  # smooth analytic image in ideal normalised coordinates
         return 0.5 + 0.5 * np.sin(9 * x) * np.cos(7 * y)
 
     # distorted image: the pixel at distorted position shows the ideal pattern
-    ideal_xy = np.stack([(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0],
-                         (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1)
+    ideal_xy = np.stack(
+        [(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0], (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1
+    )
     # sample the distorted image densely by inverting with fixed-point iterations
     und = ideal_xy.copy()
     for _ in range(30):

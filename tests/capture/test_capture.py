@@ -1,5 +1,6 @@
 """Synthetic captures in both layouts, read back by the readers: cameras, poses, joint
 reprojection, mask vs silhouette, pose-dependent folds, and bad input."""
+
 import json
 import shutil
 
@@ -33,8 +34,9 @@ def captures(tmp_path_factory, body, motion):
     root = tmp_path_factory.mktemp("captures")
     out = {}
     for layout in ("zju", "thuman"):
-        out[layout] = synthesize(root / layout, *motion, num_train=3, body=body,
-                                 settings=SETTINGS, layout=layout, progress=False)
+        out[layout] = synthesize(
+            root / layout, *motion, num_train=3, body=body, settings=SETTINGS, layout=layout, progress=False
+        )
     return out
 
 

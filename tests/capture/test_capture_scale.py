@@ -1,4 +1,5 @@
 """Capture.scaled: images, masks and cameras resized together (a 1024² capture at 512²)."""
+
 import numpy as np
 import pytest
 

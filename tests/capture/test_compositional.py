@@ -3,6 +3,7 @@
 Per part, every novel frame is close to some training frame under the paper's quaternion distance;
 as a whole body (all 24 joints as one part) it is far from every training frame.
 """
+
 import numpy as np
 import pytest
 
@@ -113,8 +114,12 @@ def test_novel_parts_near_training_whole_body_far(motion):
     # far also relative to how much the body moves between consecutive training frames
     labels = np.array(frame_labels()[:n])
     same = labels[1:] == labels[:-1]
-    consecutive = np.array([pairwise_part_distance(train[i:i + 1], train[i + 1:i + 2], ALL_JOINTS)[0, 0]
-                            for i in np.nonzero(same)[0]])
+    consecutive = np.array(
+        [
+            pairwise_part_distance(train[i : i + 1], train[i + 1 : i + 2], ALL_JOINTS)[0, 0]
+            for i in np.nonzero(same)[0]
+        ]
+    )
     assert whole.min() >= 5 * np.median(consecutive)
 
 
@@ -125,8 +130,9 @@ def test_novel_frames_are_not_training_copies(motion):
     nearest = train[whole.argmin(1)]
     # even the closest training frame has some body part clearly elsewhere (measured >= 0.040 over
     # seeds 0..199; seeds 0, 1: 0.075, 0.087)
-    per_part = np.stack([np.diagonal(pairwise_part_distance(novel, nearest, j))
-                         for j in BODY_PARTS.values()], 1)
+    per_part = np.stack(
+        [np.diagonal(pairwise_part_distance(novel, nearest, j)) for j in BODY_PARTS.values()], 1
+    )
     assert per_part.max(1).min() >= 3 * PART_NEAR, per_part
     assert not any(np.allclose(f, t, atol=1e-3) for f in novel for t in train)
 

@@ -3,6 +3,7 @@
 distortion undone on load, the one-camera split (last 20 % novel, training frames scored
 as a seen view), a missing mask, a corrupt image, a malicious pickle, bad fields, and
 check-assets."""
+
 import dataclasses
 import logging
 import os
@@ -76,8 +77,7 @@ def test_body_pelvis_goes_on_the_subjects_pelvis(tmp_path, body, truth):
         info = infos[f"frame_{t:06d}"]
         R = rotvec_to_rotmat(torch.as_tensor(info["Rh"].astype(np.float64))).numpy()
         subject_pelvis = R @ info["tpose_joints"][0] + info["Th"]
-        np.testing.assert_allclose(cap.posed_body(t).joints[0, 0].numpy(), subject_pelvis,
-                                   atol=1e-5)
+        np.testing.assert_allclose(cap.posed_body(t).joints[0, 0].numpy(), subject_pelvis, atol=1e-5)
     np.testing.assert_allclose(cap.rest_joints[0], body.rest_joints[0].numpy() + offset, atol=1e-6)
 
 
@@ -141,8 +141,7 @@ def test_corrupt_image_is_an_error_naming_the_file(standin, tmp_path, body, dama
     with pytest.raises(AssetError, match="frame_000002.png"):
         cap.image(0, 2)
     if damage == "garbage":  # check-assets reads every header
-        assert any(line.startswith("FAIL") and "frame_000002.png" in line
-                   for line in check_path(root))
+        assert any(line.startswith("FAIL") and "frame_000002.png" in line for line in check_path(root))
 
 
 class _Exploit:
@@ -172,16 +171,29 @@ def _edit(root, fname, frame, key, value):
 
 
 BAD_FIELDS = [  # (file, frame, key, value, what the error says)
-    ("mesh_infos.pkl", "frame_000004", "poses", np.zeros(69),
-     r"frame_000004: 'poses' has shape \(69,\)"),
-    ("mesh_infos.pkl", "frame_000001", "Th", np.array([0, np.nan, 0.0]),
-     r"frame_000001: 'Th' contains non-finite"),
-    ("cameras.pkl", "frame_000000", "intrinsics", np.eye(3) * 2,
-     r"frame_000000 'intrinsics' last row"),
-    ("cameras.pkl", "frame_000000", "extrinsics", np.diag([1.0, 1.0, 2.0, 1.0]),
-     r"'extrinsics' \[:3, :3\] is not a rotation"),
-    ("cameras.pkl", "frame_000005", "distortions", np.full(5, 0.01),
-     r"frame_000005 'distortions' differs .* one fixed camera"),
+    ("mesh_infos.pkl", "frame_000004", "poses", np.zeros(69), r"frame_000004: 'poses' has shape \(69,\)"),
+    (
+        "mesh_infos.pkl",
+        "frame_000001",
+        "Th",
+        np.array([0, np.nan, 0.0]),
+        r"frame_000001: 'Th' contains non-finite",
+    ),
+    ("cameras.pkl", "frame_000000", "intrinsics", np.eye(3) * 2, r"frame_000000 'intrinsics' last row"),
+    (
+        "cameras.pkl",
+        "frame_000000",
+        "extrinsics",
+        np.diag([1.0, 1.0, 2.0, 1.0]),
+        r"'extrinsics' \[:3, :3\] is not a rotation",
+    ),
+    (
+        "cameras.pkl",
+        "frame_000005",
+        "distortions",
+        np.full(5, 0.01),
+        r"frame_000005 'distortions' differs .* one fixed camera",
+    ),
 ]
 
 
@@ -205,15 +217,36 @@ def test_one_camera_capture_trains_and_evaluates(standin, tmp_path, capsys):
     """No held-out view anywhere: train on the camera's training frames, evaluate the
     novel frames from it, and the training frames labelled as a seen view."""
     root = copy_of(standin, tmp_path)
-    tiny = ["encoder=small", "field.hidden=16", "field.sdf_layers=1", "field.color_layers=1",
-            "field.pos_freqs=2", "texture_size=32", "num_keys=1", "k=1", "rays_per_batch=64",
-            "coarse_samples=8", "fine_samples=4"]
+    tiny = [
+        "encoder=small",
+        "field.hidden=16",
+        "field.sdf_layers=1",
+        "field.color_layers=1",
+        "field.pos_freqs=2",
+        "texture_size=32",
+        "num_keys=1",
+        "k=1",
+        "rays_per_batch=64",
+        "coarse_samples=8",
+        "fine_samples=4",
+    ]
     args = [a for item in tiny for a in ("--set", item)]
-    assert main(["train", str(root), "--out", str(tmp_path / "run"), "--iterations", "2",
-                 *args]) == 0
+    assert main(["train", str(root), "--out", str(tmp_path / "run"), "--iterations", "2", *args]) == 0
     assert (root / "texvocab_cache" / "texmaps_32_views_0").is_dir()
-    assert main(["eval", str(tmp_path / "run" / "checkpoint.pt"), str(root), "--per-set", "1",
-                 "--out", str(tmp_path / "eval")]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                str(tmp_path / "run" / "checkpoint.pt"),
+                str(root),
+                "--per-set",
+                "1",
+                "--out",
+                str(tmp_path / "eval"),
+            ]
+        )
+        == 0
+    )
     md = (tmp_path / "eval" / "metrics.md").read_text()
     assert "| training_poses (seen view) | 1 |" in md
     assert "| novel_poses (capture camera, held-out frames) | 1 |" in md
@@ -245,7 +278,8 @@ def test_the_body_is_fitted_to_the_subjects_rest_joints(tmp_path, body, truth):
     for t in (0, 7):
         info = infos[f"frame_{t:06d}"]
         R = rotvec_to_rotmat(torch.as_tensor(info["Rh"].astype(np.float64))).numpy()
-        np.testing.assert_allclose(fitted.posed_body(t).joints[0, 0].numpy(),
-                                   R @ rest[0] + info["Th"], atol=1e-5)
+        np.testing.assert_allclose(
+            fitted.posed_body(t).joints[0, 0].numpy(), R @ rest[0] + info["Th"], atol=1e-5
+        )
     s = TexmapSettings()
     assert cache_dir(fitted, s) != cache_dir(plain, s)

@@ -1,5 +1,6 @@
 """A posed body against masks: silhouette IoU, joint reprojection offsets, and how close
 mask pixels' rays pass to the surface (checked against an exact ray-box distance)."""
+
 import numpy as np
 import pytest
 import torch
@@ -39,8 +40,10 @@ def frames():
 def test_a_body_against_its_own_silhouette_scores_one_and_a_shifted_one_less(body, frames):
     poses, trans = frames
     cam = front_camera()
-    own = [body_silhouette(body(torch.as_tensor(p)[None], torch.as_tensor(t)[None]).vertices[0],
-                           body.faces, cam) for p, t in zip(poses, trans)]
+    own = [
+        body_silhouette(body(torch.as_tensor(p)[None], torch.as_tensor(t)[None]).vertices[0], body.faces, cam)
+        for p, t in zip(poses, trans)
+    ]
     fit = silhouette_fit(body, poses, trans, cam, iter(own))
     np.testing.assert_array_equal(fit.iou, [1.0, 1.0])
     shifted = silhouette_fit(body, poses, trans + [0.06, 0.0, 0.0], cam, iter(own))
@@ -74,21 +77,35 @@ def test_reprojection_offsets_are_pixel_distances():
 
 def box_mesh(lo, hi):
     """A closed axis-aligned box: 8 vertices, 12 outward triangles."""
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])])
-    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    faces = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ]
+    )
     return corners, faces
 
 
 def ray_box_distance(origin, direction, lo, hi) -> float:
     """Exact: the distance to a box is convex along a line, so a bounded scalar search
     finds the ray's closest approach."""
+
     def dist(t):
         p = origin + t * direction
         return float(np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0)))
-    return minimize_scalar(dist, bounds=(0.0, 10.0), method="bounded",
-                           options={"xatol": 1e-10}).fun
+
+    return minimize_scalar(dist, bounds=(0.0, 10.0), method="bounded", options={"xatol": 1e-10}).fun
 
 
 def test_ray_distances_match_the_exact_distance_to_a_box():
@@ -111,14 +128,23 @@ def test_ray_distances_match_the_exact_distance_to_a_box():
 def test_shell_coverage_grows_with_the_shell(body, frames):
     poses, trans = frames
     cam = front_camera(size=128, focal=110.0)
-    own = [body_silhouette(body(torch.as_tensor(p)[None], torch.as_tensor(t)[None]).vertices[0],
-                           body.faces, cam) for p, t in zip(poses, trans)]
+    own = [
+        body_silhouette(body(torch.as_tensor(p)[None], torch.as_tensor(t)[None]).vertices[0], body.faces, cam)
+        for p, t in zip(poses, trans)
+    ]
     deltas = (0.01, 0.04, 0.1)
     np.testing.assert_array_equal(
-        shell_coverage(body, poses, trans, cam, iter(own), deltas, pixel_stride=2), 1.0)
+        shell_coverage(body, poses, trans, cam, iter(own), deltas, pixel_stride=2), 1.0
+    )
     # masks 2 px wider than the body all round (5.5 cm at 3 m): small shells miss some
-    wide = [np.pad(m, 2)[4:, 2:-2] | np.pad(m, 2)[:-4, 2:-2] | np.pad(m, 2)[2:-2, 4:]
-            | np.pad(m, 2)[2:-2, :-4] | m for m in own]
+    wide = [
+        np.pad(m, 2)[4:, 2:-2]
+        | np.pad(m, 2)[:-4, 2:-2]
+        | np.pad(m, 2)[2:-2, 4:]
+        | np.pad(m, 2)[2:-2, :-4]
+        | m
+        for m in own
+    ]
     share = shell_coverage(body, poses, trans, cam, iter(wide), deltas, pixel_stride=2)
     assert share.shape == (2, 3)
     assert (np.diff(share, axis=1) > 0).all() and (share[:, 0] < 0.95).all()

@@ -15,10 +15,17 @@ def world(tmp_path_factory):
     """base/cap (6 views, 64², 5 frames, 4 training), base/run/checkpoint.pt (2 steps)."""
     base = tmp_path_factory.mktemp("front_door")
     poses, trans = make_sequence([("walk", 3), ("arm_raise", 2)], seed=5)
-    cap = synthesize(base / "cap", poses, trans, 4, default_body(),
-                     SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=256),
-                     progress=False)
-    trainer = Trainer(open_capture(cap), tiny_settings(iterations=2, perceptual="off"),
-                      base / "run", progress=False)
+    cap = synthesize(
+        base / "cap",
+        poses,
+        trans,
+        4,
+        default_body(),
+        SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=256),
+        progress=False,
+    )
+    trainer = Trainer(
+        open_capture(cap), tiny_settings(iterations=2, perceptual="off"), base / "run", progress=False
+    )
     trainer.run()
     return base

@@ -1,4 +1,5 @@
 """The console script: --help everywhere, check-assets verdicts, one-line errors."""
+
 import subprocess
 import sys
 from pathlib import Path
@@ -68,8 +69,23 @@ def test_unknown_command_is_usage_error(args):
 
 def test_synth_contact_sheet_and_check_assets(tmp_path):
     cap = tmp_path / "cap"
-    out = run("synth", str(cap), "--frames", "3", "--train-frames", "2", "--size", "64",
-              "--ring-views", "2", "--raised-views", "1", "--texture-size", "256", check_rc=0)
+    out = run(
+        "synth",
+        str(cap),
+        "--frames",
+        "3",
+        "--train-frames",
+        "2",
+        "--size",
+        "64",
+        "--ring-views",
+        "2",
+        "--raised-views",
+        "1",
+        "--texture-size",
+        "256",
+        check_rc=0,
+    )
     assert "3 frames x 3 views (zju layout, 2 training frames)" in out.stdout
     assert "synth cap" in out.stderr  # progress bar
     out = run("check-assets", str(cap), check_rc=0).stdout.splitlines()
@@ -97,8 +113,23 @@ def test_synth_contact_sheet_and_check_assets(tmp_path):
 
 def test_prepare_and_vocab_commands(tmp_path):
     cap = tmp_path / "cap"
-    run("synth", str(cap), "--frames", "4", "--train-frames", "3", "--size", "64",
-        "--ring-views", "2", "--raised-views", "0", "--texture-size", "128", check_rc=0)
+    run(
+        "synth",
+        str(cap),
+        "--frames",
+        "4",
+        "--train-frames",
+        "3",
+        "--size",
+        "64",
+        "--ring-views",
+        "2",
+        "--raised-views",
+        "0",
+        "--texture-size",
+        "128",
+        check_rc=0,
+    )
     err = run("prepare", str(cap), "--texture-size", "32", check_rc=2).stderr
     assert err.startswith("error: setting data.eval_views=[1, 5]") and "views 0..1" in err  # no 5
     out = run("prepare", str(cap), "--texture-size", "32", "--eval-views", "1", check_rc=0).stdout
@@ -123,8 +154,23 @@ def test_synth_compositional_motion_writes_that_motion(tmp_path):
     from texvocab.capture.motion import default_motion
 
     cap = tmp_path / "comp"
-    run("synth", str(cap), "--motion", "compositional", "--frames", "5", "--size", "32",
-        "--ring-views", "1", "--raised-views", "0", "--texture-size", "64", check_rc=0)
+    run(
+        "synth",
+        str(cap),
+        "--motion",
+        "compositional",
+        "--frames",
+        "5",
+        "--size",
+        "32",
+        "--ring-views",
+        "1",
+        "--raised-views",
+        "0",
+        "--texture-size",
+        "64",
+        check_rc=0,
+    )
     got = open_capture(cap)
     want, _, num_train = compositional_motion(0)
     assert np.allclose(got.poses, want[:5], atol=1e-5) and got.num_train == 5 <= num_train

@@ -1,6 +1,7 @@
 """The front door: the bad-input probe's cases as a table. Each runs the real command line
 (``texvocab.cli.main.main``) on a tiny capture and checkpoint and asserts exit status 2,
 exactly one ``error:`` line naming the field or file, and a disk left exactly as it was."""
+
 import os
 import shutil
 from pathlib import Path
@@ -43,6 +44,7 @@ def _annots(key, value):
         else:
             a[key] = value
         np.save(root / "annots.npy", a, allow_pickle=True)
+
     return change
 
 
@@ -125,8 +127,18 @@ def _out_file(world):
 
 CAP = "{cap}"
 RUN = "{run}"
-T = ["train", CAP, "--out", "{base}/new_run", "--set", "perceptual=off", "--set", "num_keys=3",
-     "--iterations", "1"]
+T = [
+    "train",
+    CAP,
+    "--out",
+    "{base}/new_run",
+    "--set",
+    "perceptual=off",
+    "--set",
+    "num_keys=3",
+    "--iterations",
+    "1",
+]
 
 
 def _tiny_sets() -> list[str]:
@@ -170,76 +182,170 @@ CASES = [
     ("set-dotted-type", T + ["--set", "train.coarse_samples=2.5"], "train.coarse_samples"),
     ("set-dotted-unknown", T + ["--set", "train.nosuch=1"], "train.nosuch"),
     ("set-group", T + ["--set", "render=3"], "group of settings"),
-    ("eval-set-train-knob", ["eval", RUN + "/checkpoint.pt", CAP, "--set",
-                             "train.coarse_samples=3"], "only render knobs"),
-    ("eval-set-misspelt", ["eval", RUN + "/checkpoint.pt", CAP, "--set",
-                           "render.coarse_sample=3"], "render.coarse_samples"),
-    ("iterations-negative", ["train", CAP, "--out", "{base}/new_run", "--iterations", "-5"],
-     "iterations"),
+    (
+        "eval-set-train-knob",
+        ["eval", RUN + "/checkpoint.pt", CAP, "--set", "train.coarse_samples=3"],
+        "only render knobs",
+    ),
+    (
+        "eval-set-misspelt",
+        ["eval", RUN + "/checkpoint.pt", CAP, "--set", "render.coarse_sample=3"],
+        "render.coarse_samples",
+    ),
+    ("iterations-negative", ["train", CAP, "--out", "{base}/new_run", "--iterations", "-5"], "iterations"),
     ("out-is-a-file", lambda w: ["train", str(w / "cap"), "--out", _out_file(w)], "is a file"),
     ("out-holds-checkpoint", ["train", CAP, "--out", RUN, "--iterations", "3"], "--resume"),
-    ("resume-and-overwrite", ["train", CAP, "--out", RUN, "--resume", "--overwrite"],
-     "exclude"),
+    ("resume-and-overwrite", ["train", CAP, "--out", RUN, "--resume", "--overwrite"], "exclude"),
     ("resume-past-iterations", R + ["--iterations", "1"], "already at step 2"),
     ("resume-other-settings", R + ["--set", "lr=0.1"], "written with train.lr"),
     ("synth-frames-0", ["synth", "{base}/new_cap", "--frames", "0"], "--frames"),
     ("synth-frames-negative", ["synth", "{base}/new_cap", "--frames", "-3"], "--frames"),
     ("synth-size-0", ["synth", "{base}/new_cap", "--size", "0"], "--size"),
-    ("synth-overwrite-user-folder", lambda w: ["synth", _user_folder(w), "--overwrite",
-                                               "--frames", "1"], "not one"),
-    ("synth-poses-empty", lambda w: ["synth", str(w / "new_cap"), "--poses", _poses_file(
-        w, "empty.npz", poses=np.zeros((0, 72)))], "0 frames"),
-    ("synth-poses-text-npz", lambda w: ["synth", str(w / "new_cap"), "--poses", _file(
-        w, "text.npz", b"this is text, not numpy")], "text.npz: not an .npz archive"),
-    ("synth-poses-wrong-shape", lambda w: ["synth", str(w / "new_cap"), "--poses", _poses_file(
-        w, "shape.npz", poses=np.zeros((4, 5)))], "poses"),
-    ("synth-poses-huge", lambda w: ["synth", str(w / "new_cap"), "--poses", _poses_file(
-        w, "huge.npz", poses=np.full((2, 72), 1e30))], "pose"),
-    ("eval-per-set-negative", ["eval", RUN + "/checkpoint.pt", CAP, "--per-set", "-1"],
-     "--per-set"),
-    ("eval-vocab-junk", lambda w: ["eval", _ckpt_with(w, "vocab", _vocab_junk), str(w / "cap")],
-     "vocabulary"),
-    ("eval-vocab-frames-outside", lambda w: ["eval", _ckpt_with(w, "frames", _frames_out_of_range),
-                                             str(w / "cap")], "vocabulary"),
-    ("eval-settings-string", lambda w: ["eval", _ckpt_with(w, "settings", _settings_str),
-                                        str(w / "cap")], "settings"),
-    ("eval-wrong-tensor-shape", lambda w: ["eval", _ckpt_with(w, "shape", _wrong_shape),
-                                           str(w / "cap")], "weights do not fit"),
-    ("eval-text-checkpoint", lambda w: ["eval", _file(w, "text.pt", b"hello"), str(w / "cap")],
-     "text.pt"),
-    ("eval-malicious-checkpoint", lambda w: ["eval", _evil_checkpoint(w), str(w / "cap")],
-     "refused by the weights-only reader"),
+    (
+        "synth-overwrite-user-folder",
+        lambda w: ["synth", _user_folder(w), "--overwrite", "--frames", "1"],
+        "not one",
+    ),
+    (
+        "synth-poses-empty",
+        lambda w: [
+            "synth",
+            str(w / "new_cap"),
+            "--poses",
+            _poses_file(w, "empty.npz", poses=np.zeros((0, 72))),
+        ],
+        "0 frames",
+    ),
+    (
+        "synth-poses-text-npz",
+        lambda w: ["synth", str(w / "new_cap"), "--poses", _file(w, "text.npz", b"this is text, not numpy")],
+        "text.npz: not an .npz archive",
+    ),
+    (
+        "synth-poses-wrong-shape",
+        lambda w: [
+            "synth",
+            str(w / "new_cap"),
+            "--poses",
+            _poses_file(w, "shape.npz", poses=np.zeros((4, 5))),
+        ],
+        "poses",
+    ),
+    (
+        "synth-poses-huge",
+        lambda w: [
+            "synth",
+            str(w / "new_cap"),
+            "--poses",
+            _poses_file(w, "huge.npz", poses=np.full((2, 72), 1e30)),
+        ],
+        "pose",
+    ),
+    ("eval-per-set-negative", ["eval", RUN + "/checkpoint.pt", CAP, "--per-set", "-1"], "--per-set"),
+    (
+        "eval-vocab-junk",
+        lambda w: ["eval", _ckpt_with(w, "vocab", _vocab_junk), str(w / "cap")],
+        "vocabulary",
+    ),
+    (
+        "eval-vocab-frames-outside",
+        lambda w: ["eval", _ckpt_with(w, "frames", _frames_out_of_range), str(w / "cap")],
+        "vocabulary",
+    ),
+    (
+        "eval-settings-string",
+        lambda w: ["eval", _ckpt_with(w, "settings", _settings_str), str(w / "cap")],
+        "settings",
+    ),
+    (
+        "eval-wrong-tensor-shape",
+        lambda w: ["eval", _ckpt_with(w, "shape", _wrong_shape), str(w / "cap")],
+        "weights do not fit",
+    ),
+    ("eval-text-checkpoint", lambda w: ["eval", _file(w, "text.pt", b"hello"), str(w / "cap")], "text.pt"),
+    (
+        "eval-malicious-checkpoint",
+        lambda w: ["eval", _evil_checkpoint(w), str(w / "cap")],
+        "refused by the weights-only reader",
+    ),
     ("eval-missing-checkpoint", ["eval", "{base}/nope.pt", CAP], "nope.pt"),
     ("eval-missing-capture", ["eval", RUN + "/checkpoint.pt", "{base}/nope_cap"], "nope_cap"),
-    ("view-neural-processes-0", ["view", RUN + "/checkpoint.pt", "--neural-processes", "0"],
-     "--neural-processes"),
-    ("view-preview-wait-negative", ["view", RUN + "/checkpoint.pt", "--neural-preview-wait",
-                                    "-5"], "--neural-preview-wait -5: expected 0..200"),
-    ("view-preview-wait-huge", ["view", RUN + "/checkpoint.pt", "--neural-preview-wait",
-                                "1000"], "--neural-preview-wait 1000"),
+    (
+        "view-neural-processes-0",
+        ["view", RUN + "/checkpoint.pt", "--neural-processes", "0"],
+        "--neural-processes",
+    ),
+    (
+        "view-preview-wait-negative",
+        ["view", RUN + "/checkpoint.pt", "--neural-preview-wait", "-5"],
+        "--neural-preview-wait -5: expected 0..200",
+    ),
+    (
+        "view-preview-wait-huge",
+        ["view", RUN + "/checkpoint.pt", "--neural-preview-wait", "1000"],
+        "--neural-preview-wait 1000",
+    ),
     ("vocab-k-0", ["vocab", CAP, "--pose", "frame:0", "-k", "0"], "k"),
     ("vocab-keys-0", ["vocab", CAP, "--pose", "frame:0", "--keys", "0"], "keys"),
     ("vocab-frame-abc", ["vocab", CAP, "--pose", "frame:abc"], "frame:abc"),
     ("vocab-frame-999", ["vocab", CAP, "--pose", "frame:999"], "frame"),
-    ("vocab-min-distance-negative", ["vocab", CAP, "--pose", "frame:0", "--min-distance", "-1"],
-     "--min-distance"),
-    ("sheet-frames-abc", ["contact-sheet", CAP, "--frames", "1,abc", "--out",
-                          "{base}/sheet.png"], "--frames"),
-    ("annots-K-4x2x2", lambda w: ["vocab", _capture_copy(w, "k422", _annots("K", None)),
-                                  "--pose", "frame:0"], "K"),
-    ("annots-ims-abc", lambda w: ["vocab", _capture_copy(w, "imsabc", _annots("ims", "abc")),
-                                  "--pose", "frame:0"], "ims"),
-    ("annots-not-a-dict", lambda w: ["vocab", _capture_copy(
-        w, "notdict", lambda r: np.save(r / "annots.npy", np.arange(3))), "--pose", "frame:0"], "annots.npy"),
-    ("synth-json-broken", lambda w: ["vocab", _capture_copy(
-        w, "json", lambda r: (r / "texvocab_synth.json").write_text("{broken")), "--pose",
-                                     "frame:0"],
-     "texvocab_synth.json"),
-    ("train-image-other-size", lambda w: ["train", _capture_copy(w, "resized", _resize_one_image),
-                                          "--out", str(w / "new_run"), "--set", "num_keys=3"],
-     "48x48"),
-    ("capture-pose-1e30", lambda w: ["vocab", _capture_copy(w, "hugepose", _huge_pose), "--pose",
-                                     "frame:0"], "SMPL parameters"),
+    (
+        "vocab-min-distance-negative",
+        ["vocab", CAP, "--pose", "frame:0", "--min-distance", "-1"],
+        "--min-distance",
+    ),
+    (
+        "sheet-frames-abc",
+        ["contact-sheet", CAP, "--frames", "1,abc", "--out", "{base}/sheet.png"],
+        "--frames",
+    ),
+    (
+        "annots-K-4x2x2",
+        lambda w: ["vocab", _capture_copy(w, "k422", _annots("K", None)), "--pose", "frame:0"],
+        "K",
+    ),
+    (
+        "annots-ims-abc",
+        lambda w: ["vocab", _capture_copy(w, "imsabc", _annots("ims", "abc")), "--pose", "frame:0"],
+        "ims",
+    ),
+    (
+        "annots-not-a-dict",
+        lambda w: [
+            "vocab",
+            _capture_copy(w, "notdict", lambda r: np.save(r / "annots.npy", np.arange(3))),
+            "--pose",
+            "frame:0",
+        ],
+        "annots.npy",
+    ),
+    (
+        "synth-json-broken",
+        lambda w: [
+            "vocab",
+            _capture_copy(w, "json", lambda r: (r / "texvocab_synth.json").write_text("{broken")),
+            "--pose",
+            "frame:0",
+        ],
+        "texvocab_synth.json",
+    ),
+    (
+        "train-image-other-size",
+        lambda w: [
+            "train",
+            _capture_copy(w, "resized", _resize_one_image),
+            "--out",
+            str(w / "new_run"),
+            "--set",
+            "num_keys=3",
+        ],
+        "48x48",
+    ),
+    (
+        "capture-pose-1e30",
+        lambda w: ["vocab", _capture_copy(w, "hugepose", _huge_pose), "--pose", "frame:0"],
+        "SMPL parameters",
+    ),
     ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
     ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
 ]
@@ -248,8 +354,11 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_bad_input_gives_one_error_line_and_changes_nothing(case, world, capsys):
     _, argv, words = case
-    argv = argv(world) if callable(argv) else [
-        a.format(cap=world / "cap", run=world / "run", base=world) for a in argv]
+    argv = (
+        argv(world)
+        if callable(argv)
+        else [a.format(cap=world / "cap", run=world / "run", base=world) for a in argv]
+    )
     before = snapshot(world)
     cwd = os.getcwd()
     try:
@@ -271,10 +380,14 @@ def test_case_table_covers_the_probe():
 
 @pytest.mark.parametrize("name", ["k422", "imsabc", "notdict", "json", "resized", "emptymask"])
 def test_check_assets_reports_a_bad_capture_as_one_fail_line(name, world, capsys):
-    change = {"k422": _annots("K", None), "imsabc": _annots("ims", "abc"),
-              "notdict": lambda r: np.save(r / "annots.npy", np.arange(3)),
-              "json": lambda r: (r / "texvocab_synth.json").write_text("{broken"),
-              "resized": _resize_one_image, "emptymask": _empty_one_mask}[name]
+    change = {
+        "k422": _annots("K", None),
+        "imsabc": _annots("ims", "abc"),
+        "notdict": lambda r: np.save(r / "annots.npy", np.arange(3)),
+        "json": lambda r: (r / "texvocab_synth.json").write_text("{broken"),
+        "resized": _resize_one_image,
+        "emptymask": _empty_one_mask,
+    }[name]
     root = _capture_copy(world, name, change)
     assert main(["check-assets", root]) == 1
     out = capsys.readouterr().out.strip().splitlines()
@@ -285,9 +398,15 @@ def test_check_assets_passes_the_good_capture_and_flags_missing_eval_views(world
     assert main(["check-assets", str(world / "cap")]) == 0
     assert capsys.readouterr().out.startswith("OK ")
     poses, trans = make_sequence([("walk", 2)], seed=1)
-    four = synthesize(tmp_path / "four", poses, trans, 2, default_body(),
-                      SynthSettings(ring_views=4, raised_views=0, size=32, texture_size=64),
-                      progress=False)
+    four = synthesize(
+        tmp_path / "four",
+        poses,
+        trans,
+        2,
+        default_body(),
+        SynthSettings(ring_views=4, raised_views=0, size=32, texture_size=64),
+        progress=False,
+    )
     assert main(["check-assets", str(four)]) == 0  # a valid capture; the defaults do not fit
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("note ") and "default eval_views are [1, 5]" in out[0]

@@ -1,4 +1,5 @@
 """`texvocab demo` (current stage): the body in six poses, rendered offscreen (OSMesa)."""
+
 import numpy as np
 from PIL import Image
 
@@ -18,6 +19,7 @@ def test_demo_writes_a_sheet_of_six_poses(tmp_path):
     for name, tile in tiles.items():
         assert tile.shape == (96, 96, 3)
         assert 0.03 < _body_fraction(tile) < 0.6, name  # the body is there, not a blank frame
+
     # different poses and views give different silhouettes
     def sil(t):
         return t.min(-1) < 0.97
@@ -27,10 +29,12 @@ def test_demo_writes_a_sheet_of_six_poses(tmp_path):
 
     assert iou(tiles["t_pose_front"], tiles["squat_front"]) < 0.6
     assert iou(tiles["t_pose_front"], tiles["t_pose_side"]) < 0.6
+
     # a T-pose seen from the front is wider than tall-thin side view
     def width(t):
         cols = np.where((t.min(-1) < 0.97).any(0))[0]
         return cols.max() - cols.min()
+
     assert width(tiles["t_pose_front"]) > 2 * width(tiles["t_pose_side"])
 
 

@@ -2,6 +2,7 @@
 reader and the checkpoint loader, fed random inputs, either succeed or raise a
 TexvocabError (the CLI's one-line error) — never another exception — and write nothing
 outside their output folder."""
+
 import shutil
 import string
 
@@ -17,16 +18,37 @@ from texvocab.errors import TexvocabError
 from texvocab.pipeline.avatar import load_avatar
 from texvocab.pipeline.settings import FLAT_NAMES, Settings
 
-FUZZ = settings(max_examples=60, deadline=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                       HealthCheck.too_slow])
-KEYS = list(FLAT_NAMES) + list(Settings().dotted()) + ["nosuch", "field", "render",
-                                                       "render.nosuch"]
-VALUES = st.one_of(st.sampled_from(["nan", "inf", "-inf", "-1", "0", "1e30", "none", "true",
-                                    "1,2", "abc", "", "0.5", "3", "part", "paper", "auto"]),
-                   st.text(string.printable, max_size=8),
-                   st.integers(-10**6, 10**6).map(str),
-                   st.floats(allow_nan=True, allow_infinity=True).map(repr))
+FUZZ = settings(
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+KEYS = list(FLAT_NAMES) + list(Settings().dotted()) + ["nosuch", "field", "render", "render.nosuch"]
+VALUES = st.one_of(
+    st.sampled_from(
+        [
+            "nan",
+            "inf",
+            "-inf",
+            "-1",
+            "0",
+            "1e30",
+            "none",
+            "true",
+            "1,2",
+            "abc",
+            "",
+            "0.5",
+            "3",
+            "part",
+            "paper",
+            "auto",
+        ]
+    ),
+    st.text(string.printable, max_size=8),
+    st.integers(-(10**6), 10**6).map(str),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+)
 
 
 @FUZZ
@@ -40,19 +62,21 @@ def test_settings_overrides(items):
 
 
 ARRAYS = st.one_of(
-    st.integers(0, 4).flatmap(lambda t: st.sampled_from([(t, 72), (t, 24, 3), (t, 3), (t,),
-                                                        (t, 156), (t, 5, 3)])).flatmap(
+    st.integers(0, 4)
+    .flatmap(lambda t: st.sampled_from([(t, 72), (t, 24, 3), (t, 3), (t,), (t, 156), (t, 5, 3)]))
+    .flatmap(
         lambda shape: st.sampled_from([np.float32, np.float64, np.int64, np.bool_]).flatmap(
-            lambda dt: st.one_of(st.floats(-1e30, 1e30),
-                                 st.sampled_from([np.nan, np.inf])).map(
-                lambda v: np.full(shape, v).astype(dt)))),
-    st.sampled_from([np.array(["a", "b"]), np.zeros((2, 24, 3), np.complex64),
-                     np.array(3.0)]))
+            lambda dt: st.one_of(st.floats(-1e30, 1e30), st.sampled_from([np.nan, np.inf])).map(
+                lambda v: np.full(shape, v).astype(dt)
+            )
+        )
+    ),
+    st.sampled_from([np.array(["a", "b"]), np.zeros((2, 24, 3), np.complex64), np.array(3.0)]),
+)
 
 
 @FUZZ
-@given(st.dictionaries(st.sampled_from(["poses", "trans", "betas", "other"]), ARRAYS,
-                       max_size=3))
+@given(st.dictionaries(st.sampled_from(["poses", "trans", "betas", "other"]), ARRAYS, max_size=3))
 def test_pose_file_reader(tmp_path_factory, arrays):
     path = tmp_path_factory.mktemp("poses") / "p.npz"
     np.savez(path, **arrays)
@@ -64,12 +88,19 @@ def test_pose_file_reader(tmp_path_factory, arrays):
     assert np.isfinite(poses).all() and np.isfinite(trans).all()
 
 
-JUNK = st.recursive(st.one_of(st.none(), st.integers(-3, 10**9), st.floats(), st.text(max_size=5),
-                              st.sampled_from([np.zeros((3, 3)), np.zeros((4, 2, 2)),
-                                               torch.zeros(2)])),
-                    lambda inner: st.one_of(st.lists(inner, max_size=3),
-                                            st.dictionaries(st.text(max_size=3), inner, max_size=3)),
-                    max_leaves=6)
+JUNK = st.recursive(
+    st.one_of(
+        st.none(),
+        st.integers(-3, 10**9),
+        st.floats(),
+        st.text(max_size=5),
+        st.sampled_from([np.zeros((3, 3)), np.zeros((4, 2, 2)), torch.zeros(2)]),
+    ),
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=3), st.dictionaries(st.text(max_size=3), inner, max_size=3)
+    ),
+    max_leaves=6,
+)
 
 
 @FUZZ

@@ -2,6 +2,7 @@
 z-buffer it replaced (kept here as the reference): same faces, barycentrics and depths
 on the default body seen from its cameras and on random triangle soups, and the
 z-buffer's rules (nearest wins, faces behind the camera skipped, empty pixels)."""
+
 import numpy as np
 import torch
 
@@ -58,8 +59,7 @@ def test_compiled_rasteriser_matches_the_torch_reference_on_the_body(body):
     for cam in (body["camera"].scaled(4.0), body["camera"].scaled(2.0)):  # 256², 128²
         r = rasterize_mesh(body["v"], body["f"], cam)
         pix, z = cam.project(body["v"].numpy())
-        ref = reference_rasterize(torch.as_tensor(pix), torch.as_tensor(z), body["f"],
-                                  cam.width, cam.height)
+        ref = reference_rasterize(torch.as_tensor(pix), torch.as_tensor(z), body["f"], cam.width, cam.height)
         assert r.mask.sum() > 1000 * cam.width / 256
         assert_same(r, ref, cam.width, cam.height)
 

@@ -93,9 +93,7 @@ def test_rotmat_to_rotvec_accurate_near_pi(gap: float) -> None:
     rotvec = torch.tensor(AXES * (PI - gap))
     matrices = torch.tensor(Rotation.from_rotvec(rotvec.numpy()).as_matrix())
     torch.testing.assert_close(rotmat_to_rotvec(matrices), rotvec, atol=1e-14, rtol=0)
-    torch.testing.assert_close(
-        rotmat_to_rotvec(rotvec_to_rotmat(rotvec)), rotvec, atol=1e-14, rtol=0
-    )
+    torch.testing.assert_close(rotmat_to_rotvec(rotvec_to_rotmat(rotvec)), rotvec, atol=1e-14, rtol=0)
 
 
 def test_two_pi_is_identity() -> None:
@@ -262,9 +260,7 @@ def test_quat_distance_properties(q1: np.ndarray, q2: np.ndarray, near: float, f
         assert 0 <= d.item() <= 1
         assert d.item() == quat_distance(y, x).item()
         assert d.item() == quat_distance(x, -y).item()
-        rel = Rotation.from_quat(np.roll(x.numpy(), -1)).inv() * Rotation.from_quat(
-            np.roll(y.numpy(), -1)
-        )
+        rel = Rotation.from_quat(np.roll(x.numpy(), -1)).inv() * Rotation.from_quat(np.roll(y.numpy(), -1))
         assert d.item() == pytest.approx(1 - math.cos(rel.magnitude() / 2), abs=1e-12)
         assert torch.isfinite(_grads(lambda q, y=y: quat_distance(q, y), x)).all()
     assert quat_distance(a, a).item() < 1e-15

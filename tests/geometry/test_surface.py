@@ -1,6 +1,7 @@
 """Closest point on the posed mesh (Sec. 3.4, Eq. 7): the accelerated search equals the
 brute-force reference, hand-computed cases, signs, UV/weights interpolation, degenerate
 input."""
+
 import numpy as np
 import pytest
 import torch
@@ -49,12 +50,12 @@ def _winding_number(points, verts, faces, chunk=64):
     tri = verts[faces]
     out = np.zeros(len(points))
     for s in range(0, len(points), chunk):
-        r = tri[None] - points[s:s + chunk, None, None]  # (P, F, 3, 3)
+        r = tri[None] - points[s : s + chunk, None, None]  # (P, F, 3, 3)
         a, b, c = r[..., 0, :], r[..., 1, :], r[..., 2, :]
         la, lb, lc = (np.linalg.norm(t, axis=-1) for t in (a, b, c))
         det = (a * np.cross(b, c)).sum(-1)
         den = la * lb * lc + (a * b).sum(-1) * lc + (b * c).sum(-1) * la + (c * a).sum(-1) * lb
-        out[s:s + chunk] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
+        out[s : s + chunk] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
     return out
 
 
@@ -101,8 +102,9 @@ def test_kernel_agrees_with_trimesh_per_triangle():
     bary = closest_on_triangles(p, a, b, c)
     ours = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
     theirs = trimesh.triangles.closest_point(np.stack([a, b, c], 1), p)
-    np.testing.assert_allclose(np.linalg.norm(p - ours, axis=1),
-                               np.linalg.norm(p - theirs, axis=1), atol=1e-12)
+    np.testing.assert_allclose(
+        np.linalg.norm(p - ours, axis=1), np.linalg.norm(p - theirs, axis=1), atol=1e-12
+    )
     assert (bary >= -1e-12).all()
 
 
@@ -120,8 +122,7 @@ def test_no_point_of_the_triangle_is_closer(coords):
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.floats(-2, 2), min_size=12, max_size=12),
-       st.sampled_from([1.0, 1e-7, 0.0]))
+@given(st.lists(st.floats(-2, 2), min_size=12, max_size=12), st.sampled_from([1.0, 1e-7, 0.0]))
 def test_compiled_search_equals_the_numpy_triangle_test(coords, flatness):
     """The index's compiled region test (nearest_faces) against the numpy one
     (closest_on_triangles) on random triangles, thin (corner c pulled towards the line
@@ -136,16 +137,19 @@ def test_compiled_search_equals_the_numpy_triangle_test(coords, flatness):
     np.testing.assert_allclose(out.closest[0], bary @ np.stack([a, b, c]), atol=1e-9)
 
 
-@pytest.mark.parametrize("point, closest, bary", [
-    ((-1.0, -1.0, 1.0), (0, 0, 0), (1, 0, 0)),  # vertex regions
-    ((2.0, -0.5, 0.0), (1, 0, 0), (0, 1, 0)),
-    ((-0.5, 2.0, 0.3), (0, 1, 0), (0, 0, 1)),
-    ((0.5, -1.0, 0.5), (0.5, 0, 0), (0.5, 0.5, 0)),  # edge regions
-    ((-1.0, 0.25, 0.0), (0, 0.25, 0), (0.75, 0, 0.25)),
-    ((1.0, 1.0, 0.2), (0.5, 0.5, 0), (0, 0.5, 0.5)),
-    ((0.2, 0.3, 0.7), (0.2, 0.3, 0), (0.5, 0.2, 0.3)),  # face interior
-    ((0.25, 0.25, 0.0), (0.25, 0.25, 0), (0.5, 0.25, 0.25)),  # on the surface
-])
+@pytest.mark.parametrize(
+    "point, closest, bary",
+    [
+        ((-1.0, -1.0, 1.0), (0, 0, 0), (1, 0, 0)),  # vertex regions
+        ((2.0, -0.5, 0.0), (1, 0, 0), (0, 1, 0)),
+        ((-0.5, 2.0, 0.3), (0, 1, 0), (0, 0, 1)),
+        ((0.5, -1.0, 0.5), (0.5, 0, 0), (0.5, 0.5, 0)),  # edge regions
+        ((-1.0, 0.25, 0.0), (0, 0.25, 0), (0.75, 0, 0.25)),
+        ((1.0, 1.0, 0.2), (0.5, 0.5, 0), (0, 0.5, 0.5)),
+        ((0.2, 0.3, 0.7), (0.2, 0.3, 0), (0.5, 0.2, 0.3)),  # face interior
+        ((0.25, 0.25, 0.0), (0.25, 0.25, 0), (0.5, 0.25, 0.25)),  # on the surface
+    ],
+)
 def test_single_triangle_regions(point, closest, bary):
     out = project_to_surface(np.array([point]), TRI, np.array([[0, 1, 2]]))
     np.testing.assert_allclose(out.closest[0], closest, atol=1e-12)
@@ -156,18 +160,22 @@ def test_single_triangle_regions(point, closest, bary):
 
 
 def test_tetrahedron_features_and_sign():
-    pts = np.array([[0.25, 0.25, -0.5],  # below face z=0 -> interior of face 0
-                    [0.5, -1.0, -1.0],  # off edge (0,1) -> its midpoint
-                    [-1.0, -1.0, -1.0],  # off vertex 0
-                    [1.0, 1.0, 1.0],  # off the slanted face, interior -> (1/3, 1/3, 1/3)
-                    [0.1, 0.2, 0.3],  # inside, nearest the face x = 0
-                    [0.0, 0.5, 0.5]])  # on an edge, on the surface
+    pts = np.array(
+        [
+            [0.25, 0.25, -0.5],  # below face z=0 -> interior of face 0
+            [0.5, -1.0, -1.0],  # off edge (0,1) -> its midpoint
+            [-1.0, -1.0, -1.0],  # off vertex 0
+            [1.0, 1.0, 1.0],  # off the slanted face, interior -> (1/3, 1/3, 1/3)
+            [0.1, 0.2, 0.3],  # inside, nearest the face x = 0
+            [0.0, 0.5, 0.5],
+        ]
+    )  # on an edge, on the surface
     out = project_to_surface(pts, TET, TET_FACES)
-    expect = np.array([[0.25, 0.25, 0], [0.5, 0, 0], [0, 0, 0], [1 / 3, 1 / 3, 1 / 3],
-                       [0.0, 0.2, 0.3], [0, 0.5, 0.5]])
+    expect = np.array(
+        [[0.25, 0.25, 0], [0.5, 0, 0], [0, 0, 0], [1 / 3, 1 / 3, 1 / 3], [0.0, 0.2, 0.3], [0, 0.5, 0.5]]
+    )
     np.testing.assert_allclose(out.closest, expect, atol=1e-12)
-    np.testing.assert_allclose(out.distance[:4], [0.5, np.sqrt(2), np.sqrt(3),
-                                                  2 / np.sqrt(3)], atol=1e-12)
+    np.testing.assert_allclose(out.distance[:4], [0.5, np.sqrt(2), np.sqrt(3), 2 / np.sqrt(3)], atol=1e-12)
     assert out.signed and out.distance[4] == pytest.approx(-0.1) and out.distance[5] == 0
     flipped = project_to_surface(pts, TET, TET_FACES[:, ::-1])  # inward winding
     np.testing.assert_allclose(flipped.distance, out.distance, atol=1e-12)
@@ -195,8 +203,7 @@ def test_sign_on_posed_body(posed):
     assert index.project(on + 1e-3 * normal).distance.min() > 0
     rng = np.random.default_rng(6)
     lo, hi = verts.min(0), verts.max(0)
-    pts = np.concatenate([rng.uniform(lo, hi, (300, 3)),
-                          on[:300] + rng.normal(0, 0.02, (300, 3))])
+    pts = np.concatenate([rng.uniform(lo, hi, (300, 3)), on[:300] + rng.normal(0, 0.02, (300, 3))])
     d = index.project(pts).distance
     inside = _winding_number(pts, verts, faces) > 0.5
     sure = np.abs(d) > 1e-6
@@ -230,9 +237,14 @@ def test_uv_and_weights_interpolation(body, posed):
 
 def test_degenerate_triangles_and_duplicate_vertices():
     verts = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [0, 1, 0], [1, 1, 0]])
-    faces = np.array([[0, 1, 2],  # collinear: zero area
-                      [3, 4, 4],  # a point (duplicate vertices)
-                      [1, 3, 5], [1, 4, 5]])  # the same triangle twice via a duplicate
+    faces = np.array(
+        [
+            [0, 1, 2],  # collinear: zero area
+            [3, 4, 4],  # a point (duplicate vertices)
+            [1, 3, 5],
+            [1, 4, 5],
+        ]
+    )  # the same triangle twice via a duplicate
     rng = np.random.default_rng(9)
     pts = rng.uniform(-1, 3, (400, 3))
     out = project_to_surface(pts, verts, faces)

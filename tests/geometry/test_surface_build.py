@@ -1,6 +1,7 @@
 """The compiled build of a SurfaceIndex (texvocab.geometry._build_jit) against the numpy
 formulation it replaced: the same face table, boxes and pseudo-normals bit for bit, and
 the median split's layout against a numpy statement of its rule (ties by face id)."""
+
 import math
 
 import numpy as np
@@ -74,8 +75,7 @@ def reference_pseudo_normals(vertices: np.ndarray, faces: np.ndarray, inverse, e
     edge_sum = _scatter_add(inverse, np.repeat(face_normal, 3, axis=0), edges)
     t = tri - (vertices.min(0) + vertices.max(0)) / 2
     volume = (t[:, 0] * np.cross(t[:, 1], t[:, 2])).sum()
-    return (face_normal, vertex_normal, edge_sum[inverse].reshape(-1, 3, 3),
-            -1.0 if volume < 0 else 1.0)
+    return (face_normal, vertex_normal, edge_sum[inverse].reshape(-1, 3, 3), -1.0 if volume < 0 else 1.0)
 
 
 def _meshes():
@@ -126,7 +126,7 @@ def test_median_split_layout_follows_its_rule_with_ties():
         c = rng.normal(size=(n, 3))
         c[: n // 3, 1] = 0.5  # equal keys: ties decided by face id
         c[: n // 4, 0] = c[: n // 4, 2] = 0.0
-        c[n // 2:, :] = np.round(c[n // 2:], 1)
+        c[n // 2 :, :] = np.round(c[n // 2 :], 1)
         layout = _slot_layout(c)
         assert np.array_equal(layout, reference_slot_layout(c))
         assert sorted(layout[layout >= 0].tolist()) == list(range(n))

@@ -1,6 +1,7 @@
 """Texture encoder: torchvision ResNet34 layout, weight discovery and checking, the
 fallback, and the PixelNeRF-style feature map. Checkpoints are random-init stand-ins
 written by the tests in torchvision's key layout."""
+
 import logging
 import os
 
@@ -17,6 +18,7 @@ BN = ("weight", "bias", "running_mean", "running_var", "num_batches_tracked")
 def torchvision_resnet34_layout() -> list[tuple[str, tuple[int, ...]]]:
     """(key, shape) of torchvision's resnet34 state dict, in order, written out from the
     architecture: [3, 4, 6, 3] BasicBlocks, downsample in the first block of layers 2-4."""
+
     def bn(prefix, c):
         return [(f"{prefix}.{s}", () if s == "num_batches_tracked" else (c,)) for s in BN]
 
@@ -48,8 +50,7 @@ def standin_state():
 @pytest.fixture(scope="module")
 def standin_home(tmp_path_factory, standin_state):
     """A TORCH_HOME holding the stand-in as hub/checkpoints/resnet34-b627a593.pth."""
-    return torch_home_with(tmp_path_factory.mktemp("torch_home"),
-                           {"resnet34-b627a593.pth": standin_state})
+    return torch_home_with(tmp_path_factory.mktemp("torch_home"), {"resnet34-b627a593.pth": standin_state})
 
 
 def test_state_dict_matches_torchvision_resnet34_layout():
@@ -60,8 +61,7 @@ def test_state_dict_matches_torchvision_resnet34_layout():
     assert sum(p.numel() for p in net.parameters()) == 21_797_672
 
 
-def test_auto_loads_pretrained_weights_from_torch_home(standin_home, standin_state,
-                                                        monkeypatch, caplog):
+def test_auto_loads_pretrained_weights_from_torch_home(standin_home, standin_state, monkeypatch, caplog):
     monkeypatch.setenv("TORCH_HOME", str(standin_home))
     path = standin_home / "hub" / "checkpoints" / "resnet34-b627a593.pth"
     assert find_resnet34_weights() == path
@@ -70,8 +70,13 @@ def test_auto_loads_pretrained_weights_from_torch_home(standin_home, standin_sta
     assert caplog.records == []
     assert (e.name, e.pretrained, e.trainable, e.feature_dim) == ("resnet34", True, False, 512)
     got = e.backbone.state_dict()
-    for key in ("conv1.weight", "bn1.running_var", "layer1.0.conv1.weight",
-                "layer2.0.downsample.0.weight", "layer3.5.bn2.running_mean"):
+    for key in (
+        "conv1.weight",
+        "bn1.running_var",
+        "layer1.0.conv1.weight",
+        "layer2.0.downsample.0.weight",
+        "layer3.5.bn2.running_mean",
+    ):
         assert torch.equal(got[key], standin_state[key]), key
     assert not any(p.requires_grad for p in e.parameters())
     assert "layer4.0.conv1.weight" not in got  # stage 4 is not among the 4 levels
@@ -79,8 +84,7 @@ def test_auto_loads_pretrained_weights_from_torch_home(standin_home, standin_sta
     assert out.shape == (1, 512, 128, 128) and torch.isfinite(out).all()
 
 
-def test_frozen_encoder_stays_in_eval_mode_inside_a_training_parent(standin_home,
-                                                                     standin_state):
+def test_frozen_encoder_stays_in_eval_mode_inside_a_training_parent(standin_home, standin_state):
     e = build_encoder("resnet34", weights=standin_home / "hub/checkpoints/resnet34-b627a593.pth")
     parent = torch.nn.ModuleDict({"encoder": e, "head": torch.nn.Linear(2, 2)}).train()
     assert parent["head"].training and not any(m.training for m in e.modules())
@@ -101,8 +105,7 @@ def test_feature_map_is_stem_then_upsampled_levels(standin_home):
     torch.testing.assert_close(out[:, 64:128], up)
 
 
-def test_old_checkpoint_explicit_path_and_name_preference(tmp_path, standin_state,
-                                                          standin_home, monkeypatch):
+def test_old_checkpoint_explicit_path_and_name_preference(tmp_path, standin_state, standin_home, monkeypatch):
     old = {k: v for k, v in standin_state.items() if not k.endswith("num_batches_tracked")}
     path = tmp_path / "hub" / "checkpoints" / "resnet34-333f7ec4.pth"
     path.parent.mkdir(parents=True)
@@ -150,8 +153,7 @@ def test_resnet34_scratch_is_trainable(empty_torch_home, caplog):
     with caplog.at_level(logging.INFO, logger="texvocab"):
         e = build_encoder("resnet34-scratch")
     assert caplog.records == []
-    assert (e.name, e.pretrained, e.trainable, e.feature_dim) == (
-        "resnet34-scratch", False, True, 512)
+    assert (e.name, e.pretrained, e.trainable, e.feature_dim) == ("resnet34-scratch", False, True, 512)
     e.train()
     out = e(torch.rand(2, 3, 64, 64))
     assert out.shape == (2, 512, 32, 32) and torch.isfinite(out).all()
@@ -179,24 +181,30 @@ def test_bad_settings_are_rejected():
 
 def _head(state, upto="bn1.num_batches_tracked"):
     keys = list(state)
-    return {k: state[k] for k in keys[:keys.index(upto) + 1]}
+    return {k: state[k] for k in keys[: keys.index(upto) + 1]}
 
 
-@pytest.mark.parametrize("case, pattern", [
-    ("wrong_shape", r"key 'layer1.0.conv1.weight' expected shape \(64, 64, 3, 3\), "
-                    r"got \(64, 64, 1, 1\)"),
-    ("missing", r"key 'layer1.0.conv1.weight' missing \(expected shape \(64, 64, 3, 3\)\)"),
-    ("unexpected", r"unexpected key 'layer5.0.conv1.weight'"),
-    ("not_a_dict", r"expected a torchvision ResNet34 state dict, got list"),
-    ("empty_file", r"not loadable as a torch state dict with weights_only=True \(EOFError\)"),
-])
-def test_wrong_checkpoint_raises_one_line_naming_file_and_key(tmp_path, standin_state,
-                                                              monkeypatch, case, pattern):
+@pytest.mark.parametrize(
+    "case, pattern",
+    [
+        (
+            "wrong_shape",
+            r"key 'layer1.0.conv1.weight' expected shape \(64, 64, 3, 3\), "
+            r"got \(64, 64, 1, 1\)",
+        ),
+        ("missing", r"key 'layer1.0.conv1.weight' missing \(expected shape \(64, 64, 3, 3\)\)"),
+        ("unexpected", r"unexpected key 'layer5.0.conv1.weight'"),
+        ("not_a_dict", r"expected a torchvision ResNet34 state dict, got list"),
+        ("empty_file", r"not loadable as a torch state dict with weights_only=True \(EOFError\)"),
+    ],
+)
+def test_wrong_checkpoint_raises_one_line_naming_file_and_key(
+    tmp_path, standin_state, monkeypatch, case, pattern
+):
     path = tmp_path / "hub" / "checkpoints" / "resnet34-b627a593.pth"
     path.parent.mkdir(parents=True)
     if case == "wrong_shape":
-        torch.save(_head(standin_state) | {"layer1.0.conv1.weight": torch.zeros(64, 64, 1, 1)},
-                   path)
+        torch.save(_head(standin_state) | {"layer1.0.conv1.weight": torch.zeros(64, 64, 1, 1)}, path)
     elif case == "missing":
         torch.save(_head(standin_state), path)
     elif case == "unexpected":

@@ -1,5 +1,6 @@
 """Pose feature f(Θ, x) (Sec. 3.4): equals the textbook blend-then-sample form, touches
 only the parts a point attends to, samples across UV seams continuously."""
+
 import numpy as np
 import pytest
 import torch
@@ -69,8 +70,9 @@ def test_only_attended_parts_are_sampled(setup, body):
     assert ctx.stats["samples"] <= len(pts) * len(frames_used)
     # the features equal the left arm's key blend alone
     q = model.vocab.query(pose)[left_arm]
-    expect = sum(wk * sample_maps(model.textures[fk], out.uv) for fk, wk in
-                 zip(q.frames, q.weights, strict=True))
+    expect = sum(
+        wk * sample_maps(model.textures[fk], out.uv) for fk, wk in zip(q.frames, q.weights, strict=True)
+    )
     assert torch.allclose(out.features, expect.float(), atol=1e-5)
 
 
@@ -81,8 +83,14 @@ def test_sampling_is_continuous_across_uv_seams(body):
     faces = body.faces.numpy()
 
     def f(p):  # a smooth colour field on the body
-        return np.stack([0.5 + 0.5 * np.sin(3 * p[:, 0]), 0.5 + 0.5 * np.cos(2 * p[:, 1]),
-                         0.5 + 0.5 * np.sin(4 * p[:, 2] + 1)], 1)
+        return np.stack(
+            [
+                0.5 + 0.5 * np.sin(3 * p[:, 0]),
+                0.5 + 0.5 * np.cos(2 * p[:, 1]),
+                0.5 + 0.5 * np.sin(4 * p[:, 2] + 1),
+            ],
+            1,
+        )
 
     tex = torch.as_tensor(tmap.to_image(f(tmap.points(rest, faces))), dtype=torch.float32)
     tex = tex.permute(2, 0, 1)
@@ -150,19 +158,38 @@ def test_a_subjects_shape_is_the_same_mesh_everywhere(tmp_path):
     joint_reg = torch.zeros(24, v, dtype=torch.float64)
     for j in range(24):  # each joint: mean of its 8 most-weighted vertices, so it follows shape
         joint_reg[j, torch.topk(base.weights[:, j], 8).indices] = 1 / 8
-    shaped = BodyModel(base.v_template, base.faces, base.weights, base.parents,
-                       J_regressor=joint_reg.numpy(), vt=base.vt, ft=base.ft,
-                       shapedirs=rng.normal(0, 0.03, (v, 3, 4)), name="shape stand-in")
+    shaped = BodyModel(
+        base.v_template,
+        base.faces,
+        base.weights,
+        base.parents,
+        J_regressor=joint_reg.numpy(),
+        vt=base.vt,
+        ft=base.ft,
+        shapedirs=rng.normal(0, 0.03, (v, 3, 4)),
+        name="shape stand-in",
+    )
     poses = np.stack([preset("walk")[0], preset("squat")[0]]).astype(np.float32)
     R, t = look_at(np.array([0.0, 0.0, 3.0]), np.zeros(3))
-    cam = Camera(K=np.array([[300.0, 0, 64], [0, 300.0, 64], [0, 0, 1]]), R=R, t=t, width=128,
-                 height=128)
-    cap = Capture(tmp_path, "zju", [cam, cam], poses, np.zeros((2, 3), np.float32),
-                  [[tmp_path / "x.png"] * 2] * 2, [[tmp_path / "m.png"] * 2] * 2, [0, 1], 2,
-                  shaped, betas=np.array([2.0, -1.5, 1.0, 0.5, 9.0]))
+    cam = Camera(K=np.array([[300.0, 0, 64], [0, 300.0, 64], [0, 0, 1]]), R=R, t=t, width=128, height=128)
+    cap = Capture(
+        tmp_path,
+        "zju",
+        [cam, cam],
+        poses,
+        np.zeros((2, 3), np.float32),
+        [[tmp_path / "x.png"] * 2] * 2,
+        [[tmp_path / "m.png"] * 2] * 2,
+        [0, 1],
+        2,
+        shaped,
+        betas=np.array([2.0, -1.5, 1.0, 0.5, 9.0]),
+    )
     assert cap.shape().shape == (1, 4)
-    s = Settings(data=DataSettings(texture_size=32, eval_views=(1,)),
-                 vocab=VocabSettings(encoder="pyramid", num_keys=2, k=1))
+    s = Settings(
+        data=DataSettings(texture_size=32, eval_views=(1,)),
+        vocab=VocabSettings(encoder="pyramid", num_keys=2, k=1),
+    )
     model = build_model(cap, s, torch.rand(2, 3, 32, 32))
     for t in range(2):
         ctx = model.pose_feature.context(cap.poses[t], cap.trans[t])
@@ -203,6 +230,7 @@ def test_warm_feature_maps_encodes_every_key_once_up_front(body):
     """PoseFeature.warm_feature_maps: a frozen encoder's cache holds every key frame's
     maps afterwards, so no pose's context runs the encoder; the maps are the ones a
     context would have encoded; a trainable encoder is left alone."""
+
     class Counting(PassThrough):
         calls = 0
 
@@ -210,8 +238,7 @@ def test_warm_feature_maps_encodes_every_key_once_up_front(body):
             Counting.calls += len(x)
             return x
 
-    vocab = Vocabulary.build(np.random.default_rng(5).normal(0, 0.3, (12, 24, 3)),
-                             num_keys=4, k=2)
+    vocab = Vocabulary.build(np.random.default_rng(5).normal(0, 0.3, (12, 24, 3)), num_keys=4, k=2)
     textures = torch.rand(12, 3, 16, 16)
     keys = {int(f) for frames in vocab.key_frames for f in frames}
     warm = PoseFeature(body, vocab, textures, Counting())
@@ -224,7 +251,7 @@ def test_warm_feature_maps_encodes_every_key_once_up_front(body):
         assert torch.equal(a.frames, b.frames)
         fa, fb, n = a.features, b.features, a.features.height * a.features.width
         for ra, rb in zip(fa.rows.tolist(), fb.rows.tolist(), strict=True):
-            assert torch.equal(fa.table[ra:ra + n], fb.table[rb:rb + n])
+            assert torch.equal(fa.table[ra : ra + n], fb.table[rb : rb + n])
     assert Counting.calls == len(keys)  # no context encoded anything
     trainable = PoseFeature(body, vocab, textures, build_encoder("small"))
     assert trainable.warm_feature_maps() == 0

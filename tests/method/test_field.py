@@ -1,4 +1,5 @@
 """Avatar field: geometric initialisation, inverse LBS, VolSDF density at the extremes."""
+
 import numpy as np
 import pytest
 import torch

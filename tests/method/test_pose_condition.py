@@ -1,6 +1,7 @@
 """The vocabulary and the field's Θ read the root-relative pose: a body turned about the
 vertical axis selects the same keys with the same weights and gets the same avatar, turned
 with it; a global (old) vocabulary and field see the turn exactly as before."""
+
 import numpy as np
 import pytest
 import torch
@@ -20,9 +21,10 @@ UP_143 = np.array([0.0, np.radians(143.0), 0.0])  # 143° about the world's up a
 def turned(pose, rotvec) -> np.ndarray:
     """(..., 24, 3) with the root turned in the world by ``rotvec``: R0' = R · R0."""
     pose = np.array(pose, dtype=np.float64)
-    q = quat_multiply(rotvec_to_quat(torch.as_tensor(np.broadcast_to(rotvec, pose[..., 0, :].shape)
-                                                     .copy())),
-                      rotvec_to_quat(torch.as_tensor(pose[..., 0, :])))
+    q = quat_multiply(
+        rotvec_to_quat(torch.as_tensor(np.broadcast_to(rotvec, pose[..., 0, :].shape).copy())),
+        rotvec_to_quat(torch.as_tensor(pose[..., 0, :])),
+    )
     pose[..., 0, :] = quat_to_rotvec(q).numpy()
     return pose
 
@@ -33,15 +35,13 @@ def training_poses():
     rng = np.random.default_rng(0)
     poses = rng.normal(0, 0.3, (16, 24, 3))
     poses[:, 0] = 0.0
-    facing = np.stack([rng.normal(0, 0.1, 16), rng.uniform(-np.pi, np.pi, 16),
-                       rng.normal(0, 0.1, 16)], -1)
+    facing = np.stack([rng.normal(0, 0.1, 16), rng.uniform(-np.pi, np.pi, 16), rng.normal(0, 0.1, 16)], -1)
     return np.stack([turned(p, f) for p, f in zip(poses, facing, strict=True)])
 
 
 def test_a_turned_key_pose_selects_the_same_keys_root_relative_not_global(training_poses):
     for condition, same in (("root-relative", True), ("global", False)):
-        vocab = Vocabulary.build(training_poses, "part", num_keys=6, k=3,
-                                 pose_condition=condition)
+        vocab = Vocabulary.build(training_poses, "part", num_keys=6, k=3, pose_condition=condition)
         frame = int(vocab.key_frames[MAIN][2])  # a main-body key: its novelty is 0
         pose = training_poses[frame]
         before, after = vocab.query(pose), vocab.query(turned(pose, UP_143))
@@ -49,8 +49,7 @@ def test_a_turned_key_pose_selects_the_same_keys_root_relative_not_global(traini
         print(condition, "main-body novelty, turned 143°:", round(after[MAIN].novelty, 4))
         for p, (a, b) in enumerate(zip(before, after, strict=True)):
             if p != MAIN:  # the other parts do not hold joint 0: never moved by the turn
-                assert np.array_equal(a.key_ids, b.key_ids) and np.array_equal(a.weights,
-                                                                               b.weights)
+                assert np.array_equal(a.key_ids, b.key_ids) and np.array_equal(a.weights, b.weights)
         a, b = before[MAIN], after[MAIN]
         if same:
             assert np.array_equal(a.key_ids, b.key_ids) and np.array_equal(a.frames, b.frames)
@@ -79,8 +78,9 @@ def test_keys_of_a_subject_turned_round_are_the_keys_of_one_facing_forward(train
     for a, b in zip(rel.key_quats, ref.key_quats, strict=True):
         assert torch.equal(a, b)
     assert not torch.equal(glob.key_frames[MAIN], ref.key_frames[MAIN])
-    assert torch.equal(rel.key_quats[MAIN][:, 0], torch.tensor([[1.0, 0, 0, 0]]).double()
-                       .expand(len(rel.key_quats[MAIN]), 4))
+    assert torch.equal(
+        rel.key_quats[MAIN][:, 0], torch.tensor([[1.0, 0, 0, 0]]).double().expand(len(rel.key_quats[MAIN]), 4)
+    )
 
 
 def test_an_old_vocabulary_keeps_the_global_pose(training_poses):
@@ -93,8 +93,9 @@ def test_an_old_vocabulary_keeps_the_global_pose(training_poses):
     assert loaded.pose_condition == "global" and loaded.ignored_joints == ()
     pose = turned(training_poses[3], UP_143)
     quats = rotvec_to_quat(torch.as_tensor(pose))  # the query as it was: the pose itself
-    for q, joints, keys, kf in zip(loaded.query(pose), loaded.part_joints, loaded.key_quats,
-                                   loaded.key_frames, strict=True):
+    for q, joints, keys, kf in zip(
+        loaded.query(pose), loaded.part_joints, loaded.key_quats, loaded.key_frames, strict=True
+    ):
         d = part_distance(quats[list(joints)], keys)
         idx, w = knn_weights(d, 3, len(joints))
         assert np.array_equal(q.key_ids, idx.numpy()) and np.array_equal(q.weights, w.numpy())
@@ -169,15 +170,15 @@ def test_a_global_field_reads_the_full_pose_as_before(training_poses):
     field = _field(training_poses, "global")
     pose = turned(training_poses[5], UP_143)
     ctx = field.pose_feature.context(pose)
-    x = torch.randn(50, field.sdf_net[0].in_features - 96, generator=torch.Generator()
-                    .manual_seed(4))
+    x = torch.randn(50, field.sdf_net[0].in_features - 96, generator=torch.Generator().manual_seed(4))
     theta = pose_input(ctx.pose.to(x.dtype)).reshape(1, -1).expand(len(x), -1)
     before = field.sdf_net(torch.cat([x, theta], -1))
     assert torch.allclose(field._sdf_hidden(ctx, x), before, atol=1e-5)
     rel = _field(training_poses, "root-relative")
     theta = pose_input(torch.as_tensor(pose, dtype=x.dtype)).reshape(1, -1).expand(len(x), -1)
-    assert not torch.allclose(rel._sdf_hidden(rel.pose_feature.context(pose), x),
-                              rel.sdf_net(torch.cat([x, theta], -1)), atol=1e-3)
+    assert not torch.allclose(
+        rel._sdf_hidden(rel.pose_feature.context(pose), x), rel.sdf_net(torch.cat([x, theta], -1)), atol=1e-3
+    )
 
 
 def test_gradients_reach_the_pose_through_the_condition(training_poses):
@@ -186,7 +187,6 @@ def test_gradients_reach_the_pose_through_the_condition(training_poses):
     field = _field(training_poses, "root-relative")
     ctx = field.pose_feature.context(training_poses[5])
     ctx.pose = ctx.pose.clone().requires_grad_(True)
-    x = torch.randn(20, field.sdf_net[0].in_features - 96, generator=torch.Generator()
-                    .manual_seed(5))
+    x = torch.randn(20, field.sdf_net[0].in_features - 96, generator=torch.Generator().manual_seed(5))
     field._sdf_hidden(ctx, x).sum().backward()
     assert ctx.pose.grad[1:].abs().sum() > 0 and not ctx.pose.grad[0].any()

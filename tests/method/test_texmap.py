@@ -1,5 +1,6 @@
 """Texture maps (Sec. 3.2): the back-projected U_t of a synthetic capture reproduces the
 generator's known appearance where views saw the surface; occluded surface gets nothing."""
+
 import numpy as np
 import pytest
 import torch
@@ -26,10 +27,10 @@ def unlit_capture(tmp_path_factory):
     poses[:, 16, 2] = -np.radians(60)  # arms lowered a little
     poses[:, 17, 2] = np.radians(60)
     poses[1, 18, 1] = -np.radians(70)
-    settings = SynthSettings(ring_views=6, raised_views=2, size=256, texture_size=512,
-                             lighting=False)
-    root = synthesize(tmp_path_factory.mktemp("cap") / "unlit", poses, np.zeros((2, 3)), 2,
-                      body, settings, progress=False)
+    settings = SynthSettings(ring_views=6, raised_views=2, size=256, texture_size=512, lighting=False)
+    root = synthesize(
+        tmp_path_factory.mktemp("cap") / "unlit", poses, np.zeros((2, 3)), 2, body, settings, progress=False
+    )
     return open_capture(root, body=body)
 
 
@@ -46,8 +47,10 @@ def test_texture_map_matches_known_appearance(unlit_capture):
     covered = texel_map(cap.body, SIZE).covered
     assert seen.sum() > 0.6 * covered.sum()  # most of the surface is seen by 8 views
     psnr = _psnr(texture[seen], truth[seen])
-    print(f"UV-space PSNR of U_0 vs the generator's albedo over seen texels: {psnr:.2f} dB "
-          f"({seen.mean():.1%} of the atlas seen)")
+    print(
+        f"UV-space PSNR of U_0 vs the generator's albedo over seen texels: {psnr:.2f} dB "
+        f"({seen.mean():.1%} of the atlas seen)"
+    )
     assert psnr > 20.0
     # a texture map from a different pose's truth would not match as well: folds differ
     assert np.isfinite(texture).all() and texture.min() >= 0 and texture.max() <= 1
@@ -162,10 +165,12 @@ def test_texture_map_cache_is_keyed_by_view_set(unlit_capture, tmp_path):
 
     cap = unlit_capture
     all_views = cache_dir(cap, TexmapSettings(size=64))
-    train = cache_dir(cap, texmap_settings(cap, Settings(data=DataSettings(
-        texture_size=64, eval_views=(1, 5)))))
-    other = cache_dir(cap, texmap_settings(cap, Settings(data=DataSettings(
-        texture_size=64, eval_views=(2,)))))
+    train = cache_dir(
+        cap, texmap_settings(cap, Settings(data=DataSettings(texture_size=64, eval_views=(1, 5))))
+    )
+    other = cache_dir(
+        cap, texmap_settings(cap, Settings(data=DataSettings(texture_size=64, eval_views=(2,))))
+    )
     assert len({all_views, train, other}) == 3
     assert train.name == "texmaps_64_views_0-2-3-4-6-7"
     maps = prepare_texture_maps(cap, TexmapSettings(size=64), progress=False)  # all views

@@ -1,4 +1,5 @@
 """Vocabulary (Sec. 3.3–3.4): FPS and KNN on hand-computed cases, weights at the extremes."""
+
 import numpy as np
 import pytest
 import torch
@@ -99,8 +100,7 @@ def test_vocabulary_handles_identical_training_poses():
 
 
 def test_format_query_prints_every_part():
-    vocab = Vocabulary.build(np.random.default_rng(1).normal(0, 0.3, (12, 24, 3)), k=2,
-                             num_keys=4)
+    vocab = Vocabulary.build(np.random.default_rng(1).normal(0, 0.3, (12, 24, 3)), k=2, num_keys=4)
     text = vocab.format_query(np.zeros((24, 3)))
     for name in ("main_body", "left_leg", "right_leg", "left_arm", "right_arm"):
         assert name in text

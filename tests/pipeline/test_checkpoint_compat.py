@@ -1,6 +1,7 @@
 """A checkpoint written before settings were grouped (tests/data/checkpoint_main, its
 README says how) loads, renders as it rendered then, and resumes with the same settings
 and the same step."""
+
 import shutil
 from pathlib import Path
 
@@ -43,17 +44,24 @@ def test_flat_settings_load_value_for_value():
         else:
             assert dotted[FLAT_NAMES[key]] == value, key
     # the values away from their defaults, in their groups
-    assert (s.render.shell_width, s.render.early_stop_eps, s.train.coarse_samples,
-            s.train.residual, s.train.shell_voxel, s.train.seed, s.vocab.encoder,
-            s.data.eval_views) == (0.03, 2e-3, 6, "all", 0.02, 3, "pyramid", (1,))
+    assert (
+        s.render.shell_width,
+        s.render.early_stop_eps,
+        s.train.coarse_samples,
+        s.train.residual,
+        s.train.shell_voxel,
+        s.train.seed,
+        s.vocab.encoder,
+        s.data.eval_views,
+    ) == (0.03, 2e-3, 6, "all", 0.02, 3, "pyramid", (1,))
 
 
 def test_old_checkpoint_loads_and_renders_as_then(old_run):
-    avatar = load_avatar(old_run / "run" / "checkpoint.pt",
-                         open_capture(old_run / "capture"), progress=False)
+    avatar = load_avatar(old_run / "run" / "checkpoint.pt", open_capture(old_run / "capture"), progress=False)
     cap = avatar.capture
-    rgb, stats = render_view(avatar.model, cap.poses[1], cap.trans[1], cap.cameras[1],
-                             march_settings(avatar.settings), 0.5)
+    rgb, stats = render_view(
+        avatar.model, cap.poses[1], cap.trans[1], cap.cameras[1], march_settings(avatar.settings), 0.5
+    )
     then = np.load(DATA / "render_frame1_view1_half.npy")
     assert rgb.shape == then.shape == (64, 64, 3)
     assert np.abs(rgb - then).max() < 1e-5 and rgb.max() > 0.1  # the body, not an empty image
@@ -63,17 +71,21 @@ def test_old_checkpoint_loads_and_renders_as_then(old_run):
 def test_old_checkpoint_resumes_one_step_as_then(old_run):
     ck = load_checkpoint(old_run / "run" / "checkpoint.pt")
     settings = Settings.from_dict(ck["settings"]).with_overrides(["iterations=3"])
-    trainer = Trainer(open_capture(old_run / "capture"), settings, old_run / "run",
-                      progress=False)
+    trainer = Trainer(open_capture(old_run / "capture"), settings, old_run / "run", progress=False)
     assert trainer.resume() and trainer.step == 2
     (log,) = trainer.run()
     # what the version that wrote the checkpoint logged for step 3 (the data's README)
     assert (log["evals"], log["banded"], log["residual"]) == (251, 42, 15)
     assert log["loss"] == pytest.approx(0.044322215, rel=1e-5)
     new = load_checkpoint(old_run / "run" / "checkpoint.pt")
-    assert new["version"] == 2 and new["step"] == 3 and set(new["settings"]) == {
-        "data", "vocab", "field", "render", "train"}
+    assert (
+        new["version"] == 2
+        and new["step"] == 3
+        and set(new["settings"]) == {"data", "vocab", "field", "render", "train"}
+    )
     resumed = Settings.from_dict(new["settings"])
     assert resumed == settings and resumed.dotted() == {
-        **Settings.from_dict(ck["settings"]).dotted(), "train.iterations": 3}
+        **Settings.from_dict(ck["settings"]).dotted(),
+        "train.iterations": 3,
+    }
     assert not torch.equal(new["model"]["log_beta"], ck["model"]["log_beta"])

@@ -2,6 +2,7 @@
 the weights of one process that accumulates the same two shards of every step's batch,
 and a time budget stops both at the same step. About 10 s each (two processes start
 torch), measured in ./scripts/test."""
+
 import numpy as np
 import pytest
 import torch
@@ -17,18 +18,38 @@ from texvocab.pipeline.train import Trainer
 
 pytestmark = pytest.mark.slow  # torch.distributed processes
 
-SETS = ["texture_size=64", "num_keys=3", "k=2", "encoder=pyramid", "rays_per_batch=128",
-        "coarse_samples=8", "fine_samples=4", "iterations=3", "checkpoint_every=3",
-        "field.hidden=32", "field.sdf_layers=2", "field.color_layers=1", "field.pos_freqs=4",
-        "perceptual=inception", "patch_size=14", "lr=2e-3"]
+SETS = [
+    "texture_size=64",
+    "num_keys=3",
+    "k=2",
+    "encoder=pyramid",
+    "rays_per_batch=128",
+    "coarse_samples=8",
+    "fine_samples=4",
+    "iterations=3",
+    "checkpoint_every=3",
+    "field.hidden=32",
+    "field.sdf_layers=2",
+    "field.color_layers=1",
+    "field.pos_freqs=4",
+    "perceptual=inception",
+    "patch_size=14",
+    "lr=2e-3",
+]
 
 
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory):
     poses, trans = make_sequence([("walk", 3), ("arm_raise", 2)], seed=5)
-    return synthesize(tmp_path_factory.mktemp("ddp") / "cap", poses, trans, 4, default_body(),
-                      SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=128),
-                      progress=False)
+    return synthesize(
+        tmp_path_factory.mktemp("ddp") / "cap",
+        poses,
+        trans,
+        4,
+        default_body(),
+        SynthSettings(ring_views=6, raised_views=0, size=64, texture_size=128),
+        progress=False,
+    )
 
 
 def accumulated(capture, out, world: int, steps: int) -> dict:
@@ -58,8 +79,9 @@ def test_two_processes_equal_one_process_accumulating_their_shards(capture, tmp_
     ck = load_checkpoint(tmp_path / "ddp" / "checkpoint.pt")
     assert ck["step"] == 3
     ref = accumulated(capture, tmp_path / "ref", 2, 3)
-    init = Trainer(open_capture(capture), Settings().with_overrides(SETS), tmp_path / "init",
-                   progress=False).model.state_dict()
+    init = Trainer(
+        open_capture(capture), Settings().with_overrides(SETS), tmp_path / "init", progress=False
+    ).model.state_dict()
     moved = 0.0
     for name, value in ref.items():
         if value.dtype.is_floating_point:
@@ -70,9 +92,20 @@ def test_two_processes_equal_one_process_accumulating_their_shards(capture, tmp_
 
 def test_time_budget_stops_every_process_at_the_same_step(capture, tmp_path):
     sets = [s for s in SETS if not s.startswith(("iterations", "checkpoint_every"))]
-    args = ["train", str(capture), "--out", str(tmp_path / "run"), "--ddp", "2",
-            "--set", "iterations=100000", "--set", "max_minutes=0.05",
-            "--set", "checkpoint_every=1000"]
+    args = [
+        "train",
+        str(capture),
+        "--out",
+        str(tmp_path / "run"),
+        "--ddp",
+        "2",
+        "--set",
+        "iterations=100000",
+        "--set",
+        "max_minutes=0.05",
+        "--set",
+        "checkpoint_every=1000",
+    ]
     assert main(args + sum((["--set", s] for s in sets), [])) == 0
     step = load_checkpoint(tmp_path / "run" / "checkpoint.pt")["step"]
     assert 1 <= step < 100000

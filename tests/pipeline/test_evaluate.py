@@ -2,6 +2,7 @@
 with their standard errors and image counts, FID only from 50 images, KID from 2, a
 progress bar. A fake capture and a stand-in renderer keep it fast (the real pipeline
 runs end to end in test_train.py)."""
+
 import json
 from types import SimpleNamespace
 
@@ -35,8 +36,7 @@ class FakeCapture:
         t = num_train + num_novel
         self.poses = np.arange(t, dtype=np.float32)[:, None, None] * np.ones((1, 24, 3), np.float32)
         self.trans = np.zeros((t, 3), np.float32)
-        self.cameras = [SimpleNamespace(name=f"view{v}", width=64, height=64)
-                        for v in range(views)]
+        self.cameras = [SimpleNamespace(name=f"view{v}", width=64, height=64) for v in range(views)]
         self.num_views, self.root, self.frame_ids = views, "fake", list(range(t))
         self.train_frames, self.novel_frames = range(num_train), range(num_train, t)
         self.synthetic = None
@@ -142,9 +142,17 @@ def fake_render(monkeypatch):
 
     monkeypatch.setattr(evaluate, "render_view_rgba", render_view_rgba)
     monkeypatch.setattr(frechet, "inception_extractor", lambda extractor=None: _fake_extractor)
-    monkeypatch.setattr(evaluate, "evaluate_pair", lambda pred, gt, mask, lpips_model=None: {
-        "psnr_bbox": float(-10 * np.log10(np.mean((pred - gt) ** 2))), "ssim_bbox": 0.9,
-        "psnr_full": 30.0, "ssim_full": 0.95, "lpips": None})
+    monkeypatch.setattr(
+        evaluate,
+        "evaluate_pair",
+        lambda pred, gt, mask, lpips_model=None: {
+            "psnr_bbox": float(-10 * np.log10(np.mean((pred - gt) ** 2))),
+            "ssim_bbox": 0.9,
+            "psnr_full": 30.0,
+            "ssim_full": 0.95,
+            "lpips": None,
+        },
+    )
     return truth
 
 
@@ -178,19 +186,39 @@ def test_evaluate_sets_reports_means_sems_counts_fid_from_50_and_kid(fake_render
 
 def test_evaluate_sets_without_inception_reports_none(fake_render, monkeypatch):
     monkeypatch.setattr(frechet, "inception_extractor", lambda extractor=None: None)
-    items = [(np.full((24, 3), t, np.float32), np.zeros(3), SimpleNamespace(name="v"),
-              np.full((SIZE, SIZE, 3), 0.1 * (t + 1), np.float32), np.ones((SIZE, SIZE), bool))
-             for t in range(3)]
+    items = [
+        (
+            np.full((24, 3), t, np.float32),
+            np.zeros(3),
+            SimpleNamespace(name="v"),
+            np.full((SIZE, SIZE, 3), 0.1 * (t + 1), np.float32),
+            np.ones((SIZE, SIZE), bool),
+        )
+        for t in range(3)
+    ]
     for t in range(3):
         fake_render[(t, "v")] = items[t][3]
     table, _, _ = evaluate_sets(None, {"s": items}, None, progress=False)
     assert table["s"]["fid"] is None and table["s"]["kid"] is None and table["s"]["images"] == 3
 
 
-ROW = {"images": 60, "psnr_bbox": 27.4142, "psnr_bbox_sem": 0.2271, "ssim_bbox": 0.93124,
-       "ssim_bbox_sem": 0.00213, "psnr_full": 31.0, "psnr_full_sem": 0.1, "ssim_full": 0.97,
-       "ssim_full_sem": 0.001, "lpips": None, "lpips_sem": None, "fid": 41.234, "kid": 0.01234,
-       "kid_std": None, "seconds": 1.31}
+ROW = {
+    "images": 60,
+    "psnr_bbox": 27.4142,
+    "psnr_bbox_sem": 0.2271,
+    "ssim_bbox": 0.93124,
+    "ssim_bbox_sem": 0.00213,
+    "psnr_full": 31.0,
+    "psnr_full_sem": 0.1,
+    "ssim_full": 0.97,
+    "ssim_full_sem": 0.001,
+    "lpips": None,
+    "lpips_sem": None,
+    "fid": 41.234,
+    "kid": 0.01234,
+    "kid_std": None,
+    "seconds": 1.31,
+}
 
 
 def test_report_shows_mean_pm_sem_counts_and_fid_na_under_50(tmp_path):
@@ -199,11 +227,18 @@ def test_report_shows_mean_pm_sem_counts_and_fid_na_under_50(tmp_path):
     md = format_table(table, "ck.pt")
     header = md.splitlines()[0]
     assert "ck.pt" in header and "±" in header and "standard error" in header
-    assert ("| novel_poses | 60 | 27.41 ± 0.23 | 0.9312 ± 0.0021 | 31.00 ± 0.10 | 0.9700 ± 0.0010 "
-            "| n/a | 41.23 | 0.0123 | n/a | 1.31 |") in md
+    assert (
+        "| novel_poses | 60 | 27.41 ± 0.23 | 0.9312 ± 0.0021 | 31.00 ± 0.10 | 0.9700 ± 0.0010 "
+        "| n/a | 41.23 | 0.0123 | n/a | 1.31 |"
+    ) in md
     assert "| generated_novel_poses | 8 |" in md and "| n/a (8 images) | -0.0021 (sd 0.0005) |" in md
-    paths = write_report(tmp_path, table, [{"set": "novel_poses", "index": 0, "psnr_bbox": 27.0}],
-                         {"novel_poses": []}, {"checkpoint": "ck.pt"})
+    paths = write_report(
+        tmp_path,
+        table,
+        [{"set": "novel_poses", "index": 0, "psnr_bbox": 27.0}],
+        {"novel_poses": []},
+        {"checkpoint": "ck.pt"},
+    )
     assert paths[0].read_text() == md
     blob = json.loads(paths[1].read_text())
     g = blob["table"]["generated_novel_poses"]

@@ -1,4 +1,5 @@
 """Speed/accuracy presets and render-knob overrides on trained checkpoints."""
+
 from dataclasses import fields
 
 import pytest
@@ -30,10 +31,10 @@ def test_presets_are_valid_settings_and_ordered_by_cost():
         assert changed and changed <= {f"render.{k}" for k in RENDER_KNOBS}
     # every knob moves monotonically from fast to quality
     for knob in ("image_scale", "coarse_samples", "fine_samples"):
-        assert getattr(fast.render, knob) <= getattr(balanced.render, knob) \
-            <= getattr(quality.render, knob), knob
-    assert fast.render.early_stop_eps >= balanced.render.early_stop_eps \
-        >= quality.render.early_stop_eps
+        assert (
+            getattr(fast.render, knob) <= getattr(balanced.render, knob) <= getattr(quality.render, knob)
+        ), knob
+    assert fast.render.early_stop_eps >= balanced.render.early_stop_eps >= quality.render.early_stop_eps
     assert len({repr(p) for p in (fast, balanced, quality)}) == 3  # pairwise distinct
 
 
@@ -47,16 +48,17 @@ def test_render_overrides_touch_only_render_knobs(knob):
     trained = Settings(vocab=VocabSettings(num_keys=7, k=2))
     s = render_overrides(trained, "fast", [f"{knob}=10"])
     assert s.render.coarse_samples == 10  # --set wins over the preset
-    assert (s.render.fine_samples, s.render.shell_width) == (PRESETS["fast"]["fine_samples"],
-                                                             PRESETS["fast"]["shell_width"])
+    assert (s.render.fine_samples, s.render.shell_width) == (
+        PRESETS["fast"]["fine_samples"],
+        PRESETS["fast"]["shell_width"],
+    )
     assert (s.vocab.num_keys, s.vocab.k) == (7, 2)
     assert s.train == trained.train  # train.coarse_samples is training's own
     for item in ("num_keys=3", "vocab.num_keys=3", "train.coarse_samples=3"):
         with pytest.raises(TexvocabError, match="only render knobs"):
             render_overrides(trained, None, [item])
     assert RENDER_KNOBS == tuple(f.name for f in fields(RenderSettings))
-    assert set(RENDER_KNOBS) == {k for p in PRESETS.values() for k in p} | {"image_scale",
-                                                                           "guide"}
+    assert set(RENDER_KNOBS) == {k for p in PRESETS.values() for k in p} | {"image_scale", "guide"}
 
 
 def test_marcher_shell_width_is_a_render_knob_but_training_keeps_the_fields():
@@ -67,16 +69,19 @@ def test_marcher_shell_width_is_a_render_knob_but_training_keeps_the_fields():
     assert march_settings(Settings()).shell_width == Settings().field.shell_width
 
 
-@pytest.mark.parametrize("item, message", [
-    ("field.beta_min=0", "setting field.beta_min=0.0: expected >= 1e-8"),
-    ("image_scale=0", "setting render.image_scale=0.0: expected in (0, 4]"),
-    ("render.image_scale=5", "setting render.image_scale=5.0: expected in (0, 4]"),
-    ("k=0", "setting vocab.k=0: expected >= 1"),
-    ("strategy=parts", "setting vocab.strategy='parts': expected part, joint, global or none"),
-    ("early_stop_eps=1", "setting render.early_stop_eps=1.0: expected in [0, 1)"),
-    ("train.coarse_samples=0", "setting train.coarse_samples=0: expected >= 1 or none"),
-    ("render.shell_width=2", "setting render.shell_width=2.0: expected in (0, 1] m or none"),
-])
+@pytest.mark.parametrize(
+    "item, message",
+    [
+        ("field.beta_min=0", "setting field.beta_min=0.0: expected >= 1e-8"),
+        ("image_scale=0", "setting render.image_scale=0.0: expected in (0, 4]"),
+        ("render.image_scale=5", "setting render.image_scale=5.0: expected in (0, 4]"),
+        ("k=0", "setting vocab.k=0: expected >= 1"),
+        ("strategy=parts", "setting vocab.strategy='parts': expected part, joint, global or none"),
+        ("early_stop_eps=1", "setting render.early_stop_eps=1.0: expected in [0, 1)"),
+        ("train.coarse_samples=0", "setting train.coarse_samples=0: expected >= 1 or none"),
+        ("render.shell_width=2", "setting render.shell_width=2.0: expected in (0, 1] m or none"),
+    ],
+)
 def test_out_of_range_settings_name_the_setting_and_the_range(item, message):
     with pytest.raises(TexvocabError) as e:
         Settings().with_overrides([item])
@@ -87,8 +92,10 @@ def test_quality_takes_the_guided_marchers_exact_paths_and_the_knobs_reach_the_m
     """The presets' sample knobs act only on marched rays; with the guided marcher
     `quality` also marches its hard rays and takes the 4-sample band, and `--set` reaches
     both on a trained checkpoint."""
-    assert (march_settings(_with("quality")).residual_rays,
-            march_settings(_with("quality")).band_newton) == (False, False)
+    assert (march_settings(_with("quality")).residual_rays, march_settings(_with("quality")).band_newton) == (
+        False,
+        False,
+    )
     for name in ("fast", "balanced"):
         m = march_settings(_with(name))
         assert m.residual_rays and m.band_newton

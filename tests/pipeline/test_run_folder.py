@@ -1,6 +1,7 @@
 """A run folder is one writer's and is never lost silently: the lock, stale temp files,
 refusing to replace a trained checkpoint, extending a run with --resume, stopping on a
 non-finite loss with the last checkpoint intact, absolute capture paths."""
+
 import os
 import subprocess
 import sys
@@ -40,34 +41,53 @@ def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(tmp_path)
 
 def test_resume_extends_a_run_and_overwrite_replaces_it(capture, tmp_path, capsys):
     run = tmp_path / "run"
-    sets = ["--set", "texture_size=64", "--set", "num_keys=3", "--set", "k=2", "--set",
-            "encoder=small", "--set", "rays_per_batch=128", "--set", "perceptual=off",
-            "--set", "coarse_samples=8", "--set", "fine_samples=4"]
+    sets = [
+        "--set",
+        "texture_size=64",
+        "--set",
+        "num_keys=3",
+        "--set",
+        "k=2",
+        "--set",
+        "encoder=small",
+        "--set",
+        "rays_per_batch=128",
+        "--set",
+        "perceptual=off",
+        "--set",
+        "coarse_samples=8",
+        "--set",
+        "fine_samples=4",
+    ]
     assert main(["train", str(capture), "--out", str(run), "--iterations", "2"] + sets) == 0
     first = load_checkpoint(run / "checkpoint.pt")
     assert first["step"] == 2 and os.path.isabs(first["capture"])
-    assert main(["train", str(capture), "--out", str(run), "--iterations", "4", "--resume"]
-                + sets) == 0
+    assert main(["train", str(capture), "--out", str(run), "--iterations", "4", "--resume"] + sets) == 0
     assert load_checkpoint(run / "checkpoint.pt")["step"] == 4
     assert main(["train", str(capture), "--out", str(run), "--iterations", "5"] + sets) == 2
     assert "--resume" in capsys.readouterr().err
     assert load_checkpoint(run / "checkpoint.pt")["step"] == 4  # untouched
-    assert main(["train", str(capture), "--out", str(run), "--iterations", "1", "--overwrite"]
-                + sets) == 0
+    assert main(["train", str(capture), "--out", str(run), "--iterations", "1", "--overwrite"] + sets) == 0
     assert load_checkpoint(run / "checkpoint.pt")["step"] == 1
     assert not (run / LOCK_NAME).exists()
 
 
 def test_a_non_finite_loss_stops_training_naming_step_and_term(capture, tmp_path):
-    trainer = Trainer(open_capture(capture), tiny_settings(iterations=6, checkpoint_every=2,
-                                                           perceptual="off"),
-                      tmp_path / "run", progress=False)
+    trainer = Trainer(
+        open_capture(capture),
+        tiny_settings(iterations=6, checkpoint_every=2, perceptual="off"),
+        tmp_path / "run",
+        progress=False,
+    )
     trainer.run(until=2)
     good = {k: v.clone() for k, v in load_checkpoint(trainer.checkpoint_path)["model"].items()}
     with torch.no_grad():
         next(p for p in trainer.model.parameters() if p.requires_grad).fill_(float("nan"))
-    with pytest.raises(TexvocabError, match=r"step 3: the (loss|color|mask|eikonal) term is nan; "
-                                            r"the last checkpoint .* is intact"):
+    with pytest.raises(
+        TexvocabError,
+        match=r"step 3: the (loss|color|mask|eikonal) term is nan; "
+        r"the last checkpoint .* is intact",
+    ):
         trainer.run()
     after = load_checkpoint(trainer.checkpoint_path)
     assert after["step"] == 2
@@ -75,17 +95,21 @@ def test_a_non_finite_loss_stops_training_naming_step_and_term(capture, tmp_path
     assert not (tmp_path / "run" / LOCK_NAME).exists()  # released on the way out
 
 
-def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_path,
-                                                                   monkeypatch):
+def test_an_old_relative_capture_path_is_found_from_another_folder(capture, tmp_path, monkeypatch):
     project = tmp_path / "project"
     (project / "runs" / "a").mkdir(parents=True)
     os.symlink(capture, project / "cap")
-    trainer = Trainer(open_capture(project / "cap"), tiny_settings(iterations=1, perceptual="off"),
-                      project / "runs" / "a", progress=False)
+    trainer = Trainer(
+        open_capture(project / "cap"),
+        tiny_settings(iterations=1, perceptual="off"),
+        project / "runs" / "a",
+        progress=False,
+    )
     state = trainer.state()
     state["capture"] = "cap"  # as checkpoints before this change stored it (relative)
-    torch.save({"format": "texvocab-checkpoint", "version": 1, **state},
-               project / "runs" / "a" / "checkpoint.pt")
+    torch.save(
+        {"format": "texvocab-checkpoint", "version": 1, **state}, project / "runs" / "a" / "checkpoint.pt"
+    )
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
@@ -118,10 +142,28 @@ def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, t
     import time
 
     texvocab = os.path.join(os.path.dirname(sys.executable), "texvocab")
-    sets = ["--set", "texture_size=64", "--set", "num_keys=3", "--set", "k=2", "--set",
-            "encoder=small", "--set", "rays_per_batch=128", "--set", "perceptual=off",
-            "--set", "coarse_samples=8", "--set", "fine_samples=4", "--set",
-            "checkpoint_every=1", "--set", "field.hidden=32"]
+    sets = [
+        "--set",
+        "texture_size=64",
+        "--set",
+        "num_keys=3",
+        "--set",
+        "k=2",
+        "--set",
+        "encoder=small",
+        "--set",
+        "rays_per_batch=128",
+        "--set",
+        "perceptual=off",
+        "--set",
+        "coarse_samples=8",
+        "--set",
+        "fine_samples=4",
+        "--set",
+        "checkpoint_every=1",
+        "--set",
+        "field.hidden=32",
+    ]
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
 
     def train(out, *extra, wait=True):
@@ -130,15 +172,13 @@ def test_kill_9_mid_training_then_resume_matches_an_uninterrupted_run(capture, t
             proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
             assert proc.returncode == 0, proc.stderr
             return None
-        return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+        return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     train(tmp_path / "straight", "--iterations", "8")
     proc = train(tmp_path / "killed", "--iterations", "400", wait=False)
     ckpt = tmp_path / "killed" / "checkpoint.pt"
     deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and not (ckpt.is_file() and
-                                                load_checkpoint(ckpt)["step"] >= 3):
+    while time.monotonic() < deadline and not (ckpt.is_file() and load_checkpoint(ckpt)["step"] >= 3):
         time.sleep(0.2)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
@@ -160,8 +200,9 @@ def test_a_moved_capture_is_named_and_capture_points_to_it(capture, tmp_path, ca
 
     moved = tmp_path / "moved_cap"
     shutil.copytree(capture, moved)
-    trainer = Trainer(open_capture(moved), tiny_settings(iterations=1, perceptual="off"),
-                      tmp_path / "run", progress=False)
+    trainer = Trainer(
+        open_capture(moved), tiny_settings(iterations=1, perceptual="off"), tmp_path / "run", progress=False
+    )
     trainer.run()
     shutil.move(moved, tmp_path / "elsewhere_cap")  # the recorded (absolute) path is gone
     ckpt = str(trainer.checkpoint_path)

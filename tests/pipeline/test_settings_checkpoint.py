@@ -1,4 +1,5 @@
 """Settings (one object for every knob) and checkpoint I/O (atomic, weights-only)."""
+
 import os
 from dataclasses import fields
 from typing import get_args
@@ -33,19 +34,35 @@ from texvocab.render import GUIDES
 
 
 def test_settings_round_trip_and_overrides():
-    s = Settings().with_overrides(["k=5", "field.hidden=64", "data.eval_views=0,3",
-                                   "max_minutes=2.5", "vocab.encoder=small", "train_views=none",
-                                   "train.coarse_samples=none"])
-    assert (s.vocab.k, s.field.hidden, s.data.eval_views, s.train.max_minutes,
-            s.vocab.encoder, s.train.coarse_samples) == (5, 64, (0, 3), 2.5, "small", None)
+    s = Settings().with_overrides(
+        [
+            "k=5",
+            "field.hidden=64",
+            "data.eval_views=0,3",
+            "max_minutes=2.5",
+            "vocab.encoder=small",
+            "train_views=none",
+            "train.coarse_samples=none",
+        ]
+    )
+    assert (
+        s.vocab.k,
+        s.field.hidden,
+        s.data.eval_views,
+        s.train.max_minutes,
+        s.vocab.encoder,
+        s.train.coarse_samples,
+    ) == (5, 64, (0, 3), 2.5, "small", None)
     assert Settings.from_dict(s.to_dict()) == s
     assert list(s.to_dict()) == ["data", "vocab", "field", "render", "train"]
-    for bad, msg in ((["nope=1"], "unknown setting 'nope'"),
-                     (["k=three"], "--set k=three: setting vocab.k expects an integer"),
-                     (["field.nope=1"], "unknown setting 'field.nope'"),
-                     (["render.nope=1"], "unknown setting 'render.nope'"),
-                     (["k"], "expected key=value"),
-                     (["render=3"], "render is a group of settings")):
+    for bad, msg in (
+        (["nope=1"], "unknown setting 'nope'"),
+        (["k=three"], "--set k=three: setting vocab.k expects an integer"),
+        (["field.nope=1"], "unknown setting 'field.nope'"),
+        (["render.nope=1"], "unknown setting 'render.nope'"),
+        (["k"], "expected key=value"),
+        (["render=3"], "render is a group of settings"),
+    ):
         with pytest.raises(TexvocabError, match=msg):
             Settings().with_overrides(bad)
 
@@ -55,10 +72,14 @@ def test_flat_names_map_to_the_groups():
     the five training twins of render knobs are ``train_*``."""
     dotted = set(Settings().dotted())
     assert sorted(FLAT_NAMES.values()) == sorted(n for n in dotted if not n.startswith("field."))
-    assert {k: v for k, v in FLAT_NAMES.items() if k.startswith("train_") and k != "train_views"} \
-        == {f"train_{t}": f"train.{t}" for t in TrainSettings.TWINS}
+    assert {k: v for k, v in FLAT_NAMES.items() if k.startswith("train_") and k != "train_views"} == {
+        f"train_{t}": f"train.{t}" for t in TrainSettings.TWINS
+    }
     assert (FLAT_NAMES["coarse_samples"], FLAT_NAMES["guide"], FLAT_NAMES["shell_width"]) == (
-        "render.coarse_samples", "render.guide", "render.shell_width")
+        "render.coarse_samples",
+        "render.guide",
+        "render.shell_width",
+    )
     for flat, name in FLAT_NAMES.items():  # --set takes either name for the same setting
         assert resolve_name(flat) == resolve_name(name) == name
     s = Settings().with_overrides(["train_coarse_samples=12", "coarse_samples=20"])
@@ -67,11 +88,23 @@ def test_flat_names_map_to_the_groups():
 
 
 def test_flat_checkpoint_settings_read_as_the_groups():
-    s = flat_settings(texture_size=64, num_keys=4, train_guide="shell", shell_width=0.03,
-                      train_residual="all", field=FieldSettings(hidden=32))
+    s = flat_settings(
+        texture_size=64,
+        num_keys=4,
+        train_guide="shell",
+        shell_width=0.03,
+        train_residual="all",
+        field=FieldSettings(hidden=32),
+    )
     assert Settings.from_dict(flat_dict(s)) == s
-    assert (s.data.texture_size, s.vocab.num_keys, s.train.guide, s.render.shell_width,
-            s.train.residual, s.field.hidden) == (64, 4, "shell", 0.03, "all", 32)
+    assert (
+        s.data.texture_size,
+        s.vocab.num_keys,
+        s.train.guide,
+        s.render.shell_width,
+        s.train.residual,
+        s.field.hidden,
+    ) == (64, 4, "shell", 0.03, "all", 32)
     with pytest.raises(TexvocabError, match="unknown setting 'nope'"):
         Settings.from_dict({**flat_dict(s), "nope": 1})
     with pytest.raises(TexvocabError, match="unknown settings \\['field.nope'\\]"):
@@ -83,38 +116,60 @@ def test_flat_checkpoint_settings_read_as_the_groups():
 
 
 def test_choices_are_the_methods_own_and_every_knob_says_what_it_does():
-    for hint, names in ((ViewWeighting, VIEW_WEIGHTINGS), (Strategy, STRATEGIES),
-                        (Weighting, WEIGHTINGS), (Encoder, ENCODER_NAMES), (Guide, GUIDES)):
+    for hint, names in (
+        (ViewWeighting, VIEW_WEIGHTINGS),
+        (Strategy, STRATEGIES),
+        (Weighting, WEIGHTINGS),
+        (Encoder, ENCODER_NAMES),
+        (Guide, GUIDES),
+    ):
         assert set(get_args(hint)) == set(names)
     for group in GROUPS.values():
         for f in fields(group):
             assert f.metadata.get("doc"), f"{group.GROUP}.{f.name} has no doc"
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda: RenderSettings(coarse_samples=0), "setting render.coarse_samples=0: expected >= 1"),
-    (lambda: RenderSettings(coarse_samples=2.0),
-     "setting render.coarse_samples=2.0: expected an integer"),
-    (lambda: RenderSettings(guide="mesh"), "setting render.guide='mesh': expected raster or shell"),
-    (lambda: TrainSettings(coarse_samples=None, residual="some"),
-     "setting train.residual='some': expected hits, all or off"),
-    (lambda: TrainSettings(max_minutes=0), "setting train.max_minutes=0: expected > 0 or none"),
-    (lambda: TrainSettings(lr=float("nan")), "setting train.lr=nan: expected a finite number"),
-    (lambda: TrainSettings(band_newton=1),
-     "setting train.band_newton=1: expected true or false"),
-    (lambda: DataSettings(eval_views=(1, 1)),
-     "setting data.eval_views=(1, 1): expected distinct view indices >= 0"),
-    (lambda: DataSettings(eval_views=[1]),
-     "setting data.eval_views=[1]: expected a list of view indices"),
-    (lambda: DataSettings(train_views=(0, 1), eval_views=(1,)), "setting data.train_views=(0, 1): "
-     "expected view indices >= 0 not among eval_views (held-out views never train) or none"),
-    (lambda: VocabSettings(num_keys=2, k=3),
-     "setting vocab.k=3: expected <= num_keys (2): K of the M keys"),
-    (lambda: FieldSettings(beta_init=1e-5), "setting field.beta_init=1e-05: expected >= "
-     "field.beta_min"),
-    (lambda: Settings(render=3), "setting render=3: expected a group of settings "
-     "(render.image_scale=..., render.coarse_samples=...)"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: RenderSettings(coarse_samples=0), "setting render.coarse_samples=0: expected >= 1"),
+        (
+            lambda: RenderSettings(coarse_samples=2.0),
+            "setting render.coarse_samples=2.0: expected an integer",
+        ),
+        (lambda: RenderSettings(guide="mesh"), "setting render.guide='mesh': expected raster or shell"),
+        (
+            lambda: TrainSettings(coarse_samples=None, residual="some"),
+            "setting train.residual='some': expected hits, all or off",
+        ),
+        (lambda: TrainSettings(max_minutes=0), "setting train.max_minutes=0: expected > 0 or none"),
+        (lambda: TrainSettings(lr=float("nan")), "setting train.lr=nan: expected a finite number"),
+        (lambda: TrainSettings(band_newton=1), "setting train.band_newton=1: expected true or false"),
+        (
+            lambda: DataSettings(eval_views=(1, 1)),
+            "setting data.eval_views=(1, 1): expected distinct view indices >= 0",
+        ),
+        (
+            lambda: DataSettings(eval_views=[1]),
+            "setting data.eval_views=[1]: expected a list of view indices",
+        ),
+        (
+            lambda: DataSettings(train_views=(0, 1), eval_views=(1,)),
+            "setting data.train_views=(0, 1): "
+            "expected view indices >= 0 not among eval_views (held-out views never train) or none",
+        ),
+        (
+            lambda: VocabSettings(num_keys=2, k=3),
+            "setting vocab.k=3: expected <= num_keys (2): K of the M keys",
+        ),
+        (lambda: FieldSettings(beta_init=1e-5), "setting field.beta_init=1e-05: expected >= field.beta_min"),
+        (
+            lambda: Settings(render=3),
+            "setting render=3: expected a group of settings "
+            "(render.image_scale=..., render.coarse_samples=...)",
+        ),
+    ],
+)
 def test_each_check_sits_with_its_field_and_names_it(make, message):
     with pytest.raises(TexvocabError) as e:
         make()
@@ -123,8 +178,7 @@ def test_each_check_sits_with_its_field_and_names_it(make, message):
 
 def test_checkpoint_round_trip_is_atomic(tmp_path):
     path = tmp_path / "run" / "checkpoint.pt"
-    save_checkpoint(path, {"step": 3, "settings": Settings().to_dict(),
-                           "model": {"w": torch.ones(2)}})
+    save_checkpoint(path, {"step": 3, "settings": Settings().to_dict(), "model": {"w": torch.ones(2)}})
     ck = load_checkpoint(path)
     assert ck["step"] == 3 and torch.equal(ck["model"]["w"], torch.ones(2))
     assert [p.name for p in path.parent.iterdir()] == ["checkpoint.pt"]  # no temp files left
@@ -163,8 +217,7 @@ def test_foreign_or_newer_checkpoints(tmp_path):
     torch.save({"state_dict": {}}, path)
     with pytest.raises(AssetError, match="not a texvocab checkpoint"):
         load_checkpoint(path)
-    torch.save({"format": "texvocab-checkpoint", "version": 99, "step": 0, "settings": {},
-                "model": {}}, path)
+    torch.save({"format": "texvocab-checkpoint", "version": 99, "step": 0, "settings": {}, "model": {}}, path)
     with pytest.raises(AssetError, match="version 99 is newer"):
         load_checkpoint(path)
     with pytest.raises(AssetError, match="checkpoint not found"):

@@ -9,6 +9,7 @@ part; float32 vs float64. Everywhere: no NaN or inf in values or in gradients (a
 loss back-propagated to the model parameters and, where differentiable, to the pose).
 Pure rotation-function and analytic-field cases live in test_rotations.py / test_render.py.
 """
+
 from __future__ import annotations
 
 import copy
@@ -87,15 +88,15 @@ def check_vocab_query(vocab: Vocabulary, pose: np.ndarray) -> None:
     frames, weights, dists = vocab.query_tensors(pose)
     keys = vocab.condition(training_poses()).numpy()  # the poses as the vocabulary reads them
     seen = vocab.condition(pose).numpy()
-    for joints, kf, f, w, d in zip(vocab.part_joints, vocab.key_frames, frames, weights, dists,
-                                   strict=True):
+    for joints, kf, f, w, d in zip(vocab.part_joints, vocab.key_frames, frames, weights, dists, strict=True):
         assert_finite(weights=w, distances=d)
         assert (w >= 0).all() and float(w.sum()) == pytest.approx(1.0, abs=1e-12)
         assert (d >= 0).all() and (d <= len(joints) + 1e-12).all()
         key_of_frame = {int(fr): m for m, fr in enumerate(kf)}
         for fr, dk in zip(f[0], d[0], strict=True):
-            by_hand = rotvec_distance(torch.as_tensor(seen[list(joints)]),
-                                      torch.as_tensor(keys[int(fr)][list(joints)])).sum()
+            by_hand = rotvec_distance(
+                torch.as_tensor(seen[list(joints)]), torch.as_tensor(keys[int(fr)][list(joints)])
+            ).sum()
             assert float(dk) == pytest.approx(float(by_hand), abs=1e-9), key_of_frame[int(fr)]
     grad, _ = vocab_pose_gradient(vocab, torch.as_tensor(pose))
     assert_finite(vocab_pose_grad=grad)
@@ -105,15 +106,17 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
     """Pose feature, field (values, eikonal gradient, pose and parameter gradients) and a
     differentiable render for one pose."""
     ctx = field.pose_feature.context(pose)
-    assert_finite(vertices=ctx.vertices, transforms=ctx.transforms, part_coef=ctx.part_coef,
-                  features=ctx.features.table)
+    assert_finite(
+        vertices=ctx.vertices, transforms=ctx.transforms, part_coef=ctx.part_coef, features=ctx.features.table
+    )
     pts = shell_points(ctx, 300).requires_grad_(True)
     feat = field.pose_feature(ctx, pts)
     assert_finite(feature=feat.features, uv=feat.uv, distance=feat.distance)
     assert feat.valid.float().mean() > 0.5
     ctx.pose = ctx.pose.clone().requires_grad_(True)  # the field's pose conditioning
-    sdf, rgb, valid = field.sdf_and_color(ctx, pts, torch.nn.functional.normalize(
-        pts - pts.detach().mean(0), dim=-1))
+    sdf, rgb, valid = field.sdf_and_color(
+        ctx, pts, torch.nn.functional.normalize(pts - pts.detach().mean(0), dim=-1)
+    )
     assert_finite(sdf=sdf, rgb=rgb)
     (eik,) = torch.autograd.grad(sdf.sum(), pts, create_graph=True)
     assert_finite(eikonal_grad=eik)
@@ -132,8 +135,9 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
     assert_param_grads(field)
     # the surface-guided marcher (render time) on the same pose: finite and in range
     with torch.no_grad():
-        guided = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces,
-                              MarchSettings.from_flat(guide="raster"))
+        guided = render_image(
+            field.for_pose(ctx), cam, ctx.vertices, field.body.faces, MarchSettings.from_flat(guide="raster")
+        )
     assert_finite(guided_rgb=guided.rgb, guided_alpha=guided.alpha, guided_depth=guided.depth)
     assert (guided.alpha >= 0).all() and (guided.alpha <= 1 + 1e-6).all()
     assert (guided.rgb >= 0).all() and (guided.rgb <= 1 + 1e-6).all()
@@ -142,8 +146,10 @@ def check_field_and_render(field, pose: np.ndarray, camera_size: int = 10) -> No
 
 # --- rotations through the whole path -------------------------------------------------
 
-@pytest.mark.parametrize("angle", [0.0, 1e-8, PI - 1e-7, PI, -PI, 2 * PI],
-                         ids=["0", "1e-8", "pi-1e-7", "pi", "-pi", "2pi"])
+
+@pytest.mark.parametrize(
+    "angle", [0.0, 1e-8, PI - 1e-7, PI, -PI, 2 * PI], ids=["0", "1e-8", "pi-1e-7", "pi", "-pi", "2pi"]
+)
 def test_whole_query_path_at_extreme_angle(body, vocab, avatar, angle):
     pose = uniform_pose(angle)
     q = rotvec_to_quat(torch.as_tensor(pose))
@@ -174,8 +180,7 @@ def antipodal_pair(case: str) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
-@pytest.mark.parametrize("case", ["theta_vs_theta_minus_2pi", "pi_vs_minus_pi", "zero_vs_2pi",
-                                  "mixed"])
+@pytest.mark.parametrize("case", ["theta_vs_theta_minus_2pi", "pi_vs_minus_pi", "zero_vs_2pi", "mixed"])
 def test_antipodal_quaternions_give_the_same_query_body_and_feature(body, vocab, avatar, case):
     a, b = antipodal_pair(case)
     qa, qb = rotvec_to_quat(torch.as_tensor(a)), rotvec_to_quat(torch.as_tensor(b))
@@ -219,6 +224,7 @@ def test_antipodal_quaternions_give_the_same_query_body_and_feature(body, vocab,
 
 # --- vocabulary corner cases through the field ----------------------------------------
 
+
 @pytest.mark.parametrize("weighting", ["paper", "inverse"])
 def test_k_larger_than_m(body, weighting):
     vocab = Vocabulary.build(training_poses()[:3], "part", num_keys=3, k=7, weighting=weighting)
@@ -254,8 +260,9 @@ def test_all_keys_at_equal_distance(body, case):
         assert torch.allclose(d, torch.full_like(d, expect), atol=1e-12)
         assert torch.allclose(w, torch.full_like(w, 1 / 3), atol=1e-12)  # uniform, no NaN
     check_vocab_query_finite_only(vocab, query)
-    textures = torch.rand(NUM_FRAMES, 3, TEXTURE_SIZE, TEXTURE_SIZE,
-                          generator=torch.Generator().manual_seed(1))
+    textures = torch.rand(
+        NUM_FRAMES, 3, TEXTURE_SIZE, TEXTURE_SIZE, generator=torch.Generator().manual_seed(1)
+    )
     pf = PoseFeature(body, vocab, textures, PassThrough())
     ctx = pf.context(query)
     pts = shell_points(ctx, 200)
@@ -265,7 +272,7 @@ def test_all_keys_at_equal_distance(body, case):
     expect = torch.zeros_like(out.features)
     for p, f in enumerate(frames):
         blend = sum(sample_maps(textures[int(fr)], out.uv) for fr in f[0]) / 3
-        expect += omega[:, p:p + 1] * blend
+        expect += omega[:, p : p + 1] * blend
     assert torch.allclose(out.features, expect * out.valid[:, None], atol=1e-5)
     check_field_and_render(make_field(body, vocab, textures, "pyramid"), query)
 
@@ -285,8 +292,9 @@ def test_pose_equal_to_a_key(body, weighting, offset):
     query = poses[0].copy()  # frame 0 (rest) is key 0 of every part (FPS starts there)
     query[:, 0] += offset
     frames, weights, dists = vocab.query_tensors(query)
-    textures = torch.rand(NUM_FRAMES, 3, TEXTURE_SIZE, TEXTURE_SIZE,
-                          generator=torch.Generator().manual_seed(2))
+    textures = torch.rand(
+        NUM_FRAMES, 3, TEXTURE_SIZE, TEXTURE_SIZE, generator=torch.Generator().manual_seed(2)
+    )
     pf = PoseFeature(body, vocab, textures, PassThrough())
     ctx = pf.context(query)
     out = pf(ctx, shell_points(ctx, 200))
@@ -294,7 +302,7 @@ def test_pose_equal_to_a_key(body, weighting, offset):
     blend = torch.zeros_like(out.features)
     omega = out.skin_weights @ pf.membership / out.skin_weights.sum(-1, keepdim=True)
     for joints, f, w, d in zip(vocab.part_joints, frames, weights, dists, strict=True):
-        assert int(f[0, 0]) == 0 and float(d[0, 0]) <= len(joints) * offset ** 2
+        assert int(f[0, 0]) == 0 and float(d[0, 0]) <= len(joints) * offset**2
         if weighting == "inverse" and offset == 0:
             assert w[0].tolist() == [1.0, 0.0, 0.0]  # exactly one, the others exactly zero
         elif weighting == "inverse":
@@ -306,9 +314,10 @@ def test_pose_equal_to_a_key(body, weighting, offset):
             assert torch.allclose(w[0], raw / raw.sum(), atol=1e-12)
             assert 1 / 3 < float(w[0, 0]) < 1 and float(w[0, 0]) == float(w[0].max())
     for p, (f, w) in enumerate(zip(frames, weights, strict=True)):
-        part = sum(float(wk) * sample_maps(textures[int(fr)], out.uv) for fr, wk in
-                   zip(f[0], w[0], strict=True))
-        blend += omega[:, p:p + 1] * part
+        part = sum(
+            float(wk) * sample_maps(textures[int(fr)], out.uv) for fr, wk in zip(f[0], w[0], strict=True)
+        )
+        blend += omega[:, p : p + 1] * part
     assert torch.allclose(out.features, blend * out.valid[:, None], atol=1e-5)
     if weighting == "inverse" and offset == 0:
         assert torch.allclose(out.features, key_only, atol=1e-5)
@@ -319,12 +328,16 @@ def test_pose_equal_to_a_key(body, weighting, offset):
 
 # --- density --------------------------------------------------------------------------
 
+
 @settings(max_examples=60, deadline=None)
-@given(log_beta=st.floats(-15, 38), sdf=st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=8),
-       double=st.booleans())
+@given(
+    log_beta=st.floats(-15, 38),
+    sdf=st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=8),
+    double=st.booleans(),
+)
 def test_laplace_density_values_and_gradients_are_finite(log_beta, sdf, double):
     dtype = torch.float64 if double else torch.float32
-    beta = torch.tensor(10.0 ** log_beta, dtype=dtype, requires_grad=True)
+    beta = torch.tensor(10.0**log_beta, dtype=dtype, requires_grad=True)
     s = torch.tensor(sdf + [0.0], dtype=dtype, requires_grad=True)
     sigma = laplace_density(s, beta)
     (sigma.sum() + sigma.square().sum() * 1e-30).backward()
@@ -334,8 +347,11 @@ def test_laplace_density_values_and_gradients_are_finite(log_beta, sdf, double):
     assert (sigma.detach()[order].diff() <= 1e-6 * sigma.detach().max()).all()  # denser inside
 
 
-@pytest.mark.parametrize("log_beta", [-1e4, math.log(FIELD.beta_min), 0.0, math.log(1e3), 60.0],
-                         ids=["to_zero", "beta_min", "1", "1e3", "1e26"])
+@pytest.mark.parametrize(
+    "log_beta",
+    [-1e4, math.log(FIELD.beta_min), 0.0, math.log(1e3), 60.0],
+    ids=["to_zero", "beta_min", "1", "1e3", "1e26"],
+)
 def test_field_beta_extremes_render_and_backprop(body, vocab, log_beta):
     field = make_field(body, vocab, encoder="pyramid")
     with torch.no_grad():
@@ -356,23 +372,29 @@ def test_field_beta_extremes_render_and_backprop(body, vocab, log_beta):
 
 # --- rays and cameras -----------------------------------------------------------------
 
+
 def test_rays_that_miss_the_body(body, avatar):
     pose = uniform_pose(0.3)
     ctx = avatar.pose_feature.context(pose)
-    shell = ShellGeometry.build(ctx.vertices.detach(), body.faces, FIELD.shell_width,
-                                index=ctx.index)
+    shell = ShellGeometry.build(ctx.vertices.detach(), body.faces, FIELD.shell_width, index=ctx.index)
     cam = front_camera(ctx.vertices, 8)
     away = look_at(2 * cam.center - ctx.vertices.detach().double().mean(0).numpy(), cam.center, 8)
-    image = render_image(avatar.for_pose(ctx), away, ctx.vertices.detach(), body.faces,
-                         MARCH, background=(0.2, 0.4, 0.6), shell=shell)
+    image = render_image(
+        avatar.for_pose(ctx),
+        away,
+        ctx.vertices.detach(),
+        body.faces,
+        MARCH,
+        background=(0.2, 0.4, 0.6),
+        shell=shell,
+    )
     assert image.stats.field_evals == 0 and image.stats.rays == 0
     assert torch.equal(image.rgb, torch.tensor([0.2, 0.4, 0.6]).expand(8, 8, 3))
     assert (image.alpha == 0).all() and (image.depth == 0).all()
     # a training batch mixing rays that hit with rays that miss
     o_hit, d_hit = cam.pixel_rays()
     o_miss, d_miss = away.pixel_rays()
-    out = render_and_backprop(avatar, ctx, torch.cat([o_hit, o_miss]), torch.cat([d_hit, d_miss]),
-                              shell)
+    out = render_and_backprop(avatar, ctx, torch.cat([o_hit, o_miss]), torch.cat([d_hit, d_miss]), shell)
     n = len(o_hit)
     assert torch.equal(out.rgb[n:], torch.tensor([0.2, 0.4, 0.6]).expand(n, 3))
     assert (out.opacity[n:] == 0).all() and float(out.opacity[:n].max()) > 0.5
@@ -402,13 +424,11 @@ def camera_at(body, ctx, where: str, size: int):
 @pytest.mark.parametrize("where", ["inside", "surface_out", "surface_in"])
 def test_camera_inside_or_at_the_surface(body, avatar, where, path):
     ctx = avatar.pose_feature.context(np.zeros((24, 3)))
-    shell = ShellGeometry.build(ctx.vertices.detach(), body.faces, FIELD.shell_width,
-                                index=ctx.index)
+    shell = ShellGeometry.build(ctx.vertices.detach(), body.faces, FIELD.shell_width, index=ctx.index)
     cam = camera_at(body, ctx, where, 8)
     if path == "render_image":
         with torch.no_grad():
-            image = render_image(avatar.for_pose(ctx), cam, ctx.vertices, body.faces, MARCH,
-                                 shell=shell)
+            image = render_image(avatar.for_pose(ctx), cam, ctx.vertices, body.faces, MARCH, shell=shell)
         assert_finite(rgb=image.rgb, alpha=image.alpha, depth=image.depth)
         assert (image.alpha >= 0).all() and (image.alpha <= 1 + 1e-6).all()
         assert (image.rgb >= 0).all() and (image.rgb <= 1 + 1e-6).all()
@@ -423,6 +443,7 @@ def test_camera_inside_or_at_the_surface(body, avatar, where, path):
 
 
 # --- extreme joint angles -------------------------------------------------------------
+
 
 def extreme_pose(case: str) -> np.ndarray:
     if case in ("plus_pi", "minus_pi"):
@@ -440,8 +461,11 @@ def test_extreme_joint_angles(body, vocab, avatar, case):
     assert_finite(vertices=out.vertices, transforms=out.transforms, body_pose_grad=p.grad)
     v = out.vertices[0].detach()
     index = SurfaceIndex(v.double().numpy(), body.faces.numpy())
-    pts = (v[::23] + 0.02 * torch.randn(len(v[::23]), 3, generator=torch.Generator()
-                                         .manual_seed(0))).double().numpy()
+    pts = (
+        (v[::23] + 0.02 * torch.randn(len(v[::23]), 3, generator=torch.Generator().manual_seed(0)))
+        .double()
+        .numpy()
+    )
     proj = index.project(pts, body.vt.numpy(), body.ft.numpy(), body.weights.numpy())
     for name in ("distance", "closest", "uv", "weights"):
         assert np.isfinite(getattr(proj, name)).all(), name
@@ -456,8 +480,9 @@ SPECIAL = [0.0, 1e-8, -1e-8, PI - 1e-7, PI, -PI, 2 * PI, 1.0]
 
 
 @settings(max_examples=15, deadline=None)
-@given(kinds=st.lists(st.sampled_from(range(len(SPECIAL))), min_size=24, max_size=24),
-       seed=st.integers(0, 2**16))
+@given(
+    kinds=st.lists(st.sampled_from(range(len(SPECIAL))), min_size=24, max_size=24), seed=st.integers(0, 2**16)
+)
 def test_body_and_vocabulary_at_special_angles_on_random_axes(body, vocab, kinds, seed):
     angles = np.array([SPECIAL[k] for k in kinds])
     pose = random_axes(seed) * angles[:, None]
@@ -471,6 +496,7 @@ def test_body_and_vocabulary_at_special_angles_on_random_axes(body, vocab, kinds
 
 
 # --- textures -------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("encoder", ["small", "pyramid", "resnet34-scratch", "pass_through"])
 def test_all_zero_textures(body, vocab, encoder):
@@ -495,8 +521,7 @@ def test_all_zero_textures(body, vocab, encoder):
     else:
         check_field_and_render(field, pose)
     if encoder in ("small", "resnet34-scratch"):
-        grads = {n: p.grad for n, p in field.pose_feature.encoder.named_parameters()
-                 if p.grad is not None}
+        grads = {n: p.grad for n, p in field.pose_feature.encoder.named_parameters() if p.grad is not None}
         assert grads
         assert_finite(**grads)
 
@@ -555,20 +580,26 @@ def test_zero_coverage_for_a_part(body, vocab, encoder):
 
 
 def test_texture_map_seen_by_no_view(body):
-    texture, coverage = build_texture_map(FrontOnlyCapture(body), 0,
-                                          TexmapSettings(size=TEXTURE_SIZE), views=[])
+    texture, coverage = build_texture_map(
+        FrontOnlyCapture(body), 0, TexmapSettings(size=TEXTURE_SIZE), views=[]
+    )
     assert texture.shape == (TEXTURE_SIZE, TEXTURE_SIZE, 3) and texture.dtype == np.float32
     assert (texture == 0).all() and (coverage == 0).all()
 
 
 # --- float32 vs float64 ---------------------------------------------------------------
 
+
 @pytest.mark.parametrize("case", ["pi", "1e-8", "2pi", "limits_high"])
 def test_float32_and_float64_agree_at_extreme_poses(body, vocab, case):
-    pose = extreme_pose(case) if case == "limits_high" else \
-        uniform_pose({"pi": PI, "1e-8": 1e-8, "2pi": 2 * PI}[case])
-    textures = torch.rand(NUM_FRAMES, 3, TEXTURE_SIZE, TEXTURE_SIZE,
-                          generator=torch.Generator().manual_seed(3))
+    pose = (
+        extreme_pose(case)
+        if case == "limits_high"
+        else uniform_pose({"pi": PI, "1e-8": 1e-8, "2pi": 2 * PI}[case])
+    )
+    textures = torch.rand(
+        NUM_FRAMES, 3, TEXTURE_SIZE, TEXTURE_SIZE, generator=torch.Generator().manual_seed(3)
+    )
     field32 = make_field(body, vocab, textures, "pyramid")
     field64 = copy.deepcopy(field32).double()
     ctx32 = field32.pose_feature.context(pose)

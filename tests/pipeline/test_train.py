@@ -1,5 +1,6 @@
 """A tiny end-to-end run of the real pipeline: synth -> prepare -> train -> eval, plus
 resume after a simulated kill."""
+
 import json
 import subprocess
 import sys
@@ -34,8 +35,7 @@ def test_trainable_encoder_frames_keep_no_feature_maps(capture, tmp_path):
     holds none between steps (kept for every frame they exhausted 24 GB with
     resnet34-scratch); frames drawn again still train the encoder."""
     cap = open_capture(capture)
-    trainer = Trainer(cap, tiny_settings(encoder="small", iterations=8), tmp_path / "run",
-                      progress=False)
+    trainer = Trainer(cap, tiny_settings(encoder="small", iterations=8), tmp_path / "run", progress=False)
     encoder = trainer.model.pose_feature.encoder
     before = [p.detach().clone() for p in encoder.parameters()]
     drawn = []
@@ -45,8 +45,7 @@ def test_trainable_encoder_frames_keep_no_feature_maps(capture, tmp_path):
         assert all(fd.ctx.features is None for fd in trainer.frames.values())
         drawn.append(len(trainer.frames))
     assert drawn[-1] < 8  # 4 training frames: some were drawn again from the cache
-    assert any(not torch.equal(a, b.detach()) for a, b in zip(before, encoder.parameters(),
-                                                              strict=True))
+    assert any(not torch.equal(a, b.detach()) for a, b in zip(before, encoder.parameters(), strict=True))
 
 
 @pytest.fixture
@@ -88,15 +87,36 @@ def test_resume_after_kill_gives_the_same_weights(capture, tmp_path, one_thread)
 @pytest.mark.slow  # the command line end to end in subprocesses
 def test_train_and_eval_commands(capture, tmp_path):
     run = tmp_path / "run"
-    args = ["--set", "texture_size=64", "--set", "encoder=small", "--set", "num_keys=3",
-            "--set", "rays_per_batch=128", "--set", "field.hidden=32", "--set",
-            "coarse_samples=8", "--set", "fine_samples=4"]
-    proc = subprocess.run([TEXVOCAB, "train", str(capture), "--out", str(run), "--iterations",
-                           "3", *args], capture_output=True, text=True, timeout=300)
+    args = [
+        "--set",
+        "texture_size=64",
+        "--set",
+        "encoder=small",
+        "--set",
+        "num_keys=3",
+        "--set",
+        "rays_per_batch=128",
+        "--set",
+        "field.hidden=32",
+        "--set",
+        "coarse_samples=8",
+        "--set",
+        "fine_samples=4",
+    ]
+    proc = subprocess.run(
+        [TEXVOCAB, "train", str(capture), "--out", str(run), "--iterations", "3", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "step 3:" in proc.stdout and "train" in proc.stderr  # progress bar on stderr
-    proc = subprocess.run([TEXVOCAB, "eval", str(run / "checkpoint.pt"), str(capture),
-                           "--per-set", "1"], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [TEXVOCAB, "eval", str(run / "checkpoint.pt"), str(capture), "--per-set", "1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     report = json.loads((run / "eval" / "metrics.json").read_text())
     assert set(report["table"]) == {"training_poses", "novel_poses", "generated_novel_poses"}
@@ -107,8 +127,9 @@ def test_train_and_eval_commands(capture, tmp_path):
     # a checkpoint that is not one: one clear line
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a checkpoint")
-    proc = subprocess.run([TEXVOCAB, "eval", str(bad), str(capture)], capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run(
+        [TEXVOCAB, "eval", str(bad), str(capture)], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2 and proc.stderr.startswith("error: ") and "bad.pt" in proc.stderr
 
 

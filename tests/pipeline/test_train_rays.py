@@ -30,16 +30,55 @@ def test_residual_rays_match_the_marcher_for_fewer_evaluations(body):
     field = body["field"]
     with torch.no_grad():
         ref = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
-        marched = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
-                                     None, body["shell"], t_passing=t_pass)
-        resid = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
-                                   None, body["shell"], t_passing=t_pass, index=_index(body))
-        off = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos,
-                                 MARCH.replace(residual_rays=False), None,
-                                 body["shell"], t_passing=t_pass, index=_index(body))
-        hits = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
-                                  None, body["shell"], t_passing=t_pass, index=_index(body),
-                                  residual_misses=False)
+        marched = render_rays_banded(
+            field, field.beta, o, d, near, far, t_band, cos, MARCH, None, body["shell"], t_passing=t_pass
+        )
+        resid = render_rays_banded(
+            field,
+            field.beta,
+            o,
+            d,
+            near,
+            far,
+            t_band,
+            cos,
+            MARCH,
+            None,
+            body["shell"],
+            t_passing=t_pass,
+            index=_index(body),
+        )
+        off = render_rays_banded(
+            field,
+            field.beta,
+            o,
+            d,
+            near,
+            far,
+            t_band,
+            cos,
+            MARCH.replace(residual_rays=False),
+            None,
+            body["shell"],
+            t_passing=t_pass,
+            index=_index(body),
+        )
+        hits = render_rays_banded(
+            field,
+            field.beta,
+            o,
+            d,
+            near,
+            far,
+            t_band,
+            cos,
+            MARCH,
+            None,
+            body["shell"],
+            t_passing=t_pass,
+            index=_index(body),
+            residual_misses=False,
+        )
     assert 0 < hits.residual < resid.residual  # misses are marched, the hits are not
     assert resid.field_evals < hits.field_evals < marched.field_evals
     assert marched.residual == 0 and off.residual == 0
@@ -55,15 +94,27 @@ def test_residual_rays_carry_gradients_to_the_colour_and_beta(body):
     colour's gradient matches the marcher's, and β gets one."""
     o, d, near, far, t_band, cos, t_pass = rays_of(body, body["camera"])
     keep = torch.isfinite(t_pass[:, 0])
-    o, d, near, far, t_band, cos, t_pass = (x[keep] for x in (o, d, near, far, t_band, cos,
-                                                              t_pass))
+    o, d, near, far, t_band, cos, t_pass = (x[keep] for x in (o, d, near, far, t_band, cos, t_pass))
     field = body["field"]
     grads = {}
     for name, index in (("residual", _index(body)), ("marched", None)):
         field.albedo = field.albedo.detach().clone().requires_grad_(True)
         field.beta = field.beta.detach().clone().requires_grad_(True)
-        out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
-                                 body["shell"], t_passing=t_pass, index=index)
+        out = render_rays_banded(
+            field,
+            field.beta,
+            o,
+            d,
+            near,
+            far,
+            t_band,
+            cos,
+            MARCH,
+            None,
+            body["shell"],
+            t_passing=t_pass,
+            index=index,
+        )
         out.rgb.sum().backward()
         grads[name] = (field.albedo.grad.clone(), field.beta.grad.clone(), out.residual)
     field.albedo, field.beta = field.albedo.detach(), field.beta.detach()
@@ -82,14 +133,15 @@ def test_per_ray_origins_give_what_one_origin_gives(body):
         t_hit = t_band[band]
         sdf0, rgb0 = field.sdf_rgb(o[band] + t_hit[:, None] * d[band], d[band])
         one = newton_band(field, o[0], d[band], t_hit, cos[band], sdf0, rgb0, field.beta, MARCH)
-        each = newton_band(field, o[band], d[band], t_hit, cos[band], sdf0, rgb0, field.beta,
-                           MARCH)
+        each = newton_band(field, o[band], d[band], t_hit, cos[band], sdf0, rgb0, field.beta, MARCH)
         probes = torch.cat([t_hit[:, None], torch.full_like(t_hit, torch.inf)[:, None]], 1)
         sdfs = torch.cat([sdf0[:, None], torch.full_like(sdf0, torch.inf)[:, None]], 1)
-        r_one = render_residual(field, _index(body), o[0], d[band], near[band], far[band],
-                                probes, sdfs, float(field.beta), MARCH)
-        r_each = render_residual(field, _index(body), o[band], d[band], near[band], far[band],
-                                 probes, sdfs, field.beta, MARCH)
+        r_one = render_residual(
+            field, _index(body), o[0], d[band], near[band], far[band], probes, sdfs, float(field.beta), MARCH
+        )
+        r_each = render_residual(
+            field, _index(body), o[band], d[band], near[band], far[band], probes, sdfs, field.beta, MARCH
+        )
     assert torch.equal(o[band], o[0].expand(len(band), 3))  # one camera
     for a, b in zip(one[:4] + r_one[:4], each[:4] + r_each[:4], strict=True):
         assert torch.allclose(a.float(), b.float(), atol=1e-6)
@@ -106,13 +158,13 @@ def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):
         sdf0, rgb0 = field.sdf_rgb(o + t_band[:, None] * d, d)
         runs = {}
         for m in (MARCH, OLD_BAND):
-            out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, m, None,
-                                     body["shell"])
-            ok = (newton_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m)
-                  if m.band_newton else
-                  sample_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m))[3]
-            rest = render_rays(field, o[~ok], d[~ok], near[~ok], far[~ok], m, None,
-                               body["shell"])
+            out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, m, None, body["shell"])
+            ok = (
+                newton_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m)
+                if m.band_newton
+                else sample_band(field, o, d, t_band, cos, sdf0, rgb0, field.beta, m)
+            )[3]
+            rest = render_rays(field, o[~ok], d[~ok], near[~ok], far[~ok], m, None, body["shell"])
             per_ray = 3 if m.band_newton else 1 + m.band_samples
             assert out.banded == int(ok.sum()) > 0.8 * len(o)
             assert out.field_evals == per_ray * len(o) + rest.field_evals
@@ -121,12 +173,18 @@ def test_newton_band_rays_take_three_evaluations_the_old_band_five(body):
     assert not torch.equal(runs[True].rgb, runs[False].rgb)
 
 
-@pytest.mark.parametrize("knobs", [{}, {"train_residual": "hits"}, {"train_residual": "off"},
-                                   {"train_residual": "off", "train_band_newton": False}])
+@pytest.mark.parametrize(
+    "knobs",
+    [
+        {},
+        {"train_residual": "hits"},
+        {"train_residual": "off"},
+        {"train_residual": "off", "train_band_newton": False},
+    ],
+)
 def test_training_uses_residual_and_newton_rays_by_their_knobs(capture, tmp_path, knobs):
     cap = open_capture(capture)
-    trainer = Trainer(cap, tiny_settings(iterations=3, **knobs), tmp_path / "run",
-                      progress=False)
+    trainer = Trainer(cap, tiny_settings(iterations=3, **knobs), tmp_path / "run", progress=False)
     m = trainer.march
     assert m.residual_rays == (knobs.get("train_residual", "all") != "off")
     assert m.band_newton == knobs.get("train_band_newton", True)
@@ -159,8 +217,12 @@ def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):
     cap = open_capture(capture)
     shells = {}
     for voxel in (0.01, 0.015):
-        trainer = Trainer(cap, tiny_settings(iterations=1, train_shell_voxel=voxel),
-                          tmp_path / f"run{voxel}", progress=False)
+        trainer = Trainer(
+            cap,
+            tiny_settings(iterations=1, train_shell_voxel=voxel),
+            tmp_path / f"run{voxel}",
+            progress=False,
+        )
         trainer.run()
         (fd,) = trainer.frames.values()
         shells[voxel] = fd.shell
@@ -170,7 +232,7 @@ def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):
     idx = torch.nonzero(fine.occupied)
     centres = torch.from_numpy(fine.origin) + (idx + 0.5) * 0.01
     assert coarse.contains(centres.float()).float().mean() > 0.99
-    assert coarse.occupied.sum() * 0.015 ** 3 > fine.occupied.sum() * 0.01 ** 3
+    assert coarse.occupied.sum() * 0.015**3 > fine.occupied.sum() * 0.01**3
     old = flat_dict(Settings())
     del old["train_shell_voxel"]
     assert Settings.from_dict(old).train.shell_voxel == 0.01  # runs before the setting

@@ -1,5 +1,6 @@
 """bench/ablation.py: run names shared across groups, per-variant means over seeds and
 paired differences against the reference from the same seeds and images."""
+
 import importlib.util
 from pathlib import Path
 
@@ -16,9 +17,14 @@ def _load():
 
 
 def _result(run, seed, psnr, sps=1.0):
-    return {"run": run, "seed": seed, "steps": 7, "seconds_per_step": sps, "kid": 0.01,
-            "per_image": {"psnr_bbox": psnr, "ssim_bbox": [0.5] * len(psnr),
-                          "lpips": [None] * len(psnr)}}
+    return {
+        "run": run,
+        "seed": seed,
+        "steps": 7,
+        "seconds_per_step": sps,
+        "kid": 0.01,
+        "per_image": {"psnr_bbox": psnr, "ssim_bbox": [0.5] * len(psnr), "lpips": [None] * len(psnr)},
+    }
 
 
 def test_identical_settings_share_one_run_across_groups():
@@ -33,8 +39,7 @@ def test_identical_settings_share_one_run_across_groups():
 def test_report_pairs_seeds_and_images():
     bench = _load()
     runs = {"ref": "a", "other": "b"}
-    psnr = {("a", 0): [30.0, 31.0], ("b", 0): [29.0, 29.5],
-            ("a", 1): [28.0, 28.0], ("b", 1): [28.5, 28.5]}
+    psnr = {("a", 0): [30.0, 31.0], ("b", 0): [29.0, 29.5], ("a", 1): [28.0, 28.0], ("b", 1): [28.5, 28.5]}
     results = {k: _result(k[0], k[1], v) for k, v in psnr.items()}
     md = "\n".join(bench.group_report("g", runs, results))
     assert "| ref | 29.2500 (2.5000) |" in md  # seed means 30.5 and 28.0
@@ -49,12 +54,13 @@ def test_the_evaluation_preset_does_not_change_training_unless_asked():
     """Runs train with their own settings and are evaluated at the preset's render knobs;
     --train-with-preset trains at the preset's knobs as earlier runs did."""
     mod = _load()
-    job = {"preset": "fast", "iterations": 7, "overrides": ["train_coarse_samples=9"],
-           "seed": 3}
+    job = {"preset": "fast", "iterations": 7, "overrides": ["train_coarse_samples=9"], "seed": 3}
     trained, shown = mod.run_settings(job)
-    assert (trained.render.coarse_samples, trained.render.fine_samples,
-            trained.train.coarse_samples) == (
-        18, 8, 9)
+    assert (trained.render.coarse_samples, trained.render.fine_samples, trained.train.coarse_samples) == (
+        18,
+        8,
+        9,
+    )
     assert (shown.render.coarse_samples, shown.render.fine_samples, shown.train.seed) == (6, 2, 3)
     old, _ = mod.run_settings({**job, "train_with_preset": True})
     assert (old.render.coarse_samples, old.render.fine_samples) == (6, 2)

@@ -1,5 +1,6 @@
 """bench/real_capture.py end to end on a HumanNeRF-layout stand-in: the body against the
 masks, prepare, a time-budgeted train, eval of the held-out frames, the report."""
+
 import json
 import subprocess
 import sys
@@ -19,12 +20,34 @@ def test_real_capture_bench_reports_the_fit_and_the_held_out_frames(tmp_path):
     cap = write_standin(tmp_path / "subject", body, make_truth(body), pelvis_offset=(0, -0.02, 0))
     before = sorted(p.relative_to(cap) for p in cap.rglob("*"))
     out = tmp_path / "bench"
-    run = subprocess.run([sys.executable, str(ROOT / "bench" / "real_capture.py"), str(cap),
-                          "--out", str(out), "--minutes", "0.05", "--fit-every", "3",
-                          "--coverage-every", "5", "--set", "vocab.encoder=small",
-                          "--set", "field.hidden=32", "--set", "data.texture_size=64",
-                          "--set", "vocab.num_keys=4", "--set", "vocab.k=2"],
-                         capture_output=True, text=True, timeout=600)
+    run = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "bench" / "real_capture.py"),
+            str(cap),
+            "--out",
+            str(out),
+            "--minutes",
+            "0.05",
+            "--fit-every",
+            "3",
+            "--coverage-every",
+            "5",
+            "--set",
+            "vocab.encoder=small",
+            "--set",
+            "field.hidden=32",
+            "--set",
+            "data.texture_size=64",
+            "--set",
+            "vocab.num_keys=4",
+            "--set",
+            "vocab.k=2",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     last = run.stdout.strip().splitlines()[-1]
     assert last.startswith("summary: novel_psnr_bbox=") and "fit_iou_after=" in last

@@ -1,5 +1,6 @@
 """texvocab/blas.py: numpy's BLAS pool is found and limited (in a fresh interpreter, so the
 limit does not leak into other tests)."""
+
 from __future__ import annotations
 
 import os
@@ -18,10 +19,14 @@ print(before, blas_threads())
 
 
 def test_limit_blas_threads_limits_numpys_openblas():
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
-    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True,
-                         text=True, check=True).stdout.split()
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    }
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
     before, after = int(out[0]), int(out[1])
     assert before >= 1, "numpy's BLAS library was not found"
     assert after == 1
@@ -39,21 +44,30 @@ print(int(took), os.environ.get("OPENBLAS_NUM_THREADS"), blas_threads())
 
 
 def _clean_env(**extra) -> dict:
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")
+    }
     env.update(extra)
     return env
 
 
 def test_budget_sets_one_thread_here_and_for_child_processes():
-    out = subprocess.run([sys.executable, "-c", BUDGET], env=_clean_env(), capture_output=True,
-                         text=True, check=True).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", BUDGET], env=_clean_env(), capture_output=True, text=True, check=True
+    ).stdout.split()
     assert out == ["1", "1", "1"]
 
 
 def test_a_users_blas_setting_wins():
-    out = subprocess.run([sys.executable, "-c", BUDGET], env=_clean_env(OPENBLAS_NUM_THREADS="2"),
-                         capture_output=True, text=True, check=True).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", BUDGET],
+        env=_clean_env(OPENBLAS_NUM_THREADS="2"),
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
     assert out == ["0", "2", "2"]
 
 

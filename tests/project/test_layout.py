@@ -1,5 +1,6 @@
 """The package layout: layers in data-flow order (import-linter), a light top-level
 import, the public API the viewer uses, the paper's equation numbering."""
+
 import ast
 import re
 import subprocess
@@ -18,8 +19,7 @@ def test_import_contracts_hold():
     only texvocab.pipeline, in layers of its own, and below the command line; texvocab.render
     in layers of its own, without cycles. lint-imports runs in this interpreter, which sees
     the packages as installed here."""
-    cmd = [sys.executable, "-c", "from importlinter.cli import lint_imports_command as c; c()",
-           "--no-cache"]
+    cmd = [sys.executable, "-c", "from importlinter.cli import lint_imports_command as c; c()", "--no-cache"]
     r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
     contracts = PYPROJECT["tool"]["importlinter"]["contracts"]
@@ -28,8 +28,9 @@ def test_import_contracts_hold():
 
 def test_contract_lists_every_subpackage():
     layers = PYPROJECT["tool"]["importlinter"]["contracts"][0]["layers"]
-    subpackages = {f"texvocab.{p.name}" for p in (ROOT / "texvocab").iterdir()
-                   if (p / "__init__.py").is_file()}
+    subpackages = {
+        f"texvocab.{p.name}" for p in (ROOT / "texvocab").iterdir() if (p / "__init__.py").is_file()
+    }
     assert subpackages == {name for name in layers if name != "texvocab.errors"}
 
 
@@ -42,20 +43,27 @@ def test_packages_listed_for_the_wheel_are_the_folders():
     """Every folder with an __init__.py under texvocab/ and app/ (installed as
     texvocab_viewer) is listed, and so are the mapped folders (shaders/, assets_spec/)."""
     setup = PYPROJECT["tool"]["setuptools"]
-    folders = {"texvocab": ROOT / "texvocab",
-               "texvocab_viewer": ROOT / setup["package-dir"]["texvocab_viewer"]}
-    found = {".".join((name, *p.parent.relative_to(folder).parts))
-             for name, folder in folders.items() for p in folder.rglob("__init__.py")
-             if "__pycache__" not in p.parts}
+    folders = {
+        "texvocab": ROOT / "texvocab",
+        "texvocab_viewer": ROOT / setup["package-dir"]["texvocab_viewer"],
+    }
+    found = {
+        ".".join((name, *p.parent.relative_to(folder).parts))
+        for name, folder in folders.items()
+        for p in folder.rglob("__init__.py")
+        if "__pycache__" not in p.parts
+    }
     mapped = set(setup["package-dir"])
     assert "app" not in setup["packages"]
     assert set(setup["packages"]) == found | mapped, set(setup["packages"]) ^ (found | mapped)
 
 
 def test_importing_texvocab_and_its_public_api_loads_neither_torch_nor_gl():
-    code = ("import sys, texvocab, texvocab.pipeline, texvocab.errors\n"
-            "heavy = [m for m in ('torch', 'moderngl', 'OpenGL', 'pyrender', 'imgui_bundle')"
-            " if m in sys.modules]\nprint(','.join(heavy))")
+    code = (
+        "import sys, texvocab, texvocab.pipeline, texvocab.errors\n"
+        "heavy = [m for m in ('torch', 'moderngl', 'OpenGL', 'pyrender', 'imgui_bundle')"
+        " if m in sys.modules]\nprint(','.join(heavy))"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == ""
@@ -99,7 +107,7 @@ def test_the_manuals_equation_map_names_functions_that_exist():
     import importlib
 
     text = (ROOT / "docs" / "method.md").read_text()
-    table = text[text.index("## The paper's equations"):].split("\n## ")[0]
+    table = text[text.index("## The paper's equations") :].split("\n## ")[0]
     refs = re.findall(r"`(texvocab\.[\w.]+)`", table)
     assert len(refs) >= 10
     for ref in refs:
@@ -107,7 +115,7 @@ def test_the_manuals_equation_map_names_functions_that_exist():
         cut = 1
         while cut < len(parts):
             try:
-                importlib.import_module(".".join(parts[:cut + 1]))
+                importlib.import_module(".".join(parts[: cut + 1]))
             except ImportError:
                 break
             cut += 1

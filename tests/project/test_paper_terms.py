@@ -1,6 +1,7 @@
 """The paper's perceptual term runs (and changes the field's gradient), the offline frozen
 Inception encoder, cosine view weighting of texture maps, adaptive keys per part and the
 channels-last feature sampling."""
+
 import dataclasses
 import logging
 
@@ -28,12 +29,12 @@ from texvocab.pipeline.train import Trainer
 def _field_grads(trainer, loss):
     params = [p for p in trainer.model.parameters() if p.requires_grad]
     grads = torch.autograd.grad(loss, params, retain_graph=True, allow_unused=True)
-    return torch.cat([(torch.zeros_like(p) if g is None else g).reshape(-1)
-                      for p, g in zip(params, grads, strict=True)])
+    return torch.cat(
+        [(torch.zeros_like(p) if g is None else g).reshape(-1) for p, g in zip(params, grads, strict=True)]
+    )
 
 
-def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, tmp_path,
-                                                                      empty_torch_home):
+def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, tmp_path, empty_torch_home):
     cap = open_capture(capture)
     s = tiny_settings(perceptual="inception", lambda_perceptual=1.0, patch_size=16)
     trainer = Trainer(cap, s, tmp_path / "run", progress=False)
@@ -47,15 +48,15 @@ def test_perceptual_term_changes_the_field_gradient_only_when_weighted(capture, 
     trainer.gen.set_state(state)  # the same frame, views, patch and rays
     trainer.s = dataclasses.replace(s, train=dataclasses.replace(s.train, lambda_perceptual=0.0))
     off = trainer.loss_terms()
-    assert torch.allclose(off["color"], on["color"]) and torch.allclose(off["perceptual"],
-                                                                        on["perceptual"])
+    assert torch.allclose(off["color"], on["color"]) and torch.allclose(off["perceptual"], on["perceptual"])
     g_off = _field_grads(trainer, off["loss"])
     assert torch.allclose(g_on - g_off, g_perc, atol=1e-5 * float(g_perc.abs().max()) + 1e-9)
     assert (g_on - g_off).abs().max() > 0.1 * g_perc.abs().max()
 
 
-def test_perceptual_choice_is_logged_and_zero_weight_turns_it_off(capture, tmp_path,
-                                                                 empty_torch_home, caplog):
+def test_perceptual_choice_is_logged_and_zero_weight_turns_it_off(
+    capture, tmp_path, empty_torch_home, caplog
+):
     cap = open_capture(capture)
     with caplog.at_level(logging.INFO, logger="texvocab"):
         t = Trainer(cap, tiny_settings(), tmp_path / "a", progress=False)  # auto, no VGG
@@ -69,8 +70,7 @@ def test_perceptual_choice_is_logged_and_zero_weight_turns_it_off(capture, tmp_p
         Trainer(cap, tiny_settings(perceptual="lpips-vgg"), tmp_path / "c", progress=False)
 
 
-def test_auto_perceptual_is_lpips_vgg_when_its_weights_are_present(capture, tmp_path,
-                                                                  monkeypatch, caplog):
+def test_auto_perceptual_is_lpips_vgg_when_its_weights_are_present(capture, tmp_path, monkeypatch, caplog):
     from texvocab.metrics.perceptual import LPIPS, _heads_layout, _vgg16_layout
 
     g = torch.Generator().manual_seed(0)
@@ -78,13 +78,14 @@ def test_auto_perceptual_is_lpips_vgg_when_its_weights_are_present(capture, tmp_
     home = torch_home_with(tmp_path / "home", {"vgg16-397923af.pth": vgg})
     pkg = tmp_path / "lpips"
     (pkg / "weights" / "v0.1").mkdir(parents=True)
-    torch.save({k: torch.rand(shape, generator=g) for k, shape in _heads_layout().items()},
-               pkg / "weights" / "v0.1" / "vgg.pth")
+    torch.save(
+        {k: torch.rand(shape, generator=g) for k, shape in _heads_layout().items()},
+        pkg / "weights" / "v0.1" / "vgg.pth",
+    )
     monkeypatch.setenv("TORCH_HOME", str(home))
     monkeypatch.setattr(lpips_module, "package_dir", lambda name: pkg if name == "lpips" else None)
     with caplog.at_level(logging.INFO, logger="texvocab"):
-        t = Trainer(open_capture(capture), tiny_settings(patch_size=16), tmp_path / "run",
-                    progress=False)
+        t = Trainer(open_capture(capture), tiny_settings(patch_size=16), tmp_path / "run", progress=False)
     assert isinstance(t.perceptual, LPIPS)
     assert any("LPIPS-VGG (the paper's)" in r.getMessage() for r in caplog.records)
     assert float(t.loss_terms()["perceptual"].detach()) > 0
@@ -95,8 +96,10 @@ def test_inception_perceptual_is_zero_for_equal_images_and_grows_with_noise():
     g = torch.Generator().manual_seed(0)
     x = torch.rand(2, 3, 24, 24, generator=g)
     assert torch.allclose(net(x, x), torch.zeros(2), atol=1e-6)
-    d = [float(net((x + a * torch.randn(x.shape, generator=g)).clamp(0, 1), x).mean())
-         for a in (0.02, 0.1, 0.3)]
+    d = [
+        float(net((x + a * torch.randn(x.shape, generator=g)).clamp(0, 1), x).mean())
+        for a in (0.02, 0.1, 0.3)
+    ]
     assert 0 < d[0] < d[1] < d[2] <= 4
     with pytest.raises(ValueError, match="at least"):
         net(x[..., :10, :10], x[..., :10, :10])
@@ -125,8 +128,13 @@ def test_sample_maps_equals_grid_sample_for_channels_last_and_plain_maps():
     g = torch.Generator().manual_seed(0)
     maps = torch.randn(2, 7, 9, 13, generator=g, dtype=torch.float64, requires_grad=True)
     uv = torch.rand(300, 2, generator=g, dtype=torch.float64) * 1.4 - 0.2  # incl. outside
-    ref = F.grid_sample(maps[:1], uv_to_grid(uv).view(1, 1, -1, 2), mode="bilinear",
-                        padding_mode="border", align_corners=False)[0, :, 0].T
+    ref = F.grid_sample(
+        maps[:1],
+        uv_to_grid(uv).view(1, 1, -1, 2),
+        mode="bilinear",
+        padding_mode="border",
+        align_corners=False,
+    )[0, :, 0].T
     for m in (maps[0], FeatureMaps.from_stack(maps).map(0)):
         got = sample_maps(m, uv)
         assert torch.allclose(got, ref, atol=1e-12)
@@ -144,8 +152,7 @@ def test_cosine_view_weighting_favours_head_on_views(capture, tmp_path):
     diff = np.abs(mean[0] - cos[0]).max(-1)
     assert diff[many].max() > 1e-3 and diff[mean[1] == 1].max() < 1e-6
     s = DataSettings(view_weighting="cosine")
-    assert cache_dir(cap, TexmapSettings(view_weighting="cosine")) != cache_dir(
-        cap, TexmapSettings())
+    assert cache_dir(cap, TexmapSettings(view_weighting="cosine")) != cache_dir(cap, TexmapSettings())
     with pytest.raises(TexvocabError, match="view_weighting"):
         dataclasses.replace(s, view_weighting="max")
 
@@ -172,7 +179,6 @@ def test_adaptive_keys_stop_when_every_pose_is_within_d_min():
 
 def test_settings_absent_from_an_old_checkpoint_keep_their_old_meaning():
     old = Settings.from_dict({})  # a checkpoint written before these settings existed
-    assert (old.train.perceptual, old.data.view_weighting, old.vocab.min_key_distance) == (
-        "off", "mean", 0.0)
+    assert (old.train.perceptual, old.data.view_weighting, old.vocab.min_key_distance) == ("off", "mean", 0.0)
     assert Settings().train.perceptual == "auto"  # today's default differs
     assert Settings.from_dict(Settings().to_dict()) == Settings()

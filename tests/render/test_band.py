@@ -19,14 +19,26 @@ def test_banded_rays_match_the_shell_marcher_for_far_fewer_evaluations(body):
     field = body["field"]
     with torch.no_grad():
         ref = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
-        out = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
-                                 body["shell"], t_passing=t_pass)
+        out = render_rays_banded(
+            field, field.beta, o, d, near, far, t_band, cos, MARCH, None, body["shell"], t_passing=t_pass
+        )
     assert out.banded > 0.5 * int(torch.isfinite(t_band).sum()) > 0
     assert psnr(out.rgb, ref.rgb) > 40
     assert (out.opacity - ref.opacity).abs().max() < 0.05
     assert out.field_evals < 0.5 * ref.field_evals
-    shell_only = render_rays_banded(field, field.beta, o, d, near, far, torch.full_like(t_band,
-                                    torch.inf), cos, MARCH, None, body["shell"])
+    shell_only = render_rays_banded(
+        field,
+        field.beta,
+        o,
+        d,
+        near,
+        far,
+        torch.full_like(t_band, torch.inf),
+        cos,
+        MARCH,
+        None,
+        body["shell"],
+    )
     assert shell_only.banded == 0 and shell_only.field_evals == ref.field_evals
 
 
@@ -43,8 +55,7 @@ def test_banded_gradients_reach_the_colour_and_beta_like_the_marcher(body, newto
         field.albedo = field.albedo.detach().clone().requires_grad_(True)
         field.beta = field.beta.detach().clone().requires_grad_(True)
         t = t_band if name == "band" else torch.full_like(t_band, torch.inf)
-        out = render_rays_banded(field, field.beta, o, d, near, far, t, cos, march, None,
-                                 body["shell"])
+        out = render_rays_banded(field, field.beta, o, d, near, far, t, cos, march, None, body["shell"])
         (out.rgb.sum() + out.rgb[:, 0].pow(2).sum()).backward()
         grads[name] = (field.albedo.grad.clone(), field.beta.grad.clone())
     field.albedo, field.beta = field.albedo.detach(), field.beta.detach()
@@ -65,15 +76,37 @@ def test_passing_rays_cost_two_probes_and_show_the_background(body):
     idx = torch.nonzero(passing).squeeze(1)
     bg = (0.1, 0.2, 0.3)
     with torch.no_grad():
-        out = render_rays_banded(field, field.beta, o[idx], d[idx], near[idx], far[idx],
-                                 t_band[idx], cos[idx], MARCH, None, body["shell"], bg, t_pass[idx])
+        out = render_rays_banded(
+            field,
+            field.beta,
+            o[idx],
+            d[idx],
+            near[idx],
+            far[idx],
+            t_band[idx],
+            cos[idx],
+            MARCH,
+            None,
+            body["shell"],
+            bg,
+            t_pass[idx],
+        )
         probe = field.sdf((o[idx, None] + t_pass[idx, :, None] * d[idx, None]).reshape(-1, 3))
     far_away = probe.view(-1, 2).min(1).values > MARCH.miss_margin * float(field.beta)
     assert 0 < int(far_away.sum()) < len(idx)  # both kinds occur on this view
     assert torch.allclose(out.rgb[far_away], torch.tensor(bg).expand(int(far_away.sum()), 3))
     assert (out.opacity[far_away] == 0).all()
-    marched = render_rays(field, o[idx][~far_away], d[idx][~far_away], near[idx][~far_away],
-                          far[idx][~far_away], MARCH, None, body["shell"], bg)
+    marched = render_rays(
+        field,
+        o[idx][~far_away],
+        d[idx][~far_away],
+        near[idx][~far_away],
+        far[idx][~far_away],
+        MARCH,
+        None,
+        body["shell"],
+        bg,
+    )
     assert out.field_evals == 2 * len(idx) + marched.field_evals
     assert torch.allclose(out.rgb[~far_away], marched.rgb, atol=1e-6)
 
@@ -87,15 +120,29 @@ def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(
     o, d, near, far, t_band, cos = (x[idx] for x in (o, d, near, far, t_band, cos))
     field = body["field"]
     with torch.no_grad():
-        alone = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
-                                   body["shell"])
+        alone = render_rays_banded(
+            field, field.beta, o, d, near, far, t_band, cos, MARCH, None, body["shell"]
+        )
         # passed surface far away: probes in front of the body (the ray's shell entry)
         far_probes = torch.stack([near, near], 1)
-        far_away = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH,
-                                      None, body["shell"], t_passing=far_probes)
+        far_away = render_rays_banded(
+            field, field.beta, o, d, near, far, t_band, cos, MARCH, None, body["shell"], t_passing=far_probes
+        )
         # a close passed surface: probes on the surface itself
-        close = render_rays_banded(field, field.beta, o, d, near, far, t_band, cos, MARCH, None,
-                                   body["shell"], t_passing=torch.stack([t_band, t_band], 1))
+        close = render_rays_banded(
+            field,
+            field.beta,
+            o,
+            d,
+            near,
+            far,
+            t_band,
+            cos,
+            MARCH,
+            None,
+            body["shell"],
+            t_passing=torch.stack([t_band, t_band], 1),
+        )
         marched = render_rays(field, o, d, near, far, MARCH, None, body["shell"])
         entry = field.sdf(o + near[:, None] * d)
     assert (entry > MARCH.miss_margin * float(field.beta)).all()
@@ -110,8 +157,7 @@ def test_band_rays_behind_a_passed_surface_take_the_band_only_when_it_reads_far(
 @pytest.mark.parametrize("guide", ["raster", "shell"])
 def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path, guide):
     cap = open_capture(capture)
-    trainer = Trainer(cap, tiny_settings(train_guide=guide, iterations=3), tmp_path / "run",
-                      progress=False)
+    trainer = Trainer(cap, tiny_settings(train_guide=guide, iterations=3), tmp_path / "run", progress=False)
     before = [p.detach().clone() for p in trainer.model.parameters() if p.requires_grad]
     logs = trainer.run()
     banded = sum(r["banded"] for r in logs)
@@ -123,8 +169,7 @@ def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path,
         for vd in fd.views.values():  # rays outside the mask never take the band
             assert not (torch.isfinite(vd.t_band) & ~vd.mask).any()
             # inside the mask only band rays (behind an occlusion edge) get passing probes
-            assert not (torch.isfinite(vd.t_passing[:, 0]) & vd.mask
-                        & ~torch.isfinite(vd.t_band)).any()
+            assert not (torch.isfinite(vd.t_passing[:, 0]) & vd.mask & ~torch.isfinite(vd.t_band)).any()
             if guide == "shell":
                 assert not torch.isfinite(vd.t_band).any()
 
@@ -143,8 +188,11 @@ def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
         return Settings(train=TrainSettings(**kw))
 
     assert march_settings(Settings(), training=True).coarse_samples == 9  # the default
-    assert march_settings(train(coarse_samples=None), training=True).coarse_samples \
-        == Settings().render.coarse_samples == 18  # none: the render's coarse_samples
+    assert (
+        march_settings(train(coarse_samples=None), training=True).coarse_samples
+        == Settings().render.coarse_samples
+        == 18
+    )  # none: the render's coarse_samples
     assert march_settings(train(coarse_samples=9), training=True).coarse_samples == 9
     assert march_settings(train(coarse_samples=9)).coarse_samples == 18  # rendering
     del old["train_coarse_samples"]  # written before the setting: trained at coarse_samples

@@ -16,15 +16,19 @@ def density(s: torch.Tensor, beta: float) -> torch.Tensor:
     return torch.where(s >= 0, 0.5 * torch.exp(-s / beta), 1 - 0.5 * torch.exp(s / beta)) / beta
 
 
-@pytest.mark.parametrize("s_a,s_b", [(0.01, -0.01), (0.004, 0.001), (-0.002, -0.02),
-                                     (0.003, 0.003), (-0.005, 0.006)])
+@pytest.mark.parametrize(
+    "s_a,s_b", [(0.01, -0.01), (0.004, 0.001), (-0.002, -0.02), (0.003, 0.003), (-0.005, 0.006)]
+)
 def test_interval_optical_depth_is_the_integral_of_a_linear_sdf(s_a, s_b):
     beta, length = 0.002, 0.013
     x = (torch.arange(200_000, dtype=torch.float64) + 0.5) / 200_000
     riemann = density(s_a + (s_b - s_a) * x, beta).mean() * length
-    got = interval_optical_depth(torch.tensor([s_a], dtype=torch.float64),
-                                 torch.tensor([s_b], dtype=torch.float64),
-                                 torch.tensor([length], dtype=torch.float64), beta)
+    got = interval_optical_depth(
+        torch.tensor([s_a], dtype=torch.float64),
+        torch.tensor([s_b], dtype=torch.float64),
+        torch.tensor([length], dtype=torch.float64),
+        beta,
+    )
     assert float(got) == pytest.approx(float(riemann), rel=1e-6)
 
 
@@ -80,8 +84,9 @@ def test_guided_matches_the_shell_marcher_with_fewer_evaluations(body):
 
 def test_guided_rays_that_miss_everything_cost_nothing(body):
     bg = (0.2, 0.4, 0.6)
-    result = render_image(body["field"], looking_away(body["camera"]), body["v"], body["f"],
-                          GUIDED, background=bg)
+    result = render_image(
+        body["field"], looking_away(body["camera"]), body["v"], body["f"], GUIDED, background=bg
+    )
     assert result.stats.field_evals == 0
     assert torch.equal(result.rgb, torch.tensor(bg).expand(64, 64, 3))
 
@@ -106,8 +111,7 @@ def test_guided_camera_inside_the_body_is_finite(body, where):
     # the viewer's progressive levels (preview first, the shell built on demand) too
     from texvocab.render import progressive_render
 
-    levels = list(progressive_render(body["field"], cam, v, f, GUIDED,
-                                     shell=lambda: body["shell"]))
+    levels = list(progressive_render(body["field"], cam, v, f, GUIDED, shell=lambda: body["shell"]))
     assert [lv for lv, _, _ in levels] == [8, 4, 2, 1]
     assert torch.allclose(levels[-1][1], result.rgb, atol=1e-5)
     assert all(torch.isfinite(img).all() for _, img, _ in levels)
@@ -117,16 +121,18 @@ def test_guided_progressive_levels_of_rays_that_all_miss(body):
     from texvocab.render import progressive_render
 
     bg = (0.2, 0.4, 0.6)
-    levels = list(progressive_render(body["field"], looking_away(body["camera"]), body["v"],
-                                     body["f"], GUIDED, background=bg))
+    levels = list(
+        progressive_render(
+            body["field"], looking_away(body["camera"]), body["v"], body["f"], GUIDED, background=bg
+        )
+    )
     assert [lv for lv, _, _ in levels] == [8, 4, 2, 1]
     assert torch.equal(levels[-1][1], torch.tensor(bg).expand(64, 64, 3))
 
 
 def test_unknown_guide_is_refused(body):
     with pytest.raises(ValueError, match="guide"):
-        render_image(body["field"], body["camera"], body["v"], body["f"],
-                     SHELL.replace(guide="mesh"))
+        render_image(body["field"], body["camera"], body["v"], body["f"], SHELL.replace(guide="mesh"))
 
 
 def test_guide_is_a_render_knob_that_training_never_uses():
@@ -151,24 +157,31 @@ def test_a_one_point_field_call_works(body):
     assert torch.equal(rgb, rgb2)
 
 
-@pytest.mark.parametrize("knob,value", [("band_samples", 6), ("band_spacing", 3.0),
-                                        ("min_cos", 0.6), ("miss_margin", 6.0),
-                                        ("band_leftover", 1e-6), ("fallback_segment", 64),
-                                        ("fallback_scout", None), ("residual_rays", False),
-                                        ("residual_tolerance", 0.1), ("band_newton", False)])
+@pytest.mark.parametrize(
+    "knob,value",
+    [
+        ("band_samples", 6),
+        ("band_spacing", 3.0),
+        ("min_cos", 0.6),
+        ("miss_margin", 6.0),
+        ("band_leftover", 1e-6),
+        ("fallback_segment", 64),
+        ("fallback_scout", None),
+        ("residual_rays", False),
+        ("residual_tolerance", 0.1),
+        ("band_newton", False),
+    ],
+)
 def test_every_guided_knob_changes_the_render(body, knob, value):
     """Each documented knob of the guided marcher changes what it evaluates (the ones
     that only act on the 4-sample band or on marched rays, with those in use)."""
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
     marched = {"band_samples", "fallback_segment", "fallback_scout"}
-    start = GUIDED.replace(band_newton=False, residual_rays=False) \
-        if knob in marched else GUIDED
+    start = GUIDED.replace(band_newton=False, residual_rays=False) if knob in marched else GUIDED
     with torch.no_grad():
         base = render_image(field, cam, v, f, start, shell=body["shell"])
-        other = render_image(field, cam, v, f, start.replace(**{knob: value}),
-                             shell=body["shell"])
-    assert (other.stats.field_evals, other.stats.paths) != (base.stats.field_evals,
-                                                            base.stats.paths)
+        other = render_image(field, cam, v, f, start.replace(**{knob: value}), shell=body["shell"])
+    assert (other.stats.field_evals, other.stats.paths) != (base.stats.field_evals, base.stats.paths)
     assert psnr(other.rgb, base.rgb) > 35  # a trade, not a different image
 
 
@@ -235,8 +248,7 @@ def test_shards_together_render_the_image_of_one_render(body, guide):
     s = SHELL.replace(guide=guide)
     args = (body["field"], body["camera"], body["v"], body["f"], s)
     whole = list(progressive_render(*args, shell=body["shell"]))
-    shards = [list(progressive_shard(*args, shell=body["shell"], shard=(k, 2)))
-              for k in range(2)]
+    shards = [list(progressive_shard(*args, shell=body["shell"], shard=(k, 2))) for k in range(2)]
     for i, (level, image, _) in enumerate(whole):
         merged = torch.zeros_like(image)
         owned_by = torch.zeros(image.shape[:2], dtype=torch.int64)

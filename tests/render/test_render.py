@@ -4,6 +4,7 @@ stability (missed rays, camera inside, sharp density), early termination, progre
 Fields are analytic (no network): a sphere and the VolSDF density of the posed default
 body's own signed distance (:class:`texvocab.render.analytic.MeshSDFField`).
 """
+
 from __future__ import annotations
 
 import copy
@@ -52,6 +53,7 @@ def sphere():
 
 # --- quadrature --------------------------------------------------------------------------
 
+
 def test_composite_matches_cumprod_reference():
     g = torch.Generator().manual_seed(0)
     sigma = torch.rand(50, 30, generator=g) * 10 ** torch.randint(-2, 6, (50, 30), generator=g)
@@ -69,8 +71,7 @@ def test_sample_pdf_follows_the_weights():
     empty = sample_pdf(edges, torch.zeros(1, 3), 300)  # no weight: uniform
     assert abs(float((empty < 1).float().mean()) - 1 / 3) < 0.01
     g1, g2 = torch.Generator().manual_seed(3), torch.Generator().manual_seed(3)
-    assert torch.equal(sample_pdf(edges, torch.ones(1, 3), 9, g1),
-                       sample_pdf(edges, torch.ones(1, 3), 9, g2))
+    assert torch.equal(sample_pdf(edges, torch.ones(1, 3), 9, g1), sample_pdf(edges, torch.ones(1, 3), 9, g2))
 
 
 def test_stratified_samples_and_intervals_tile_the_path():
@@ -85,11 +86,13 @@ def test_stratified_samples_and_intervals_tile_the_path():
 
 # --- analytic sphere ---------------------------------------------------------------------
 
+
 def test_sphere_opacity_depth_and_colour(sphere):
     field = SphereField(radius=0.3, beta=0.002)
     cam = sphere["camera"]
-    result = render_image(field, cam, sphere["v"], sphere["f"], shell=sphere["shell"],
-                          background=(0.1, 0.2, 0.3))
+    result = render_image(
+        field, cam, sphere["v"], sphere["f"], shell=sphere["shell"], background=(0.1, 0.2, 0.3)
+    )
     origins, dirs = cam.pixel_rays()
     m = (-origins * dirs).sum(1)  # ray distance of the closest approach to the centre
     q = ((origins + m[:, None] * dirs).norm(dim=1)).view(48, 48)
@@ -97,7 +100,7 @@ def test_sphere_opacity_depth_and_colour(sphere):
     assert inside.sum() > 300 and outside.sum() > 300
     assert (result.alpha[inside] > 0.999).all()
     assert (result.alpha[outside] < 1e-6).all()
-    hit_t = (m.view(48, 48) - (0.3 ** 2 - q.clamp(max=0.3) ** 2).sqrt())
+    hit_t = m.view(48, 48) - (0.3**2 - q.clamp(max=0.3) ** 2).sqrt()
     assert (result.depth[inside] - hit_t[inside]).abs().max() < 0.005
     colour = field(torch.zeros(1, 3), torch.zeros(1, 3))[1][0]  # uniform albedo
     assert torch.allclose(result.rgb[inside], colour.expand(int(inside.sum()), 3), atol=2e-3)
@@ -105,6 +108,7 @@ def test_sphere_opacity_depth_and_colour(sphere):
 
 
 # --- body: fast marcher vs uniform reference ---------------------------------------------
+
 
 def test_body_opacity_and_match_with_reference(body):
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
@@ -127,6 +131,7 @@ def test_body_opacity_and_match_with_reference(body):
 
 
 # --- shell bounds ------------------------------------------------------------------------
+
 
 def test_shell_bounds_keep_every_ray_that_comes_within_delta(body):
     """Dense points along every pixel ray, exact distances: each point within δ of the
@@ -164,6 +169,7 @@ def test_shell_bounds_keep_every_ray_that_comes_within_delta(body):
 
 # --- stability ---------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("radius", [0.0, 1.0, 2.5, 4.3])
 def test_bounded_distance_transform_equals_scipy_within_its_radius(radius):
     """The shell grid's distance transform (a compiled stamp of offsets around the
@@ -185,14 +191,14 @@ def test_bounded_distance_transform_equals_scipy_within_its_radius(radius):
 def test_rays_that_miss_everything_cost_nothing(body):
     bg = (0.2, 0.4, 0.6)
     away = looking_away(body["camera"])
-    result = render_image(body["field"], away, body["v"], body["f"], shell=body["shell"],
-                          background=bg)
+    result = render_image(body["field"], away, body["v"], body["f"], shell=body["shell"], background=bg)
     assert result.stats.field_evals == 0 and result.stats.rays == 0
     assert torch.equal(result.rgb, torch.tensor(bg).expand(64, 64, 3))
     assert (result.alpha == 0).all() and (result.depth == 0).all()
     o, d = away.pixel_rays()
-    rays = render_rays(body["field"], o, d, torch.ones(len(o)), torch.ones(len(o)),
-                       shell=body["shell"], background=bg)
+    rays = render_rays(
+        body["field"], o, d, torch.ones(len(o)), torch.ones(len(o)), shell=body["shell"], background=bg
+    )
     assert rays.field_evals == 0 and torch.equal(rays.rgb, torch.tensor(bg).expand(len(o), 3))
 
 
@@ -225,12 +231,18 @@ def test_sharp_density_gives_finite_values_and_gradients(body, sphere):
     sph.albedo.requires_grad_(True)
     body_field = copy.copy(body["field"])
     body_field.beta = torch.tensor(1e-5, requires_grad=True)
-    for field, scene, cam in ((sph, sphere, sphere["camera"]),
-                              (body_field, body, body["camera"])):
+    for field, scene, cam in ((sph, sphere, sphere["camera"]), (body_field, body, body["camera"])):
         origins, dirs = cam.pixel_rays()
         hit, near, far = scene["shell"].ray_bounds(origins, dirs)
-        out = render_rays(field, origins[hit], dirs[hit], near[hit], far[hit],
-                          shell=scene["shell"], generator=torch.Generator().manual_seed(0))
+        out = render_rays(
+            field,
+            origins[hit],
+            dirs[hit],
+            near[hit],
+            far[hit],
+            shell=scene["shell"],
+            generator=torch.Generator().manual_seed(0),
+        )
         for x in (out.rgb, out.opacity, out.depth):
             assert torch.isfinite(x).all()
         (out.rgb.square().sum() + out.opacity.sum() + 0.1 * out.depth.sum()).backward()
@@ -251,6 +263,7 @@ def test_field_with_wrong_output_shapes_is_rejected(sphere):
 
 
 # --- what each saving costs --------------------------------------------------------------
+
 
 def test_early_termination_saves_evaluations(body):
     args = (body["field"], body["camera"], body["v"], body["f"])
@@ -275,8 +288,10 @@ def test_scouting_and_empty_space_skipping_save_evaluations(body, change):
 def test_random_sampling_is_reproducible(body):
     args = (body["field"], body["camera"], body["v"], body["f"])
     with torch.no_grad():
-        a, b = (render_image(*args, shell=body["shell"], generator=torch.Generator().manual_seed(7))
-                for _ in range(2))
+        a, b = (
+            render_image(*args, shell=body["shell"], generator=torch.Generator().manual_seed(7))
+            for _ in range(2)
+        )
         fixed = render_image(*args, shell=body["shell"])
     assert torch.equal(a.rgb, b.rgb)
     assert not torch.equal(a.rgb, fixed.rgb) and psnr(a.rgb, fixed.rgb) > 40
@@ -284,13 +299,18 @@ def test_random_sampling_is_reproducible(body):
 
 # --- progressive -------------------------------------------------------------------------
 
+
 def test_progressive_yields_four_levels_and_stops_when_cancelled(body):
     cam = default_cameras(SynthSettings())[1].scaled(0.5)  # 128²
     args = (body["field"], cam, body["v"], body["f"])
     levels = list(progressive_render(*args, shell=body["shell"]))
     assert [lv for lv, _, _ in levels] == [8, 4, 2, 1]
-    assert [tuple(img.shape) for _, img, _ in levels] == [(16, 16, 3), (32, 32, 3),
-                                                         (64, 64, 3), (128, 128, 3)]
+    assert [tuple(img.shape) for _, img, _ in levels] == [
+        (16, 16, 3),
+        (32, 32, 3),
+        (64, 64, 3),
+        (128, 128, 3),
+    ]
     assert all(sec >= 0 for _, _, sec in levels) and torch.is_grad_enabled()
     got = []
     for item in progressive_render(*args, cancelled=lambda: len(got) >= 1):
@@ -307,10 +327,26 @@ def test_cancel_between_ray_chunks(body):
 
     settings = MarchSettings.from_flat(chunk_rays=64)
     with pytest.raises(RenderCancelled):
-        render_image(body["field"], body["camera"], body["v"], body["f"], settings,
-                     shell=body["shell"], cancelled=cancelled)
+        render_image(
+            body["field"],
+            body["camera"],
+            body["v"],
+            body["f"],
+            settings,
+            shell=body["shell"],
+            cancelled=cancelled,
+        )
     calls.clear()
-    out = list(progressive_render(body["field"], body["camera"], body["v"], body["f"],
-                                  settings, levels=(1,), cancelled=cancelled,
-                                  shell=body["shell"]))
+    out = list(
+        progressive_render(
+            body["field"],
+            body["camera"],
+            body["v"],
+            body["f"],
+            settings,
+            levels=(1,),
+            cancelled=cancelled,
+            shell=body["shell"],
+        )
+    )
     assert out == []

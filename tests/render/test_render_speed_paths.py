@@ -1,5 +1,6 @@
 """Faster exact paths of the neural render give the same field values, gradients and
 images as the computation they replace (the weights keep their meaning)."""
+
 import numpy as np
 import pytest
 import torch
@@ -70,17 +71,13 @@ def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
     cam = default_cameras(SynthSettings(size=256))[1].scaled(1 / 8)
     # no thresholds (scouting, early stop, empty rays): a float-rounding difference in
     # the field cannot flip a marching decision, so the images must agree to rounding
-    settings = MarchSettings.from_flat(scout_threshold=None, early_stop_eps=0.0,
-                                       empty_opacity=0.0)
+    settings = MarchSettings.from_flat(scout_threshold=None, early_stop_eps=0.0, empty_opacity=0.0)
     with torch.no_grad():
         ctx = field.pose_feature.context(pose, trans)
-        shell = ShellGeometry.build(ctx.vertices, field.body.faces, settings.shell_width,
-                                    index=ctx.index)
-        fast = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces, settings,
-                            shell=shell)
+        shell = ShellGeometry.build(ctx.vertices, field.body.faces, settings.shell_width, index=ctx.index)
+        fast = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces, settings, shell=shell)
         monkeypatch.setattr(AvatarField, "_sdf_hidden", _concat_hidden)
-        slow = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces, settings,
-                            shell=shell)
+        slow = render_image(field.for_pose(ctx), cam, ctx.vertices, field.body.faces, settings, shell=shell)
     assert fast.alpha.max() > 0.5  # the body is in the picture
     assert (fast.rgb - slow.rgb).abs().max() < 1e-4
     assert (fast.alpha - slow.alpha).abs().max() < 1e-4

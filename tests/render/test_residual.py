@@ -17,16 +17,17 @@ MARCHED = GUIDED.replace(residual_rays=False, band_newton=False)
 
 def renders(body, field, *settings):
     with torch.no_grad():
-        return [render_image(field, body["camera"], body["v"], body["f"], s,
-                             shell=body["shell"]) for s in settings]
+        return [
+            render_image(field, body["camera"], body["v"], body["f"], s, shell=body["shell"])
+            for s in settings
+        ]
 
 
 def test_smooth_residual_rays_match_a_dense_march_with_few_evaluations(body):
     """A residual of 2 mm varying over 30 cm (the avatar's kind): the silhouette
     fringe, grazing hits and occlusion edges take 3 evaluations each instead of a
     march, the band 3 instead of 5, and the image stays within 50 dB of a dense march."""
-    field = MeshResidualField(body["v"], body["f"], beta=0.003, amplitude=0.002,
-                              wavenumber=20.0)
+    field = MeshResidualField(body["v"], body["f"], beta=0.003, amplitude=0.002, wavenumber=20.0)
     dense, guided, marched = renders(body, field, DENSE, GUIDED, MARCHED)
     paths = guided.stats.paths
     assert paths["residual"] > 100 and paths["fallback"] <= 5
@@ -44,8 +45,7 @@ def test_rough_residual_rays_are_marched(body):
     residuals at the evaluations disagree by more than ``residual_tolerance`` β on most
     rays, which are then marched, so the image stays as close to the dense march as the
     marched path's."""
-    field = MeshResidualField(body["v"], body["f"], beta=0.003, amplitude=0.01,
-                              wavenumber=200.0)
+    field = MeshResidualField(body["v"], body["f"], beta=0.003, amplitude=0.01, wavenumber=200.0)
     dense, guided, marched = renders(body, field, DENSE, GUIDED, MARCHED)
     paths = guided.stats.paths
     assert paths["fallback"] > 5 * (paths["residual"] + paths["band"])
@@ -73,13 +73,11 @@ def test_the_part_that_matters_holds_every_low_point():
     beta, fine = 0.002, 64  # coarse samples every 8 mm (fine = 64 profile points apart)
     x = torch.linspace(0, 0.4, 50 * fine + 1, dtype=torch.float64)
     for _ in range(20):
-        slopes = (torch.rand(len(x) - 1, generator=g, dtype=torch.float64) * 2 - 1)
-        s = 0.004 + torch.cat([torch.zeros(1, dtype=torch.float64),
-                               torch.cumsum(slopes * (x[1] - x[0]), 0)])
+        slopes = torch.rand(len(x) - 1, generator=g, dtype=torch.float64) * 2 - 1
+        s = 0.004 + torch.cat([torch.zeros(1, dtype=torch.float64), torch.cumsum(slopes * (x[1] - x[0]), 0)])
         s = s.clamp(min=0.01)  # passes 5 β away at least: never opaque (no cut)
         t, sc = x[::fine][None], s[::fine][None]
-        _, first, end, found = _part_that_matters(t, sc, torch.ones_like(t, dtype=torch.bool),
-                                                  beta)
+        _, first, end, found = _part_that_matters(t, sc, torch.ones_like(t, dtype=torch.bool), beta)
         low = x[s <= s.min().clamp(min=0) + _KEEP * beta]
         assert bool(found[0])
         assert float(t[0, first[0]]) <= float(low.min()) + 1e-12

@@ -1,5 +1,6 @@
 """The shell's bounding balls: the compiled build (texvocab.render.shell.balls) against
 binning the surface samples in numpy, and the balls-only shell the guided marcher uses."""
+
 import numpy as np
 import pytest
 import torch

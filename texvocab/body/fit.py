@@ -36,6 +36,7 @@ A body with a shape space (the user's SMPL files) need not be deformed at all: r
 are linear in its shape coefficients, so :func:`betas_from_rest_joints` recovers the betas
 that give them (exactly, when the joints came from the same model).
 """
+
 from __future__ import annotations
 
 import logging
@@ -96,8 +97,9 @@ def skeleton_handles(joints: np.ndarray, target: np.ndarray, parents: np.ndarray
     return handles
 
 
-def surface_displacement(vertices: np.ndarray, weights: np.ndarray, joints: np.ndarray,
-                         target: np.ndarray, parents: np.ndarray) -> np.ndarray:
+def surface_displacement(
+    vertices: np.ndarray, weights: np.ndarray, joints: np.ndarray, target: np.ndarray, parents: np.ndarray
+) -> np.ndarray:
     """(V, 3) displacement of rest vertices (V, 3) with skinning weights (V, J) when the
     rest joints (J, 3) move to target (J, 3)."""
     handles = skeleton_handles(joints, target, parents)
@@ -105,7 +107,7 @@ def surface_displacement(vertices: np.ndarray, weights: np.ndarray, joints: np.n
     for j, handle in enumerate(handles):
         used = weights[:, j] != 0
         if used.any():
-            out[used] += weights[used, j:j + 1] * handle.displacement(vertices[used])
+            out[used] += weights[used, j : j + 1] * handle.displacement(vertices[used])
     return out
 
 
@@ -124,8 +126,10 @@ def refit_regressor(regressor: np.ndarray, vertices: np.ndarray, target: np.ndar
                 out[j, support] = new
                 break
         else:
-            raise AssetError(f"joint regressor row {j} ({JOINT_NAMES[j]}) cannot regress "
-                             "its target joint from the fitted template")
+            raise AssetError(
+                f"joint regressor row {j} ({JOINT_NAMES[j]}) cannot regress "
+                "its target joint from the fitted template"
+            )
     return out
 
 
@@ -133,16 +137,16 @@ def bone_changes(joints: np.ndarray, target: np.ndarray, parents: np.ndarray) ->
     """(J,) change of each bone's length (joint to its parent), metres; 0 at the root."""
     out = np.zeros(len(parents))
     for j in range(1, len(parents)):
-        out[j] = (np.linalg.norm(target[j] - target[parents[j]])
-                  - np.linalg.norm(joints[j] - joints[parents[j]]))
+        out[j] = np.linalg.norm(target[j] - target[parents[j]]) - np.linalg.norm(
+            joints[j] - joints[parents[j]]
+        )
     return out
 
 
 def _checked_target(body: BodyModel, rest_joints, source: str) -> np.ndarray:
     target = np.asarray(rest_joints, dtype=np.float64)
     if target.shape != (body.num_joints, 3):
-        raise AssetError(f"{source}: rest joints have shape {target.shape}, expected "
-                         f"({body.num_joints}, 3)")
+        raise AssetError(f"{source}: rest joints have shape {target.shape}, expected ({body.num_joints}, 3)")
     if not np.isfinite(target).all():
         raise AssetError(f"{source}: rest joints are not finite")
     joints = body.rest_joints.double().numpy()
@@ -150,13 +154,14 @@ def _checked_target(body: BodyModel, rest_joints, source: str) -> np.ndarray:
     for j in range(1, body.num_joints):
         new = np.linalg.norm(target[j] - target[parents[j]])
         if new < MIN_BONE <= np.linalg.norm(joints[j] - joints[parents[j]]):
-            raise AssetError(f"{source}: the bone to joint {j} ({JOINT_NAMES[j]}) is "
-                             f"{new * 1000:.2g} mm long; expected at least {MIN_BONE * 1000:g} mm")
+            raise AssetError(
+                f"{source}: the bone to joint {j} ({JOINT_NAMES[j]}) is "
+                f"{new * 1000:.2g} mm long; expected at least {MIN_BONE * 1000:g} mm"
+            )
     return target
 
 
-def fit_rest_joints(body: BodyModel, rest_joints, source: str = "the capture's rest joints"
-                    ) -> BodyModel:
+def fit_rest_joints(body: BodyModel, rest_joints, source: str = "the capture's rest joints") -> BodyModel:
     """A new :class:`BodyModel` whose rest joints are ``rest_joints`` (J, 3) and whose rest
     surface follows them (module docstring); faces, UVs, weights and blend shapes kept.
 
@@ -167,8 +172,7 @@ def fit_rest_joints(body: BodyModel, rest_joints, source: str = "the capture's r
     joints = body.rest_joints.double().numpy()
     parents = body.parents.numpy()
     vertices = body.v_template.double().numpy()
-    moved = vertices + surface_displacement(vertices, body.weights.double().numpy(), joints,
-                                            target, parents)
+    moved = vertices + surface_displacement(vertices, body.weights.double().numpy(), joints, target, parents)
     regressor = None
     if body.J_regressor is not None:
         regressor = refit_regressor(body.J_regressor.double().numpy(), moved, target)
@@ -176,24 +180,35 @@ def fit_rest_joints(body: BodyModel, rest_joints, source: str = "the capture's r
     if body.posedirs is not None:  # stored (P, V * 3); the constructor takes (V, 3, P)
         posedirs = body.posedirs.T.reshape(body.num_vertices, 3, -1)
     fitted = BodyModel(
-        v_template=moved, faces=body.faces, weights=body.weights.double().numpy(),
-        parents=parents, joints=target, J_regressor=regressor,
+        v_template=moved,
+        faces=body.faces,
+        weights=body.weights.double().numpy(),
+        parents=parents,
+        joints=target,
+        J_regressor=regressor,
         vt=None if body.vt is None else body.vt.numpy(),
         ft=None if body.ft is None else body.ft,
         shapedirs=None if body.shapedirs is None else body.shapedirs.double().numpy(),
         posedirs=None if posedirs is None else posedirs.double().numpy(),
-        name=f"{body.name} fitted to {source}", dtype=body.dtype)
+        name=f"{body.name} fitted to {source}",
+        dtype=body.dtype,
+    )
     change = bone_changes(joints, target, parents)
     j = int(np.abs(change).argmax())
-    log.info("body: %s fitted to %s (largest bone change %+.1f cm at %s, surface moved up to "
-             "%.1f cm)", body.name, source, 100 * change[j], JOINT_NAMES[j],
-             100 * float(np.linalg.norm(moved - vertices, axis=1).max()))
+    log.info(
+        "body: %s fitted to %s (largest bone change %+.1f cm at %s, surface moved up to %.1f cm)",
+        body.name,
+        source,
+        100 * change[j],
+        JOINT_NAMES[j],
+        100 * float(np.linalg.norm(moved - vertices, axis=1).max()),
+    )
     return fitted
 
 
-
-def betas_from_rest_joints(body: BodyModel, rest_joints, num_betas: int | None = None
-                           ) -> tuple[np.ndarray, float]:
+def betas_from_rest_joints(
+    body: BodyModel, rest_joints, num_betas: int | None = None
+) -> tuple[np.ndarray, float]:
     """Shape coefficients (S,) whose rest joints J_reg (v_template + shapedirs · β) best
     match ``rest_joints`` (J, 3) in least squares, and the largest joint error left
     (metres). Needs a body with a joint regressor and a shape space."""

@@ -3,6 +3,7 @@
 Everything here is a pure function of tensors; :class:`texvocab.body.model.BodyModel`
 holds the arrays and calls these. Shapes are given as ``(B, J, 3)`` etc.
 """
+
 from __future__ import annotations
 
 import torch

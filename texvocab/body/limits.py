@@ -4,6 +4,7 @@ joint, used by random poses in synthetic motion and by the viewer's sliders.
 Signs follow SMPL's frame (see ``poses.py``): hip flexion forward is negative x, knee
 flexion positive x, left-elbow flexion negative y (right: positive y).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,7 +16,9 @@ _LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
     "pelvis": ((-180, 180), (-180, 180), (-180, 180)),
     "left_hip": ((-120, 30), (-45, 45), (-20, 60)),
     "right_hip": ((-120, 30), (-45, 45), (-60, 20)),
-    "spine1": _SPINE, "spine2": _SPINE, "spine3": _SPINE,
+    "spine1": _SPINE,
+    "spine2": _SPINE,
+    "spine3": _SPINE,
     "left_knee": ((0, 150), (-5, 5), (-5, 5)),
     "right_knee": ((0, 150), (-5, 5), (-5, 5)),
     "left_ankle": ((-40, 40), (-20, 20), (-20, 20)),

@@ -2,6 +2,7 @@
 
 Loaders (``smpl_io``, ``default``) turn files into arrays; the model never reads files.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -48,9 +49,21 @@ class BodyModel:
         name: where the arrays came from (for messages).
     """
 
-    def __init__(self, v_template, faces, weights, parents, joints=None, J_regressor=None,
-                 vt=None, ft=None, shapedirs=None, posedirs=None, name: str = "body",
-                 dtype: torch.dtype = torch.float32):
+    def __init__(
+        self,
+        v_template,
+        faces,
+        weights,
+        parents,
+        joints=None,
+        J_regressor=None,
+        vt=None,
+        ft=None,
+        shapedirs=None,
+        posedirs=None,
+        name: str = "body",
+        dtype: torch.dtype = torch.float32,
+    ):
         self.name = name
         self.dtype = dtype
         self.v_template = _as_tensor("v_template", v_template, dtype)
@@ -66,8 +79,9 @@ class BodyModel:
             self.J_regressor = None
         if joints is None and self.J_regressor is None:
             raise AssetError(f"{name}: needs either 'joints' (J, 3) or 'J_regressor' (J, V)")
-        self.rest_joints = (_as_tensor("joints", joints, dtype) if joints is not None
-                            else self.J_regressor @ self.v_template)
+        self.rest_joints = (
+            _as_tensor("joints", joints, dtype) if joints is not None else self.J_regressor @ self.v_template
+        )
         self.vt = None if vt is None else _as_tensor("vt", vt, dtype)
         self.ft = None if ft is None else torch.as_tensor(np.asarray(ft, dtype=np.int64))
         self.shapedirs = None if shapedirs is None else _as_tensor("shapedirs", shapedirs, dtype)
@@ -93,8 +107,7 @@ class BodyModel:
         if int(self.faces.max()) >= num_verts or int(self.faces.min()) < 0:
             raise AssetError(f"{self.name}: 'faces' index outside [0, {num_verts})")
         if self.parents[0] != -1 or any(int(self.parents[i]) >= i for i in range(1, j)):
-            raise AssetError(f"{self.name}: 'parents' must have -1 at the root and "
-                             "parents[j] < j")
+            raise AssetError(f"{self.name}: 'parents' must have -1 at the root and parents[j] < j")
         for key in ("v_template", "weights", "rest_joints"):
             if not torch.isfinite(getattr(self, key)).all():
                 raise AssetError(f"{self.name}: '{key}' contains non-finite values")
@@ -110,24 +123,28 @@ class BodyModel:
     def check_pose(self, pose: torch.Tensor, trans: torch.Tensor | None = None) -> None:
         """Raise :class:`PoseError` naming the joint when a pose is malformed or non-finite."""
         if pose.dim() != 3 or tuple(pose.shape[1:]) != (self.num_joints, 3):
-            raise PoseError(f"pose has shape {tuple(pose.shape)}, expected (B, {self.num_joints}, 3)"
-                            " axis-angle per joint")
+            raise PoseError(
+                f"pose has shape {tuple(pose.shape)}, expected (B, {self.num_joints}, 3) axis-angle per joint"
+            )
         bad = ~torch.isfinite(pose).all(-1)
         if bad.any():
             b, j = (int(i) for i in bad.nonzero()[0])
-            raise PoseError(f"pose[{b}, {j}] ({JOINT_NAMES[j]}) is not finite: "
-                            f"{pose[b, j].tolist()}")
+            raise PoseError(f"pose[{b}, {j}] ({JOINT_NAMES[j]}) is not finite: {pose[b, j].tolist()}")
         bad = pose.norm(dim=-1) > POSE_ANGLE_LIMIT
         if bad.any():
             b, j = (int(i) for i in bad.nonzero()[0])
-            raise PoseError(f"pose[{b}, {j}] ({JOINT_NAMES[j]}) turns {float(pose[b, j].norm()):.3g} "
-                            f"rad; expected axis-angle of at most 4π (two full turns)")
+            raise PoseError(
+                f"pose[{b}, {j}] ({JOINT_NAMES[j]}) turns {float(pose[b, j].norm()):.3g} "
+                f"rad; expected axis-angle of at most 4π (two full turns)"
+            )
         if trans is not None:
             if tuple(trans.shape) != (pose.shape[0], 3):
                 raise PoseError(f"trans has shape {tuple(trans.shape)}, expected ({pose.shape[0]}, 3)")
             if not torch.isfinite(trans).all() or trans.abs().max() > TRANS_LIMIT:
-                raise PoseError(f"trans is not finite or beyond {TRANS_LIMIT:g} m: "
-                                f"max |trans| = {float(trans.abs().max()):.3g}")
+                raise PoseError(
+                    f"trans is not finite or beyond {TRANS_LIMIT:g} m: "
+                    f"max |trans| = {float(trans.abs().max()):.3g}"
+                )
 
     def shaped(self, betas: torch.Tensor | None, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Rest vertices (B, V, 3) and joints (B, J, 3) for shape coefficients (B, S)."""
@@ -137,8 +154,7 @@ class BodyModel:
         if self.shapedirs is None:
             raise PoseError(f"{self.name} has no shape space (shapedirs); pass betas=None")
         if betas.dim() != 2 or betas.shape[0] != batch or betas.shape[1] > self.num_betas:
-            raise PoseError(f"betas has shape {tuple(betas.shape)}, expected ({batch}, <= "
-                            f"{self.num_betas})")
+            raise PoseError(f"betas has shape {tuple(betas.shape)}, expected ({batch}, <= {self.num_betas})")
         if not torch.isfinite(betas).all():
             raise PoseError("betas is not finite")
         dirs = self.shapedirs[..., : betas.shape[1]]
@@ -163,8 +179,9 @@ class BodyModel:
         self.check_pose(pose, trans)
         batch = pose.shape[0]
         v_shaped, joints = self.shaped(betas, batch)
-        verts, posed_joints, transforms = lbs(pose, v_shaped, joints, self.parents,
-                                              self.weights, self.posedirs)
+        verts, posed_joints, transforms = lbs(
+            pose, v_shaped, joints, self.parents, self.weights, self.posedirs
+        )
         if trans is not None:
             verts = verts + trans[:, None]
             posed_joints = posed_joints + trans[:, None]

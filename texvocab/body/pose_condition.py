@@ -22,6 +22,7 @@ with the same joint angles look alike to the condition.
 ``global`` is the condition of checkpoints written before this one existed (joint 0 as
 the reader folded it); a checkpoint that does not record a condition means ``global``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,8 +40,9 @@ ROOT_JOINT = 0
 def check_pose_condition(condition: str) -> str:
     """``condition`` if it is one of :data:`POSE_CONDITIONS`, else ValueError naming them."""
     if condition not in POSE_CONDITIONS:
-        raise ValueError(f"unknown pose condition {condition!r}; expected one of "
-                         f"{', '.join(POSE_CONDITIONS)}")
+        raise ValueError(
+            f"unknown pose condition {condition!r}; expected one of {', '.join(POSE_CONDITIONS)}"
+        )
     return condition
 
 
@@ -55,8 +57,8 @@ def root_relative_pose(pose: torch.Tensor | np.ndarray) -> torch.Tensor:
     pose = torch.as_tensor(pose)
     if pose.ndim < 2 or tuple(pose.shape[-2:]) != (NUM_JOINTS, 3):
         raise ValueError(f"pose: expected shape (..., 24, 3), got {tuple(pose.shape)}")
-    root = pose[..., ROOT_JOINT:ROOT_JOINT + 1, :]
-    return torch.cat([torch.zeros_like(root), pose[..., ROOT_JOINT + 1:, :]], dim=-2)
+    root = pose[..., ROOT_JOINT : ROOT_JOINT + 1, :]
+    return torch.cat([torch.zeros_like(root), pose[..., ROOT_JOINT + 1 :, :]], dim=-2)
 
 
 def condition_pose(pose: torch.Tensor | np.ndarray, condition: str) -> torch.Tensor:

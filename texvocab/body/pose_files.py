@@ -11,6 +11,7 @@ project's +Y-up world.
   pelvis, where SMPL's root rotation acts), so a person stands upright with no flag.
 * ``root="zero"`` removes the root orientation and translation (the body turns in place).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -51,8 +52,9 @@ class PoseSequence:
         return len(self.poses)
 
 
-def read_pose_sequence(path: str | Path, fps: float | None = 30.0, up: str = "auto",
-                       root: str = "keep", pelvis=None) -> PoseSequence:
+def read_pose_sequence(
+    path: str | Path, fps: float | None = 30.0, up: str = "auto", root: str = "keep", pelvis=None
+) -> PoseSequence:
     """Read a pose file (see the module docstring); every problem is one
     :class:`AssetError` naming the file and the array.
 
@@ -70,13 +72,16 @@ def read_pose_sequence(path: str | Path, fps: float | None = 30.0, up: str = "au
     if "poses" not in data:
         raise AssetError(f"{path}: missing key 'poses'; expected {ACCEPTED}")
     for key in ("poses", "trans"):
-        if key in data and not (np.issubdtype(data[key].dtype, np.number)
-                                and not np.issubdtype(data[key].dtype, np.complexfloating)):
-            raise AssetError(f"{path}: '{key}' holds {data[key].dtype} values; expected real "
-                             "numbers (axis-angle radians / metres)")
+        if key in data and not (
+            np.issubdtype(data[key].dtype, np.number)
+            and not np.issubdtype(data[key].dtype, np.complexfloating)
+        ):
+            raise AssetError(
+                f"{path}: '{key}' holds {data[key].dtype} values; expected real "
+                "numbers (axis-angle radians / metres)"
+            )
     raw = np.asarray(data["poses"])
-    flat = raw.reshape(raw.shape[0], raw.shape[1] * 3) if raw.ndim == 3 and raw.shape[2] == 3 \
-        else raw
+    flat = raw.reshape(raw.shape[0], raw.shape[1] * 3) if raw.ndim == 3 and raw.shape[2] == 3 else raw
     if flat.ndim != 2 or flat.shape[1] not in LAYOUTS:
         raise AssetError(f"{path}: 'poses' has shape {raw.shape}; expected {ACCEPTED}")
     layout = LAYOUTS[flat.shape[1]]
@@ -97,8 +102,13 @@ def read_pose_sequence(path: str | Path, fps: float | None = 30.0, up: str = "au
     elif (up == "z") or (up == "auto" and layout != "smpl"):
         poses, trans = _z_up_to_y_up(poses, trans, pelvis)
     _check_values(path, poses, trans)
-    return PoseSequence(poses.astype(np.float32), trans.astype(np.float32),
-                        fps if (rate is not None and fps is not None) else rate, layout, rate)
+    return PoseSequence(
+        poses.astype(np.float32),
+        trans.astype(np.float32),
+        fps if (rate is not None and fps is not None) else rate,
+        layout,
+        rate,
+    )
 
 
 def _frame_rate(path: Path, data: dict) -> float | None:
@@ -106,8 +116,9 @@ def _frame_rate(path: Path, data: dict) -> float | None:
         if key in data:
             value = np.asarray(data[key]).reshape(-1)
             if value.size != 1 or not np.isfinite(value[0]) or not value[0] > 0:
-                raise AssetError(f"{path}: '{key}' is {value.tolist()}; expected one frame "
-                                 "rate > 0 (frames per second)")
+                raise AssetError(
+                    f"{path}: '{key}' is {value.tolist()}; expected one frame rate > 0 (frames per second)"
+                )
             return float(value[0])
     return None
 
@@ -122,15 +133,17 @@ def _check_values(path: Path, poses: np.ndarray, trans: np.ndarray) -> None:
     angle = np.linalg.norm(poses, axis=-1)
     if (angle > POSE_ANGLE_LIMIT).any():
         t, j = (int(i) for i in np.argwhere(angle > POSE_ANGLE_LIMIT)[0])
-        raise AssetError(f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) turns "
-                         f"{angle[t, j]:.3g} rad; expected axis-angle of at most 4π")
+        raise AssetError(
+            f"{path}: 'poses' frame {t} joint {j} ({JOINT_NAMES[j]}) turns "
+            f"{angle[t, j]:.3g} rad; expected axis-angle of at most 4π"
+        )
     if (np.abs(trans) > TRANS_LIMIT).any():
-        raise AssetError(f"{path}: 'trans' reaches {np.abs(trans).max():.3g} m; expected at "
-                         f"most {TRANS_LIMIT:g} m")
+        raise AssetError(
+            f"{path}: 'trans' reaches {np.abs(trans).max():.3g} m; expected at most {TRANS_LIMIT:g} m"
+        )
 
 
-def _resample(poses: np.ndarray, trans: np.ndarray, rate: float, fps: float
-              ) -> tuple[np.ndarray, np.ndarray]:
+def _resample(poses: np.ndarray, trans: np.ndarray, rate: float, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """(T', 24, 3), (T', 3) at ``fps`` from ``rate``: frame k at time k / fps, quaternion
     nlerp (shortest arc) between the two source frames around it."""
     duration = (len(poses) - 1) / rate
@@ -148,8 +161,7 @@ def _resample(poses: np.ndarray, trans: np.ndarray, rate: float, fps: float
     return quat_to_rotvec(qi).numpy().astype(np.float64), t
 
 
-def _z_up_to_y_up(poses: np.ndarray, trans: np.ndarray, pelvis
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def _z_up_to_y_up(poses: np.ndarray, trans: np.ndarray, pelvis) -> tuple[np.ndarray, np.ndarray]:
     """Rotate the world by -90° about X: root' = R root, trans' = R (J0 + trans) - J0 with
     J0 the rest pelvis (SMPL's root rotation turns the body about J0, not the origin)."""
     if pelvis is None:

@@ -1,5 +1,6 @@
 """Read the user's official SMPL files (chumpy pickles, .npz, smpl_uv.obj) without
 chumpy, through :mod:`texvocab.io.safe_pickle`."""
+
 from __future__ import annotations
 
 import warnings
@@ -17,8 +18,9 @@ def read_model_arrays(path: str | Path) -> dict:
     """Arrays of an SMPL model file (.pkl or .npz), not yet validated."""
     path = Path(path)
     if not path.is_file():
-        raise AssetError(f"SMPL model file not found: {path}; expected one of the files in "
-                         f"{spec_ref('smpl_model')}")
+        raise AssetError(
+            f"SMPL model file not found: {path}; expected one of the files in {spec_ref('smpl_model')}"
+        )
     if path.suffix == ".pkl":
         return read_pickle(path)
     if path.suffix == ".npz":
@@ -39,15 +41,18 @@ def read_uv_obj(path: str | Path) -> dict:
             elif line.startswith("f "):
                 corners = line.split()[1:]
                 if len(corners) != 3 or any(c.count("/") < 1 for c in corners):
-                    raise AssetError(f"{path}:{lineno}: expected a triangle 'f a/ta b/tb c/tc', "
-                                     f"got {line.strip()!r}")
+                    raise AssetError(
+                        f"{path}:{lineno}: expected a triangle 'f a/ta b/tb c/tc', got {line.strip()!r}"
+                    )
                 parts = [c.split("/") for c in corners]
                 f.append([p[0] for p in parts])
                 ft.append([p[1] for p in parts])
     try:
-        return {"vt": np.asarray(vt, dtype=np.float64).reshape(-1, 2),
-                "f": np.asarray(f, dtype=np.int64).reshape(-1, 3) - 1,
-                "ft": np.asarray(ft, dtype=np.int64).reshape(-1, 3) - 1}
+        return {
+            "vt": np.asarray(vt, dtype=np.float64).reshape(-1, 2),
+            "f": np.asarray(f, dtype=np.int64).reshape(-1, 3) - 1,
+            "ft": np.asarray(ft, dtype=np.int64).reshape(-1, 3) - 1,
+        }
     except ValueError as exc:
         raise AssetError(f"{path}: malformed vt/f lines ({exc})") from None
 
@@ -61,11 +66,12 @@ def resolve_model_path(path: str | Path, spec_name: str = "smpl_model") -> Path:
             if (path / rel).is_file():
                 return path / rel
         tried = ", ".join(str(path / r) for r in order[:3])
-        raise AssetError(f"no SMPL model in {path}: looked for {tried}, ...; "
-                         f"see {spec_ref(spec_name)}")
+        raise AssetError(f"no SMPL model in {path}: looked for {tried}, ...; see {spec_ref(spec_name)}")
     if not path.is_file():
-        raise AssetError(f"SMPL model file not found: {path}; expected an SMPL model file "
-                         f"(e.g. SMPL_NEUTRAL.pkl), see {spec_ref(spec_name)}")
+        raise AssetError(
+            f"SMPL model file not found: {path}; expected an SMPL model file "
+            f"(e.g. SMPL_NEUTRAL.pkl), see {spec_ref(spec_name)}"
+        )
     return path
 
 
@@ -80,8 +86,7 @@ def load_smpl(path: str | Path, uv_path: str | Path | None = None):
     """A :class:`~texvocab.body.model.BodyModel` from the user's SMPL model (+ UV file)."""
     path = resolve_model_path(path)
     if not name_is_accepted(path, load_spec("smpl_model")):
-        warnings.warn(f"{path.name} is not an official SMPL file name; loading it anyway",
-                      stacklevel=2)
+        warnings.warn(f"{path.name} is not an official SMPL file name; loading it anyway", stacklevel=2)
     arrays = read_model_arrays(path)
     require_valid(arrays, "smpl_model", str(path))
     vt = ft = None
@@ -97,7 +102,14 @@ def load_smpl(path: str | Path, uv_path: str | Path | None = None):
             raise AssetError(f"{uv_path}: its face vertex indices differ from 'f' in {path}")
         vt, ft = uv["vt"], uv["ft"]
     return BodyModel(
-        v_template=arrays["v_template"], faces=arrays["f"], weights=arrays["weights"],
-        parents=parents_from_kintree(arrays["kintree_table"]), J_regressor=arrays["J_regressor"],
-        shapedirs=arrays["shapedirs"], posedirs=arrays.get("posedirs"), vt=vt, ft=ft,
-        name=str(path))
+        v_template=arrays["v_template"],
+        faces=arrays["f"],
+        weights=arrays["weights"],
+        parents=parents_from_kintree(arrays["kintree_table"]),
+        J_regressor=arrays["J_regressor"],
+        shapedirs=arrays["shapedirs"],
+        posedirs=arrays.get("posedirs"),
+        vt=vt,
+        ft=ft,
+        name=str(path),
+    )

@@ -1,6 +1,7 @@
 """Multi-view captures: cameras, the Capture container, ZJU-MoCap / THUman4.0 readers and
 writers, the HumanNeRF (one camera) reader, and synthetic captures with ground truth at
 any pose."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -31,9 +32,11 @@ def detect_layout(path: str | Path) -> str:
         return "thuman"
     if is_humannerf(root):
         return "humannerf"
-    raise AssetError(f"{root}: not a capture folder: expected annots.npy (ZJU-MoCap), "
-                     "calibration.json (THUman4.0) or cameras.pkl + mesh_infos.pkl (HumanNeRF); "
-                     "see assets_spec/captures.md")
+    raise AssetError(
+        f"{root}: not a capture folder: expected annots.npy (ZJU-MoCap), "
+        "calibration.json (THUman4.0) or cameras.pkl + mesh_infos.pkl (HumanNeRF); "
+        "see assets_spec/captures.md"
+    )
 
 
 READERS = {"zju": read_zju, "thuman": read_thuman, "humannerf": read_humannerf}
@@ -50,8 +53,13 @@ def auto_image_scale(cameras) -> float:
     return scale
 
 
-def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A001
-         image_scale: float | None = None, fit_body: bool = True) -> Capture:
+def open(
+    path: str | Path,
+    body=None,
+    num_train: int | None = None,  # noqa: A001
+    image_scale: float | None = None,
+    fit_body: bool = True,
+) -> Capture:
     """Open a capture folder, choosing the reader from its layout.
 
     Args:
@@ -72,13 +80,11 @@ def open(path: str | Path, body=None, num_train: int | None = None,  # noqa: A00
     if num_train is None and meta is not None:  # the generator's split
         num_train = meta.get("num_train")
         if num_train is not None and (type(num_train) is not int or num_train < 0):
-            raise AssetError(f"{root / SYNTH_META}: num_train={num_train!r}; expected an "
-                             "integer >= 0")
+            raise AssetError(f"{root / SYNTH_META}: num_train={num_train!r}; expected an integer >= 0")
     body = body if body is not None else load_body(None)
     cap = READERS[layout](root, body, num_train)
     try:  # finite and within the stated bounds (texvocab.body.model), before any work
-        body.check_pose(torch.as_tensor(np.asarray(cap.poses)), torch.as_tensor(
-            np.asarray(cap.trans)))
+        body.check_pose(torch.as_tensor(np.asarray(cap.poses)), torch.as_tensor(np.asarray(cap.trans)))
     except PoseError as e:
         raise AssetError(f"{root}: its SMPL parameters: {e}") from None
     if fit_body:

@@ -1,5 +1,6 @@
 """Pinhole camera in the OpenCV convention: ``x_cam = R @ x_world + t``, +z forward,
 +y down, intrinsics ``K`` in pixels, optional distortion (k1, k2, p1, p2[, k3])."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -45,8 +46,10 @@ class Camera:
         if abs(np.linalg.det(self.R) - 1) > 1e-3 or np.abs(self.R @ self.R.T - np.eye(3)).max() > 1e-3:
             raise AssetError(f"{source}: camera {self.name!r} R is not a rotation matrix")
         if self.K[0, 0] <= 0 or self.K[1, 1] <= 0 or self.width <= 0 or self.height <= 0:
-            raise AssetError(f"{source}: camera {self.name!r} needs positive focal lengths and "
-                             f"image size, got K={self.K.tolist()}, size={self.width}x{self.height}")
+            raise AssetError(
+                f"{source}: camera {self.name!r} needs positive focal lengths and "
+                f"image size, got K={self.K.tolist()}, size={self.width}x{self.height}"
+            )
         return self
 
     @property
@@ -59,8 +62,9 @@ class Camera:
         K = self.K.copy()
         K[:2] *= factor
         K[:2, 2] += 0.5 * factor - 0.5
-        return Camera(K, self.R, self.t, round(self.width * factor), round(self.height * factor),
-                      self.dist, self.name)
+        return Camera(
+            K, self.R, self.t, round(self.width * factor), round(self.height * factor), self.dist, self.name
+        )
 
     def every(self, step: int) -> "Camera":
         """The camera of every ``step``-th pixel of this one in both directions: its pixel
@@ -68,8 +72,9 @@ class Camera:
         coarse level, ``image[::step, ::step]``); size ceil(W / step) x ceil(H / step)."""
         K = self.K.copy()
         K[:2] /= step
-        return Camera(K, self.R, self.t, -(-self.width // step), -(-self.height // step),
-                      self.dist, self.name)
+        return Camera(
+            K, self.R, self.t, -(-self.width // step), -(-self.height // step), self.dist, self.name
+        )
 
     def project(self, points) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (N, 2) and depths (N,) of world points (N, 3); ignores distortion
@@ -90,7 +95,7 @@ class Camera:
             origins (N, 3), directions (N, 3).
         """
         if pixels is None:
-            ys, xs = np.mgrid[0:self.height, 0:self.width]
+            ys, xs = np.mgrid[0 : self.height, 0 : self.width]
             pixels = np.stack([xs.ravel(), ys.ravel()], -1)
         pix = np.asarray(pixels, dtype=np.float64)
         homo = np.concatenate([pix, np.ones((len(pix), 1))], 1)
@@ -104,7 +109,7 @@ class Camera:
         k1, k2, p1, p2, k3 = self.dist
         x, y = xy[:, 0], xy[:, 1]
         r2 = x * x + y * y
-        radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        radial = 1 + k1 * r2 + k2 * r2**2 + k3 * r2**3
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
         return np.stack([xd, yd], -1)
@@ -117,9 +122,15 @@ class Camera:
         return sample_image(image, src_x, src_y, nearest).reshape(image.shape)
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "K": self.K.tolist(), "R": self.R.tolist(),
-                "t": self.t.tolist(), "width": self.width, "height": self.height,
-                "dist": self.dist.tolist()}
+        return {
+            "name": self.name,
+            "K": self.K.tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+            "width": self.width,
+            "height": self.height,
+            "dist": self.dist.tolist(),
+        }
 
 
 #: Undistortion maps kept per calibration (K, dist, size): (H·W,) float32 source x and y,
@@ -132,14 +143,17 @@ def _undistortion_map(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
     """(H·W,) source pixel x, y in the distorted image of every ideal pixel, row-major."""
     key = (cam.K.tobytes(), cam.dist.tobytes(), cam.width, cam.height)
     if key not in _UNDISTORTION_MAPS:
-        ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
-        xy = np.stack([(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0],
-                       (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1)
+        ys, xs = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float64)
+        xy = np.stack(
+            [(xs.ravel() - cam.K[0, 2]) / cam.K[0, 0], (ys.ravel() - cam.K[1, 2]) / cam.K[1, 1]], -1
+        )
         d = cam.distort_normalized(xy)
         if len(_UNDISTORTION_MAPS) >= _MAX_MAPS:
             _UNDISTORTION_MAPS.pop(next(iter(_UNDISTORTION_MAPS)))
-        _UNDISTORTION_MAPS[key] = ((d[:, 0] * cam.K[0, 0] + cam.K[0, 2]).astype(np.float32),
-                                   (d[:, 1] * cam.K[1, 1] + cam.K[1, 2]).astype(np.float32))
+        _UNDISTORTION_MAPS[key] = (
+            (d[:, 0] * cam.K[0, 0] + cam.K[0, 2]).astype(np.float32),
+            (d[:, 1] * cam.K[1, 1] + cam.K[1, 2]).astype(np.float32),
+        )
     return _UNDISTORTION_MAPS[key]
 
 
@@ -157,8 +171,12 @@ def sample_image(image: np.ndarray, x: np.ndarray, y: np.ndarray, nearest: bool 
     x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
     fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
     out = np.zeros((len(x), img.shape[1]), np.float32)
-    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
-                        (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+    for dx, dy, wgt in (
+        (0, 0, (1 - fx) * (1 - fy)),
+        (1, 0, fx * (1 - fy)),
+        (0, 1, (1 - fx) * fy),
+        (1, 1, fx * fy),
+    ):
         xi, yi = x0 + dx, y0 + dy
         ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
         # gather every pixel (index 0 outside, weight 0): no boolean-mask copies

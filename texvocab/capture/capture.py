@@ -5,6 +5,7 @@ training / novel-pose split is by frame, as in the paper (first frames train): b
 70 % of the frames train, or 80 % for a one-camera capture, which has no held-out view
 and so holds out its last frames (:func:`default_num_train`).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -96,17 +97,18 @@ class Capture:
     def __post_init__(self):
         t = len(self.image_paths)
         if self.poses.shape != (t, 24, 3) or self.trans.shape != (t, 3):
-            raise AssetError(f"{self.root}: {t} frames of images but poses {self.poses.shape} "
-                             f"and trans {self.trans.shape}")
+            raise AssetError(
+                f"{self.root}: {t} frames of images but poses {self.poses.shape} and trans {self.trans.shape}"
+            )
         if not np.isfinite(self.poses).all() or not np.isfinite(self.trans).all():
-            f = int(np.nonzero(~(np.isfinite(self.poses).all((1, 2)) &
-                                 np.isfinite(self.trans).all(1)))[0][0])
-            raise AssetError(f"{self.root}: non-finite pose or translation at frame "
-                             f"{self.frame_ids[f]}")
-        if self.rest_joints is not None and (np.shape(self.rest_joints) != (24, 3) or
-                                             not np.isfinite(self.rest_joints).all()):
-            raise AssetError(f"{self.root}: rest joints {np.shape(self.rest_joints)}; expected "
-                             "(24, 3) finite")
+            f = int(np.nonzero(~(np.isfinite(self.poses).all((1, 2)) & np.isfinite(self.trans).all(1)))[0][0])
+            raise AssetError(f"{self.root}: non-finite pose or translation at frame {self.frame_ids[f]}")
+        if self.rest_joints is not None and (
+            np.shape(self.rest_joints) != (24, 3) or not np.isfinite(self.rest_joints).all()
+        ):
+            raise AssetError(
+                f"{self.root}: rest joints {np.shape(self.rest_joints)}; expected (24, 3) finite"
+            )
         self.num_train = int(min(max(self.num_train, 0), t))  # 0: every frame is a novel pose
 
     @property
@@ -134,12 +136,11 @@ class Capture:
             raise AssetError(f"image scale {factor!r}: expected 0 < scale <= 1")
         source = self.source_cameras or self.cameras
         if factor == 1.0:
-            return dataclasses.replace(self, cameras=list(source), source_cameras=None,
-                                       image_scale=1.0)
-        cams = [dataclasses.replace(c.scaled(factor), dist=np.zeros_like(c.dist))
-                for c in source]  # images are undistorted before they are resized
-        return dataclasses.replace(self, cameras=cams, source_cameras=list(source),
-                                   image_scale=float(factor))
+            return dataclasses.replace(self, cameras=list(source), source_cameras=None, image_scale=1.0)
+        cams = [
+            dataclasses.replace(c.scaled(factor), dist=np.zeros_like(c.dist)) for c in source
+        ]  # images are undistorted before they are resized
+        return dataclasses.replace(self, cameras=cams, source_cameras=list(source), image_scale=float(factor))
 
     def _source(self, view: int) -> Camera:
         return (self.source_cameras or self.cameras)[view]
@@ -150,8 +151,10 @@ class Capture:
             return image
         cam = self.cameras[view]
         chans = image.reshape(image.shape[0], image.shape[1], -1)
-        out = [np.asarray(Image.fromarray(chans[..., c]).resize(
-            (cam.width, cam.height), Image.Resampling.BOX)) for c in range(chans.shape[2])]
+        out = [
+            np.asarray(Image.fromarray(chans[..., c]).resize((cam.width, cam.height), Image.Resampling.BOX))
+            for c in range(chans.shape[2])
+        ]
         return np.stack(out, -1).reshape(cam.height, cam.width, *image.shape[2:])
 
     def image(self, view: int, frame: int) -> np.ndarray:
@@ -180,8 +183,10 @@ class Capture:
     def _check_size(self, path: Path, shape: tuple, view: int) -> None:
         cam = self._source(view)
         if tuple(shape[:2]) != (cam.height, cam.width):
-            raise AssetError(f"{path}: image is {shape[1]}x{shape[0]}, but view {view}'s "
-                             f"calibration (and its other images) say {cam.width}x{cam.height}")
+            raise AssetError(
+                f"{path}: image is {shape[1]}x{shape[0]}, but view {view}'s "
+                f"calibration (and its other images) say {cam.width}x{cam.height}"
+            )
 
     def check_image_sizes(self, frames=None, views=None) -> None:
         """Read the header of every image and mask of ``frames`` x ``views`` (default
@@ -196,8 +201,7 @@ class Capture:
                         with Image.open(path) as im:
                             size = im.size
                     except (OSError, ValueError) as e:
-                        raise AssetError(f"{path}: not a readable image ({type(e).__name__})") \
-                            from None
+                        raise AssetError(f"{path}: not a readable image ({type(e).__name__})") from None
                     self._check_size(path, (size[1], size[0]), v)
 
     def shape(self) -> torch.Tensor | None:
@@ -212,8 +216,9 @@ class Capture:
 
     def posed_body(self, frame: int):
         """:class:`~texvocab.body.BodyOutput` of one frame (batch of 1)."""
-        return self.body.forward(torch.as_tensor(self.poses[frame])[None],
-                                 torch.as_tensor(self.trans[frame])[None], self.shape())
+        return self.body.forward(
+            torch.as_tensor(self.poses[frame])[None], torch.as_tensor(self.trans[frame])[None], self.shape()
+        )
 
     @property
     def synthetic(self) -> dict | None:
@@ -230,8 +235,10 @@ def read_synth_meta(root: Path) -> dict | None:
     try:
         meta = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise AssetError(f"{path}: not valid JSON ({e.msg if hasattr(e, 'msg') else e}); it "
-                         "should hold the generator's settings") from None
+        raise AssetError(
+            f"{path}: not valid JSON ({e.msg if hasattr(e, 'msg') else e}); it "
+            "should hold the generator's settings"
+        ) from None
     if not isinstance(meta, dict):
         raise AssetError(f"{path}: expected a JSON object of generator settings")
     return meta

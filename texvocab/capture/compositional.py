@@ -18,6 +18,7 @@ paper's d(ρ1, ρ2) = Σ_k (1 − |q1_k·q2_k|) (``part_nearest_distances``), wh
 far from every training frame (``whole_nearest_distance``). Segments are separate takes: smooth
 within a segment, with cuts between segments.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -32,8 +33,11 @@ from texvocab.body.poses import J
 from texvocab.geometry.rotations import rotvec_to_quat
 
 PartMotion = Callable[[np.ndarray, float], np.ndarray]  # (u (n,), amplitude) -> (n, 24, 3) degrees
-_LEFT_TO_RIGHT = [(i, JOINT_NAMES.index(n.replace("left_", "right_")))
-                  for i, n in enumerate(JOINT_NAMES) if n.startswith("left_")]
+_LEFT_TO_RIGHT = [
+    (i, JOINT_NAMES.index(n.replace("left_", "right_")))
+    for i, n in enumerate(JOINT_NAMES)
+    if n.startswith("left_")
+]
 _MIRROR = np.array([1.0, -1.0, -1.0])  # reflection x -> -x of an axis-angle (pseudo)vector
 _SPINE = (J["spine1"], J["spine2"], J["spine3"])
 
@@ -122,12 +126,25 @@ def _arm_raise_forward(u: np.ndarray, a: float) -> np.ndarray:
 
 #: Part motions per part kind: name -> (function, cyclic). ``u`` is a phase when cyclic.
 PART_MOTIONS: dict[str, dict[str, tuple[PartMotion, bool]]] = {
-    "main": {"upright": (lambda u, a: _zeros(u), False), "walk": (_main_walk, True),
-             "squat": (_main_squat, False), "twist": (_main_twist, True), "kick": (_main_kick, False)},
-    "leg": {"stand": (lambda u, a: _zeros(u), False), "walk": (_leg_walk, True),
-            "squat": (_leg_squat, False), "kick": (_leg_kick, False)},
-    "arm": {"down": (_arm_down, False), "swing": (_arm_swing, True),
-            "raise_side": (_arm_raise_side, False), "raise_forward": (_arm_raise_forward, False)},
+    "main": {
+        "upright": (lambda u, a: _zeros(u), False),
+        "walk": (_main_walk, True),
+        "squat": (_main_squat, False),
+        "twist": (_main_twist, True),
+        "kick": (_main_kick, False),
+    },
+    "leg": {
+        "stand": (lambda u, a: _zeros(u), False),
+        "walk": (_leg_walk, True),
+        "squat": (_leg_squat, False),
+        "kick": (_leg_kick, False),
+    },
+    "arm": {
+        "down": (_arm_down, False),
+        "swing": (_arm_swing, True),
+        "raise_side": (_arm_raise_side, False),
+        "raise_forward": (_arm_raise_forward, False),
+    },
 }
 _KIND = {"main_body": "main", "left_leg": "leg", "right_leg": "leg", "left_arm": "arm", "right_arm": "arm"}
 
@@ -158,8 +175,15 @@ COMPOSITIONAL_NOVEL = [
     Combo("squat, arms raised sideways", "squat", "squat", "squat", "raise_side", "raise_side", 6),
     Combo("walk, arms raised forward", "walk", "walk", "walk", "raise_forward", "raise_forward", 6),
     Combo("right kick, left arm raised", "kick", "stand", "kick", "raise_side", "down", 6),
-    Combo("torso twist, left arm forward, right arm up", "twist", "stand", "stand", "raise_forward",
-          "raise_side", 6),
+    Combo(
+        "torso twist, left arm forward, right arm up",
+        "twist",
+        "stand",
+        "stand",
+        "raise_forward",
+        "raise_side",
+        6,
+    ),
     Combo("right kick, arms forward", "kick", "stand", "kick", "raise_forward", "raise_forward", 6),
 ]
 
@@ -246,8 +270,9 @@ def pairwise_part_distance(poses_a: np.ndarray, poses_b: np.ndarray, joints) -> 
 def part_nearest_distances(poses_novel: np.ndarray, poses_train: np.ndarray) -> np.ndarray:
     """(N, 5): per novel frame and body part (``BODY_PARTS`` order), distance to the nearest training
     frame's pose of that part (each part may pick a different training frame)."""
-    return np.stack([pairwise_part_distance(poses_novel, poses_train, j).min(1)
-                     for j in BODY_PARTS.values()], 1)
+    return np.stack(
+        [pairwise_part_distance(poses_novel, poses_train, j).min(1) for j in BODY_PARTS.values()], 1
+    )
 
 
 def whole_nearest_distance(poses_novel: np.ndarray, poses_train: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ place on the body: elbow flexion creases the inner elbow, knee flexion the back 
 knee, hip flexion the groin, shoulder raises the armpit, torso twist and bend make
 diagonal folds on the shirt.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -96,8 +97,17 @@ class Garment:
         p, jnt = self.points, self.joints
         dom = self.weights.argmax(1)
         region = np.full(len(p), 2)
-        legs = np.isin(dom, [J["left_hip"], J["right_hip"], J["left_knee"], J["right_knee"],
-                             J["left_ankle"], J["right_ankle"]])
+        legs = np.isin(
+            dom,
+            [
+                J["left_hip"],
+                J["right_hip"],
+                J["left_knee"],
+                J["right_knee"],
+                J["left_ankle"],
+                J["right_ankle"],
+            ],
+        )
         region[legs | (p[:, 1] < jnt[J["pelvis"], 1] + 0.04)] = 3
         ankle_y = jnt[J["left_ankle"], 1]
         region[np.isin(dom, [J["left_foot"], J["right_foot"]]) | (p[:, 1] < ankle_y + 0.03)] = 4
@@ -106,8 +116,10 @@ class Garment:
         region[arm_skin] = 0
         head = np.isin(dom, [J["head"], J["neck"]]) & (p[:, 1] > jnt[J["neck"], 1] - 0.02)
         region[head] = 0
-        hair = head & ((p[:, 1] > jnt[J["head"], 1] + 0.06) |
-                       ((p[:, 2] < jnt[J["head"], 2] - 0.02) & (p[:, 1] > jnt[J["head"], 1] - 0.04)))
+        hair = head & (
+            (p[:, 1] > jnt[J["head"], 1] + 0.06)
+            | ((p[:, 2] < jnt[J["head"], 2] - 0.02) & (p[:, 1] > jnt[J["head"], 1] - 0.04))
+        )
         region[hair] = 1
         return region
 
@@ -127,8 +139,9 @@ class Garment:
         pins = (np.mod(azim / (2 * np.pi) * 90, 1.0) < 0.12).astype(float) * (np.abs(x) < 0.25)
         c = SHIRT * (1 - 0.25 * pins)[:, None]
         c = c * (1 - stripes[:, None]) + SHIRT_LINE * stripes[:, None]
-        chest = (z > jnt[J["spine3"], 2]) & (np.abs(x - 0.08) < 0.06) & \
-                (np.abs(y - jnt[J["spine3"], 1]) < 0.06)
+        chest = (
+            (z > jnt[J["spine3"], 2]) & (np.abs(x - 0.08) < 0.06) & (np.abs(y - jnt[J["spine3"], 1]) < 0.06)
+        )
         checker = (np.floor((x - 0.02) / 0.015) + np.floor(y / 0.015)) % 2 == 0
         c[chest & checker] = LOGO
         col[shirt] = c[shirt]

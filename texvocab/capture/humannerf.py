@@ -20,6 +20,7 @@ project body's pelvis (rest J0b; it rotates about it) on the subject's pelvis:
 trans = Th + R(Rh)·J0s − J0b. With the subject's own body (J0b = J0s) this is the ZJU
 reader's trans = Th + R(Rh)·J0 − J0. Images and masks are undistorted on load.
 """
+
 from __future__ import annotations
 
 import logging
@@ -59,8 +60,7 @@ def _frame_entries(path: Path, spec: str) -> dict[str, dict[str, np.ndarray]]:
         if not isinstance(name, str) or not FRAME_NAME.fullmatch(name):
             raise AssetError(f"{path}: key {name!r}; expected frame names frame_%06d")
         if not isinstance(entry, dict):
-            raise AssetError(f"{path}: {name} holds {type(entry).__name__}; expected a dict "
-                             "of arrays")
+            raise AssetError(f"{path}: {name} holds {type(entry).__name__}; expected a dict of arrays")
         arrays = {}
         for key, value in entry.items():
             try:
@@ -79,15 +79,15 @@ def _camera(cams: dict[str, dict], path: Path, size: tuple[int, int]) -> Camera:
     first, entry = next(iter(cams.items()))
     K, E = entry["intrinsics"].astype(np.float64), entry["extrinsics"].astype(np.float64)
     if np.abs(K[2] - (0, 0, 1)).max() > 1e-6:
-        raise AssetError(f"{path}: {first} 'intrinsics' last row is {K[2].tolist()}; "
-                         "expected (0, 0, 1)")
+        raise AssetError(f"{path}: {first} 'intrinsics' last row is {K[2].tolist()}; expected (0, 0, 1)")
     if np.abs(E[3] - (0, 0, 0, 1)).max() > 1e-6:
-        raise AssetError(f"{path}: {first} 'extrinsics' last row is {E[3].tolist()}; "
-                         "expected (0, 0, 0, 1)")
+        raise AssetError(f"{path}: {first} 'extrinsics' last row is {E[3].tolist()}; expected (0, 0, 0, 1)")
     R = E[:3, :3]
     if abs(np.linalg.det(R) - 1) > 1e-3 or np.abs(R @ R.T - np.eye(3)).max() > 1e-3:
-        raise AssetError(f"{path}: {first} 'extrinsics' [:3, :3] is not a rotation (det "
-                         f"{np.linalg.det(R):.4f}); expected world->camera [R | T]")
+        raise AssetError(
+            f"{path}: {first} 'extrinsics' [:3, :3] is not a rotation (det "
+            f"{np.linalg.det(R):.4f}); expected world->camera [R | T]"
+        )
     zeros = np.zeros(5)
     for key in CAMERA_KEYS:
         ref = entry.get(key, zeros)
@@ -95,12 +95,13 @@ def _camera(cams: dict[str, dict], path: Path, size: tuple[int, int]) -> Camera:
         diff = np.abs(stack - ref).reshape(len(stack), -1).max(1)
         if diff.max() > SAME_CAMERA_TOL:
             other = list(cams)[int(np.argmax(diff > SAME_CAMERA_TOL))]
-            raise AssetError(f"{path}: {other} '{key}' differs from {first}'s by "
-                             f"{diff.max():.3g}; texvocab reads a HumanNeRF folder as one fixed "
-                             "camera (one image per frame: per-frame cameras would be a moving "
-                             "camera); see assets_spec/captures.md")
-    cam = Camera(K, R, E[:3, 3], size[0], size[1], entry.get("distortions", zeros),
-                 name="camera")
+            raise AssetError(
+                f"{path}: {other} '{key}' differs from {first}'s by "
+                f"{diff.max():.3g}; texvocab reads a HumanNeRF folder as one fixed "
+                "camera (one image per frame: per-frame cameras would be a moving "
+                "camera); see assets_spec/captures.md"
+            )
+    cam = Camera(K, R, E[:3, 3], size[0], size[1], entry.get("distortions", zeros), name="camera")
     return cam.validate(f"{path}: {first}")
 
 
@@ -126,12 +127,16 @@ def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
     root = Path(root)
     cams = _frame_entries(root / "cameras.pkl", "humannerf_camera")
     infos = _frame_entries(root / "mesh_infos.pkl", "humannerf_mesh_info")
-    for a, b, listed, other in (("cameras.pkl", "mesh_infos.pkl", cams, infos),
-                                ("mesh_infos.pkl", "cameras.pkl", infos, cams)):
+    for a, b, listed, other in (
+        ("cameras.pkl", "mesh_infos.pkl", cams, infos),
+        ("mesh_infos.pkl", "cameras.pkl", infos, cams),
+    ):
         lacking = [n for n in listed if n not in other]
         if lacking:
-            raise AssetError(f"{root / b}: no entry for {lacking[0]} ({len(lacking)} frame(s) of "
-                             f"{a} missing); the two pickles must list the same frames")
+            raise AssetError(
+                f"{root / b}: no entry for {lacking[0]} ({len(lacking)} frame(s) of "
+                f"{a} missing); the two pickles must list the same frames"
+            )
     images, masks = _files(root / "images"), _files(root / "masks")
     names, left_out = [], []
     for name in infos:
@@ -141,20 +146,24 @@ def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
         else:
             names.append(name)
     if left_out:
-        shown = ", ".join(left_out[:10]) + (f" and {len(left_out) - 10} more" if
-                                            len(left_out) > 10 else "")
-        log.warning("%s: left out %d frame(s) whose image or mask is missing: %s", root,
-                    len(left_out), shown)
+        shown = ", ".join(left_out[:10]) + (f" and {len(left_out) - 10} more" if len(left_out) > 10 else "")
+        log.warning("%s: left out %d frame(s) whose image or mask is missing: %s", root, len(left_out), shown)
     if not names:
-        raise AssetError(f"{root}: none of the {len(infos)} frames of mesh_infos.pkl has both "
-                         "an image in images/ and a mask in masks/")
+        raise AssetError(
+            f"{root}: none of the {len(infos)} frames of mesh_infos.pkl has both "
+            "an image in images/ and a mask in masks/"
+        )
     camera = _camera(cams, root / "cameras.pkl", _image_size(images[names[0]]))
     info = [infos[n] for n in names]
     rest = np.stack([m["tpose_joints"] for m in info]).astype(np.float64)
     spread = np.abs(rest - rest[0]).max()
     if spread > 1e-3:
-        log.warning("%s: tpose_joints differ between frames by up to %.1f mm; using %s's",
-                    root / "mesh_infos.pkl", spread * 1000, names[0])
+        log.warning(
+            "%s: tpose_joints differ between frames by up to %.1f mm; using %s's",
+            root / "mesh_infos.pkl",
+            spread * 1000,
+            names[0],
+        )
     poses = np.stack([m["poses"].reshape(24, 3) for m in info]).astype(np.float64)
     rh = torch.as_tensor(np.stack([m["Rh"] for m in info]).astype(np.float64))
     th = np.stack([m["Th"] for m in info]).astype(np.float64)
@@ -162,9 +171,16 @@ def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
     poses[:, 0] = quat_to_rotvec(q).numpy()
     j0_subject, j0_body = rest[0, 0], body.rest_joints[0].double().numpy()
     trans = th + rotvec_to_rotmat(rh).numpy() @ j0_subject - j0_body
-    return Capture(root=root, layout="humannerf", cameras=[camera],
-                   poses=poses.astype(np.float32), trans=trans.astype(np.float32),
-                   image_paths=[[images[n]] for n in names], mask_paths=[[masks[n]] for n in names],
-                   frame_ids=[int(n[6:]) for n in names],
-                   num_train=default_num_train(len(names), 1) if num_train is None else num_train,
-                   body=body, rest_joints=rest[0])
+    return Capture(
+        root=root,
+        layout="humannerf",
+        cameras=[camera],
+        poses=poses.astype(np.float32),
+        trans=trans.astype(np.float32),
+        image_paths=[[images[n]] for n in names],
+        mask_paths=[[masks[n]] for n in names],
+        frame_ids=[int(n[6:]) for n in names],
+        num_train=default_num_train(len(names), 1) if num_train is None else num_train,
+        body=body,
+        rest_joints=rest[0],
+    )

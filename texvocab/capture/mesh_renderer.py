@@ -3,6 +3,7 @@
 Cameras follow the project convention (OpenCV): ``x_cam = R @ x_world + t``, +z forward,
 +y down, intrinsics ``K`` in pixels.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -48,8 +49,9 @@ class MeshRenderer:
         self.background = np.asarray([*background, 0.0], dtype=np.float32)
         self._renderer = pyrender.OffscreenRenderer(width, height)
 
-    def render(self, vertices, faces, K, R, t, vertex_colors=None, color=(0.62, 0.64, 0.72),
-               flat: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def render(
+        self, vertices, faces, K, R, t, vertex_colors=None, color=(0.62, 0.64, 0.72), flat: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Render a triangle mesh.
 
         Args:
@@ -65,12 +67,15 @@ class MeshRenderer:
         if vertex_colors is not None:
             mesh.visual.vertex_colors = (np.clip(vertex_colors, 0, 1) * 255).astype(np.uint8)
         material = pyrender.MetallicRoughnessMaterial(
-            baseColorFactor=[*color, 1.0], metallicFactor=0.0, roughnessFactor=0.8)
+            baseColorFactor=[*color, 1.0], metallicFactor=0.0, roughnessFactor=0.8
+        )
         scene = pyrender.Scene(bg_color=self.background, ambient_light=[0.35, 0.35, 0.35])
-        scene.add(pyrender.Mesh.from_trimesh(
-            mesh, material=None if vertex_colors is not None else material, smooth=True))
-        cam = pyrender.IntrinsicsCamera(K[0, 0], K[1, 1], *gl_principal_point(K), znear=0.05,
-                                       zfar=100.0)
+        scene.add(
+            pyrender.Mesh.from_trimesh(
+                mesh, material=None if vertex_colors is not None else material, smooth=True
+            )
+        )
+        cam = pyrender.IntrinsicsCamera(K[0, 0], K[1, 1], *gl_principal_point(K), znear=0.05, zfar=100.0)
         pose = gl_camera_pose(R, t)
         scene.add(cam, pose=pose)
         scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=pose)

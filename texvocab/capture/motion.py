@@ -4,6 +4,7 @@ poses within joint limits, stitched into one smooth sequence.
 Angles are axis-angle components in degrees per joint (as the presets and the viewer's
 sliders); outputs are radians, (T, 24, 3) poses and (T, 3) root translations.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -86,15 +87,17 @@ def twist(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return np.radians(deg), np.zeros((n, 3))
 
 
-def random_poses(n: int, rng: np.random.Generator, keyframes: int = 4,
-                 scale: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def random_poses(
+    n: int, rng: np.random.Generator, keyframes: int = 4, scale: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
     """Smoothly interpolated random poses inside ``scale`` × the joint limits."""
     lim = JOINT_LIMITS_DEG
     mid, half = lim.mean(-1), (lim[..., 1] - lim[..., 0]) / 2 * scale
     keys = mid + rng.uniform(-1, 1, (keyframes, 24, 3)) * half
     keys[:, 0] = 0.0  # root orientation stays (the cameras look at a standing person)
     keys[:, [J["left_hip"], J["right_hip"]], 0] = np.clip(
-        keys[:, [J["left_hip"], J["right_hip"]], 0], -40, 20)  # stay roughly upright
+        keys[:, [J["left_hip"], J["right_hip"]], 0], -40, 20
+    )  # stay roughly upright
     pos = np.linspace(0, keyframes - 1, n)
     k0 = np.floor(pos).astype(int).clip(0, keyframes - 2) if keyframes > 1 else np.zeros(n, int)
     w = (pos - k0)[:, None, None]
@@ -103,12 +106,12 @@ def random_poses(n: int, rng: np.random.Generator, keyframes: int = 4,
     return np.radians(deg), np.zeros((n, 3))
 
 
-_GENERATORS = {"walk": walk, "arm_raise": arm_raise, "squat": squat, "twist": twist,
-               "random": random_poses}
+_GENERATORS = {"walk": walk, "arm_raise": arm_raise, "squat": squat, "twist": twist, "random": random_poses}
 
 
-def make_sequence(plan: list[tuple[str, int]], seed: int = 0,
-                  blend: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def make_sequence(
+    plan: list[tuple[str, int]], seed: int = 0, blend: int = 4
+) -> tuple[np.ndarray, np.ndarray]:
     """Concatenate segments ``[(name, frames), ...]`` with ``blend``-frame cosine joins.
 
     Returns poses (T, 24, 3) float32 radians (within joint limits) and trans (T, 3).

@@ -6,6 +6,7 @@ Masks are in the camera's ideal pinhole image (undistorted, as
 :meth:`texvocab.capture.Capture.mask` returns them); the silhouette is rasterised with
 :func:`texvocab.geometry.raster.rasterize_mesh`, pixel centres at integer coordinates.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -43,8 +44,11 @@ def overlap(silhouette: np.ndarray, mask: np.ndarray) -> tuple[float, float, flo
     def ratio(den: float) -> float:
         return inter / den if den else 1.0
 
-    return (ratio(float(np.logical_or(silhouette, mask).sum())), ratio(float(silhouette.sum())),
-            ratio(float(mask.sum())))
+    return (
+        ratio(float(np.logical_or(silhouette, mask).sum())),
+        ratio(float(silhouette.sum())),
+        ratio(float(mask.sum())),
+    )
 
 
 def posed_vertices(body, poses, trans, betas=None) -> Iterable[torch.Tensor]:
@@ -54,8 +58,9 @@ def posed_vertices(body, poses, trans, betas=None) -> Iterable[torch.Tensor]:
         yield body.forward(pose[None], tr[None], betas).vertices[0]
 
 
-def silhouette_fit(body, poses, trans, camera: Camera, masks: Iterable[np.ndarray],
-                   betas=None) -> SilhouetteFit:
+def silhouette_fit(
+    body, poses, trans, camera: Camera, masks: Iterable[np.ndarray], betas=None
+) -> SilhouetteFit:
     """IoU, precision and recall of the posed body's silhouette against each frame's mask.
 
     Args:
@@ -70,8 +75,10 @@ def silhouette_fit(body, poses, trans, camera: Camera, masks: Iterable[np.ndarra
     faces = body.faces
     for verts, mask in zip(posed_vertices(body, poses, trans, betas), masks, strict=True):
         if mask.shape != (camera.height, camera.width):
-            raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, camera "
-                             f"{camera.name!r} is {camera.width}x{camera.height}")
+            raise ValueError(
+                f"mask is {mask.shape[1]}x{mask.shape[0]}, camera "
+                f"{camera.name!r} is {camera.width}x{camera.height}"
+            )
         rows.append(overlap(body_silhouette(verts, faces, camera), mask))
     iou, precision, recall = (np.asarray(c, dtype=np.float64) for c in zip(*rows))
     return SilhouetteFit(iou, precision, recall)
@@ -86,8 +93,9 @@ def reprojection_offsets(camera: Camera, joints, reference) -> np.ndarray:
     return np.linalg.norm(pa - pb, axis=1).reshape(a.shape[:-1])
 
 
-def _box_span(origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+def _box_span(
+    origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Entry and exit ray parameters (N,) of rays (N, 3) through an axis-aligned box
     (slab test); exit < entry for a ray that misses it."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -97,9 +105,15 @@ def _box_span(origins: np.ndarray, dirs: np.ndarray, lo: np.ndarray, hi: np.ndar
     return np.maximum(near, 0.0), far
 
 
-def ray_surface_distances(vertices, faces, camera: Camera, pixels, max_distance: float = 0.1,
-                          step: float = 0.0025, silhouette: np.ndarray | None = None
-                          ) -> np.ndarray:
+def ray_surface_distances(
+    vertices,
+    faces,
+    camera: Camera,
+    pixels,
+    max_distance: float = 0.1,
+    step: float = 0.0025,
+    silhouette: np.ndarray | None = None,
+) -> np.ndarray:
     """(N,) how close the camera ray through each pixel (N, 2) (x, y integers) passes to
     a posed mesh (vertices (V, 3), faces (F, 3)), metres; inf beyond ``max_distance``.
 
@@ -133,9 +147,17 @@ def ray_surface_distances(vertices, faces, camera: Camera, pixels, max_distance:
     return out
 
 
-def shell_coverage(body, poses, trans, camera: Camera, masks: Iterable[np.ndarray],
-                   deltas=(0.02, 0.04, 0.06, 0.08, 0.1), pixel_stride: int = 4, betas=None,
-                   step: float = 0.0025) -> np.ndarray:
+def shell_coverage(
+    body,
+    poses,
+    trans,
+    camera: Camera,
+    masks: Iterable[np.ndarray],
+    deltas=(0.02, 0.04, 0.06, 0.08, 0.1),
+    pixel_stride: int = 4,
+    betas=None,
+    step: float = 0.0025,
+) -> np.ndarray:
     """(T, D) share of each frame's mask pixels whose camera ray passes within each of
     ``deltas`` (D,) metres of the posed body's surface: how wide a shell around the body
     must be to reach the person in the images. Mask pixels are taken on a grid of every
@@ -150,7 +172,8 @@ def shell_coverage(body, poses, trans, camera: Camera, masks: Iterable[np.ndarra
         if not len(ys):
             rows.append(np.ones(len(deltas)))
             continue
-        dist = ray_surface_distances(verts, body.faces, camera, np.stack([xs, ys], 1),
-                                     max_distance=float(deltas.max()), step=step)
+        dist = ray_surface_distances(
+            verts, body.faces, camera, np.stack([xs, ys], 1), max_distance=float(deltas.max()), step=step
+        )
         rows.append((dist[:, None] <= deltas[None]).mean(0))
     return np.asarray(rows).reshape(-1, len(deltas))

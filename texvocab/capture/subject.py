@@ -8,6 +8,7 @@ body, which has none, gets its skeleton moved onto the joints with its surface f
 (:func:`texvocab.body.fit.fit_rest_joints`). Either way the root translation is re-based so
 the body's pelvis stays on the subject's.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -36,11 +37,17 @@ def fit_subject_body(cap: Capture) -> Capture:
     j0_before = body.rest_joints[0].double().numpy()
     if body.shapedirs is not None and body.J_regressor is not None:
         betas, err = betas_from_rest_joints(body, rest)
-        shaped = body.J_regressor.double() @ (body.v_template.double() + torch.einsum(
-            "vcs,s->vc", body.shapedirs.double()[..., :len(betas)], torch.as_tensor(betas)))
+        shaped = body.J_regressor.double() @ (
+            body.v_template.double()
+            + torch.einsum("vcs,s->vc", body.shapedirs.double()[..., : len(betas)], torch.as_tensor(betas))
+        )
         j0_after = shaped[0].numpy()
-        log.info("body: %s shape fitted to the capture's rest joints (%d betas, joint error "
-                 "%.1f mm)", body.name, len(betas), err * 1000)
+        log.info(
+            "body: %s shape fitted to the capture's rest joints (%d betas, joint error %.1f mm)",
+            body.name,
+            len(betas),
+            err * 1000,
+        )
         fitted = dataclasses.replace(cap, betas=np.asarray(betas, np.float32))
         how = "betas"
     else:
@@ -50,5 +57,4 @@ def fit_subject_body(cap: Capture) -> Capture:
         how = "skeleton"
     digest = hashlib.sha1(np.ascontiguousarray(rest, np.float64).tobytes()).hexdigest()[:8]
     trans = (cap.trans + (j0_before - j0_after)).astype(cap.trans.dtype)
-    return dataclasses.replace(fitted, trans=trans,
-                               meta={**cap.meta, "body_fit": f"{how}-{digest}"})
+    return dataclasses.replace(fitted, trans=trans, meta={**cap.meta, "body_fit": f"{how}-{digest}"})

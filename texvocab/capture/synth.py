@@ -4,6 +4,7 @@ The body wears procedural clothing (:mod:`texvocab.capture.garment`) whose folds
 the joint rotations; pyrender draws it offscreen (OSMesa/EGL) under fixed world lights
 from a ring of cameras plus raised ones.
 """
+
 from __future__ import annotations
 
 import json
@@ -96,8 +97,9 @@ class SynthRenderer:
             self._size = (w, h)
         return self._renderer
 
-    def render(self, pose, trans, cameras: list[Camera],
-               texture_pose=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    def render(
+        self, pose, trans, cameras: list[Camera], texture_pose=None
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
         """[(rgb (H, W, 3) float32, mask (H, W) bool)] per camera for one pose (24, 3).
 
         ``texture_pose`` (tests, inspection): take the clothing's folds from another pose
@@ -112,10 +114,16 @@ class SynthRenderer:
         tex = self.garment.texture(pose if texture_pose is None else texture_pose)
         # pyrender samples row 0 at v = 1, the project's convention (texvocab.geometry.uv).
         texture = pr.Texture(source=(tex * 255 + 0.5).astype(np.uint8), source_channels="RGB")
-        material = pr.MetallicRoughnessMaterial(baseColorTexture=texture, metallicFactor=0.0,
-                                                roughnessFactor=0.9)
-        prim = pr.Primitive(positions=verts[self.vidx], normals=normals[self.vidx],
-                            texcoord_0=self.uv, indices=self.rfaces, material=material)
+        material = pr.MetallicRoughnessMaterial(
+            baseColorTexture=texture, metallicFactor=0.0, roughnessFactor=0.9
+        )
+        prim = pr.Primitive(
+            positions=verts[self.vidx],
+            normals=normals[self.vidx],
+            texcoord_0=self.uv,
+            indices=self.rfaces,
+            material=material,
+        )
         scene = pr.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.32, 0.32, 0.32])
         scene.add(pr.Mesh([prim]))
         for direction, intensity in (((-0.4, -0.6, -0.7), 2.6), ((0.6, -0.3, 0.75), 1.2)):
@@ -135,8 +143,9 @@ class SynthRenderer:
             renderer = self._ensure_renderer(cam.width, cam.height)
             if cam_node is not None:
                 scene.remove_node(cam_node)
-            gl_cam = pr.IntrinsicsCamera(cam.K[0, 0], cam.K[1, 1], *gl_principal_point(cam.K),
-                                         znear=0.05, zfar=100.0)
+            gl_cam = pr.IntrinsicsCamera(
+                cam.K[0, 0], cam.K[1, 1], *gl_principal_point(cam.K), znear=0.05, zfar=100.0
+            )
             cam_node = scene.add(gl_cam, pose=gl_camera_pose(cam.R, cam.t))
             flags = pr.RenderFlags.NONE if self.settings.lighting else pr.RenderFlags.FLAT
             rgb, depth = renderer.render(scene, flags=flags)
@@ -152,10 +161,19 @@ class SynthRenderer:
             self._renderer = None
 
 
-def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train: int, body,
-               settings: SynthSettings | None = None, layout: str = "zju",
-               cameras: list[Camera] | None = None, overwrite: bool = False,
-               progress: bool = True, body_source: str = "default") -> Path:
+def synthesize(
+    out: str | Path,
+    poses: np.ndarray,
+    trans: np.ndarray,
+    num_train: int,
+    body,
+    settings: SynthSettings | None = None,
+    layout: str = "zju",
+    cameras: list[Camera] | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    body_source: str = "default",
+) -> Path:
     """Render a capture and write it in ``layout``; the folder appears only when complete.
 
     Args:
@@ -170,15 +188,15 @@ def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train:
     poses = np.asarray(poses, np.float32)
     trans = np.asarray(trans, np.float32)
     if poses.ndim != 3 or poses.shape[1:] != (24, 3) or trans.shape != (len(poses), 3):
-        raise AssetError(f"poses must be (T, 24, 3) and trans (T, 3), got {poses.shape} and "
-                         f"{trans.shape}")
+        raise AssetError(f"poses must be (T, 24, 3) and trans (T, 3), got {poses.shape} and {trans.shape}")
     body.check_pose(torch.as_tensor(poses), torch.as_tensor(trans))
     if out.exists() and not overwrite:
         raise AssetError(f"{out} already exists (pass --overwrite to replace it)")
-    if out.exists() and not (out.is_dir() and ((out / SYNTH_META).is_file()
-                                               or not any(out.iterdir()))):
-        raise AssetError(f"{out}: --overwrite replaces only a capture texvocab synthesised (it "
-                         f"holds {SYNTH_META}); this is not one, so nothing was changed")
+    if out.exists() and not (out.is_dir() and ((out / SYNTH_META).is_file() or not any(out.iterdir()))):
+        raise AssetError(
+            f"{out}: --overwrite replaces only a capture texvocab synthesised (it "
+            f"holds {SYNTH_META}); this is not one, so nothing was changed"
+        )
     cameras = cameras or default_cameras(settings)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
@@ -191,9 +209,15 @@ def synthesize(out: str | Path, poses: np.ndarray, trans: np.ndarray, num_train:
         for t in frames:
             writer.add_frame(t, poses[t], trans[t], renderer.render(poses[t], trans[t], cameras))
         writer.finish()
-        meta = {"generator": "texvocab synth", "layout": layout, "num_train": int(num_train),
-                "num_frames": len(poses), "body": body_source, "settings": asdict(settings),
-                "cameras": [c.to_dict() for c in cameras]}
+        meta = {
+            "generator": "texvocab synth",
+            "layout": layout,
+            "num_train": int(num_train),
+            "num_frames": len(poses),
+            "body": body_source,
+            "settings": asdict(settings),
+            "cameras": [c.to_dict() for c in cameras],
+        }
         (tmp / SYNTH_META).write_text(json.dumps(meta, indent=1))
         if out.exists():
             shutil.rmtree(out)
@@ -210,10 +234,13 @@ def settings_of(capture) -> tuple[SynthSettings, list[Camera]]:
     """The generator settings and cameras recorded in a synthetic capture."""
     meta = capture.synthetic if hasattr(capture, "synthetic") else capture
     if not meta:
-        raise AssetError(f"{getattr(capture, 'root', capture)} was not made by texvocab synth: "
-                         "no ground truth can be rendered for new poses")
-    cams = [Camera(c["K"], c["R"], c["t"], c["width"], c["height"], c["dist"], c["name"])
-            for c in meta["cameras"]]
+        raise AssetError(
+            f"{getattr(capture, 'root', capture)} was not made by texvocab synth: "
+            "no ground truth can be rendered for new poses"
+        )
+    cams = [
+        Camera(c["K"], c["R"], c["t"], c["width"], c["height"], c["dist"], c["name"]) for c in meta["cameras"]
+    ]
     return SynthSettings(**meta["settings"]), cams
 
 

@@ -10,6 +10,7 @@ SMPL-X hand poses drive finger joints SMPL does not have, so 22–23 are set to 
 Like SMPL-X, the root rotates about the pelvis and ``transl`` is added afterwards, which
 is the project's convention: trans = transl.
 """
+
 from __future__ import annotations
 
 import json
@@ -44,11 +45,16 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
     except json.JSONDecodeError as exc:
         raise AssetError(f"{calib_path}: not valid JSON ({exc})") from None
     names = sorted(calib)
-    image_dirs = sorted(d.name for d in (root / "images").iterdir() if d.is_dir()) \
-        if (root / "images").is_dir() else []
+    image_dirs = (
+        sorted(d.name for d in (root / "images").iterdir() if d.is_dir())
+        if (root / "images").is_dir()
+        else []
+    )
     if len(image_dirs) != len(names):
-        raise AssetError(f"{calib_path}: camera count mismatch: {len(names)} calibrated cameras, "
-                         f"{len(image_dirs)} folders in {root / 'images'}")
+        raise AssetError(
+            f"{calib_path}: camera count mismatch: {len(names)} calibrated cameras, "
+            f"{len(image_dirs)} folders in {root / 'images'}"
+        )
     frames = None
     cameras, image_paths, mask_paths = [], [], []
     for name in names:
@@ -60,17 +66,28 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
         if frames is None:
             frames = [int(p.stem) for p in imgs]
         if [int(p.stem) for p in imgs] != frames or len(masks) != len(imgs):
-            raise AssetError(f"{img_dir}: {len(imgs)} images and {len(masks)} masks, but "
-                             f"{names[0]} has {len(frames)} frames (frame count mismatch "
-                             "between views)")
+            raise AssetError(
+                f"{img_dir}: {len(imgs)} images and {len(masks)} masks, but "
+                f"{names[0]} has {len(frames)} frames (frame count mismatch "
+                "between views)"
+            )
         c = calib[name]
         try:
             w, h = c["imgSize"]
-            cam = Camera(np.reshape(c["K"], (3, 3)), np.reshape(c["R"], (3, 3)),
-                         np.reshape(c["T"], 3), w, h, c.get("D", np.zeros(5)), name=name)
+            cam = Camera(
+                np.reshape(c["K"], (3, 3)),
+                np.reshape(c["R"], (3, 3)),
+                np.reshape(c["T"], 3),
+                w,
+                h,
+                c.get("D", np.zeros(5)),
+                name=name,
+            )
         except (KeyError, ValueError, TypeError) as exc:
-            raise AssetError(f"{calib_path}: camera {name} needs K (9), R (9), T (3), "
-                             f"imgSize [W, H] ({type(exc).__name__}: {exc})") from None
+            raise AssetError(
+                f"{calib_path}: camera {name} needs K (9), R (9), T (3), "
+                f"imgSize [W, H] ({type(exc).__name__}: {exc})"
+            ) from None
         cameras.append(cam.validate(str(calib_path)))
         image_paths.append(imgs)
         mask_paths.append(masks)
@@ -79,19 +96,27 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
     require_valid(p, "thuman_smpl_params", str(params_path))
     n = len(frames)
     if len(p["body_pose"]) < max(frames) + 1:
-        raise AssetError(f"{params_path}: {len(p['body_pose'])} poses but images go up to "
-                         f"frame {max(frames)}")
+        raise AssetError(
+            f"{params_path}: {len(p['body_pose'])} poses but images go up to frame {max(frames)}"
+        )
     poses = np.zeros((n, 24, 3), np.float32)
     idx = np.asarray(frames)
     poses[:, 0] = p["global_orient"][idx]
     poses[:, 1:22] = p["body_pose"][idx].reshape(n, 21, 3)
     betas = p["betas"].reshape(-1, p["betas"].shape[-1])[0] if "betas" in p else None
-    return Capture(root=root, layout="thuman", cameras=cameras, poses=poses,
-                   trans=p["transl"][idx].astype(np.float32),
-                   image_paths=[list(r) for r in zip(*image_paths)],
-                   mask_paths=[list(r) for r in zip(*mask_paths)], frame_ids=frames,
-                   num_train=default_num_train(n, len(cameras)) if num_train is None else num_train,
-                   body=body, betas=betas)
+    return Capture(
+        root=root,
+        layout="thuman",
+        cameras=cameras,
+        poses=poses,
+        trans=p["transl"][idx].astype(np.float32),
+        image_paths=[list(r) for r in zip(*image_paths)],
+        mask_paths=[list(r) for r in zip(*mask_paths)],
+        frame_ids=frames,
+        num_train=default_num_train(n, len(cameras)) if num_train is None else num_train,
+        body=body,
+        betas=betas,
+    )
 
 
 class ThumanWriter:
@@ -107,21 +132,34 @@ class ThumanWriter:
         for name, (rgb, mask) in zip(self.names, renders):
             for sub, arr in (("images", to_uint8(rgb)), ("masks", mask.astype(np.uint8) * 255)):
                 img = Image.fromarray(arr)
-                atomic_write_bytes(self.root / sub / name / f"{t:08d}.jpg",
-                                   lambda tmp, img=img: img.save(tmp, format="JPEG", quality=95))
+                atomic_write_bytes(
+                    self.root / sub / name / f"{t:08d}.jpg",
+                    lambda tmp, img=img: img.save(tmp, format="JPEG", quality=95),
+                )
         self.poses.append(np.asarray(pose))
         self.trans.append(np.asarray(trans))
 
     def finish(self) -> None:
-        calib = {n: {"K": c.K.reshape(-1).tolist(), "R": c.R.reshape(-1).tolist(),
-                     "T": c.t.tolist(), "imgSize": [c.width, c.height]}
-                 for n, c in zip(self.names, self.cameras)}
+        calib = {
+            n: {
+                "K": c.K.reshape(-1).tolist(),
+                "R": c.R.reshape(-1).tolist(),
+                "T": c.t.tolist(),
+                "imgSize": [c.width, c.height],
+            }
+            for n, c in zip(self.names, self.cameras)
+        }
         (self.root / "calibration.json").write_text(json.dumps(calib, indent=1))
         poses = np.asarray(self.poses, np.float32)
         n = len(poses)
-        np.savez(self.root / "smpl_params.npz", betas=np.zeros((1, 10), np.float32),
-                 global_orient=poses[:, 0], transl=np.asarray(self.trans, np.float32),
-                 body_pose=poses[:, 1:22].reshape(n, 63),
-                 left_hand_pose=np.zeros((n, 45), np.float32),
-                 right_hand_pose=np.zeros((n, 45), np.float32),
-                 jaw_pose=np.zeros((n, 3), np.float32), expression=np.zeros((n, 10), np.float32))
+        np.savez(
+            self.root / "smpl_params.npz",
+            betas=np.zeros((1, 10), np.float32),
+            global_orient=poses[:, 0],
+            transl=np.asarray(self.trans, np.float32),
+            body_pose=poses[:, 1:22].reshape(n, 63),
+            left_hand_pose=np.zeros((n, 45), np.float32),
+            right_hand_pose=np.zeros((n, 45), np.float32),
+            jaw_pose=np.zeros((n, 3), np.float32),
+            expression=np.zeros((n, 10), np.float32),
+        )

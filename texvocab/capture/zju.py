@@ -9,6 +9,7 @@ ZJU's SMPL has zero root pose and puts the global rotation in Rh about the origi
 world = R(Rh) · v_smpl + Th. The project's body rotates about the pelvis joint J0 and
 then adds trans, so trans = Th + R(Rh) J0 − J0 (J0 of the body in use).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -47,12 +48,15 @@ def _cameras(annots: dict, path: Path, num_views: int, size: tuple[int, int]) ->
         raise AssetError(f"{path}: 'cams' must hold K, R, T (and D) lists")
     for k in ("K", "R", "T", "D"):
         if k in cams and not isinstance(cams[k], list | tuple | np.ndarray):
-            raise AssetError(f"{path}: cams['{k}'] holds {type(cams[k]).__name__}; expected a "
-                             "list with one entry per view")
+            raise AssetError(
+                f"{path}: cams['{k}'] holds {type(cams[k]).__name__}; expected a list with one entry per view"
+            )
     counts = {k: len(cams[k]) for k in ("K", "R", "T", "D") if k in cams}
     if len(set(counts.values())) != 1 or num_views != counts["K"]:
-        raise AssetError(f"{path}: camera count mismatch: cams has {counts} entries but each "
-                         f"frame lists {num_views} images")
+        raise AssetError(
+            f"{path}: camera count mismatch: cams has {counts} entries but each "
+            f"frame lists {num_views} images"
+        )
     out = []
     for v in range(num_views):
         arrays = {}
@@ -64,12 +68,13 @@ def _cameras(annots: dict, path: Path, num_views: int, size: tuple[int, int]) ->
             except (TypeError, ValueError):
                 raise AssetError(f"{path}: cams['{key}'][{v}] is not numeric") from None
             if shape is not None and a.size != int(np.prod(shape)):
-                raise AssetError(f"{path}: cams['{key}'][{v}] has shape {a.shape}; expected "
-                                 f"{shape}{' (or (3, 1))' if key == 'T' else ''}")
+                raise AssetError(
+                    f"{path}: cams['{key}'][{v}] has shape {a.shape}; expected "
+                    f"{shape}{' (or (3, 1))' if key == 'T' else ''}"
+                )
             arrays[key] = a.reshape(shape) if shape is not None else a.reshape(-1)
         dist = arrays.get("D", np.zeros(5))
-        cam = Camera(arrays["K"], arrays["R"], arrays["T"] / 1000.0, size[0], size[1], dist,
-                     name=f"view{v}")
+        cam = Camera(arrays["K"], arrays["R"], arrays["T"] / 1000.0, size[0], size[1], dist, name=f"view{v}")
         out.append(cam.validate(str(path)))
     return out
 
@@ -82,26 +87,35 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
         raise AssetError(f"{annots_path}: expected a dict with 'cams' and 'ims'")
     rows = annots["ims"]
     if not isinstance(rows, list | tuple) or not all(
-            isinstance(e, dict) and isinstance(e.get("ims"), list | tuple)
-            and all(isinstance(p, str) for p in e["ims"]) for e in rows):
-        raise AssetError(f"{annots_path}: 'ims' must be a list of {{'ims': [image paths]}} per "
-                         f"frame, got {type(rows).__name__}")
+        isinstance(e, dict)
+        and isinstance(e.get("ims"), list | tuple)
+        and all(isinstance(p, str) for p in e["ims"])
+        for e in rows
+    ):
+        raise AssetError(
+            f"{annots_path}: 'ims' must be a list of {{'ims': [image paths]}} per "
+            f"frame, got {type(rows).__name__}"
+        )
     ims = [entry["ims"] for entry in rows]
     if not ims:
         raise AssetError(f"{annots_path}: 'ims' lists no frames")
     num_views = len(ims[0])
     for t, row in enumerate(ims):
         if len(row) != num_views:
-            raise AssetError(f"{annots_path}: frame {t} lists {len(row)} images, frame 0 lists "
-                             f"{num_views} (frame count mismatch between views)")
+            raise AssetError(
+                f"{annots_path}: frame {t} lists {len(row)} images, frame 0 lists "
+                f"{num_views} (frame count mismatch between views)"
+            )
     view_dirs = [root / Path(p).parent for p in ims[0]]
     for v, d in enumerate(view_dirs):
         if not d.is_dir():
             raise AssetError(f"{annots_path}: missing view folder {d} (view {v})")
         found = len([f for f in d.iterdir() if f.suffix.lower() in (".jpg", ".png", ".jpeg")])
         if found < len(ims):
-            raise AssetError(f"{d}: {found} images but {annots_path.name} lists {len(ims)} frames "
-                             "(frame count mismatch between views)")
+            raise AssetError(
+                f"{d}: {found} images but {annots_path.name} lists {len(ims)} frames "
+                "(frame count mismatch between views)"
+            )
     with Image.open(root / ims[0][0]) as im:
         size = im.size
     cameras = _cameras(annots, annots_path, num_views, size)
@@ -132,13 +146,19 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
         trans.append(th + rotvec_to_rotmat(torch.as_tensor(rh)).numpy() @ j0 - j0)
         poses.append(pose)
     masks = [[mask_dir / Path(p).with_suffix(".png") for p in row] for row in ims]
-    return Capture(root=root, layout="zju", cameras=cameras, poses=np.asarray(poses, np.float32),
-                   trans=np.asarray(trans, np.float32),
-                   image_paths=[[root / p for p in row] for row in ims], mask_paths=masks,
-                   frame_ids=list(range(offset, offset + len(ims))),
-                   num_train=(default_num_train(len(ims), num_views) if num_train is None
-                              else num_train),
-                   body=body, betas=betas)
+    return Capture(
+        root=root,
+        layout="zju",
+        cameras=cameras,
+        poses=np.asarray(poses, np.float32),
+        trans=np.asarray(trans, np.float32),
+        image_paths=[[root / p for p in row] for row in ims],
+        mask_paths=masks,
+        frame_ids=list(range(offset, offset + len(ims))),
+        num_train=(default_num_train(len(ims), num_views) if num_train is None else num_train),
+        body=body,
+        betas=betas,
+    )
 
 
 class ZjuWriter:
@@ -162,13 +182,20 @@ class ZjuWriter:
         th = np.asarray(trans, np.float64) - rotvec_to_rotmat(torch.as_tensor(rh)).numpy() @ j0 + j0
         poses = np.asarray(pose, np.float64).copy()
         poses[0] = 0.0
-        params = {"poses": poses.reshape(1, 72), "Rh": rh.reshape(1, 3), "Th": th.reshape(1, 3),
-                  "shapes": np.zeros((1, 10))}
+        params = {
+            "poses": poses.reshape(1, 72),
+            "Rh": rh.reshape(1, 3),
+            "Th": th.reshape(1, 3),
+            "shapes": np.zeros((1, 10)),
+        }
         (self.root / "params").mkdir(parents=True, exist_ok=True)
         np.save(self.root / "params" / f"{t}.npy", params, allow_pickle=True)
 
     def finish(self) -> None:
-        cams = {"K": [c.K for c in self.cameras], "R": [c.R for c in self.cameras],
-                "T": [c.t.reshape(3, 1) * 1000.0 for c in self.cameras],
-                "D": [c.dist.reshape(5, 1) for c in self.cameras]}
+        cams = {
+            "K": [c.K for c in self.cameras],
+            "R": [c.R for c in self.cameras],
+            "T": [c.t.reshape(3, 1) * 1000.0 for c in self.cameras],
+            "D": [c.dist.reshape(5, 1) for c in self.cameras],
+        }
         np.save(self.root / "annots.npy", {"cams": cams, "ims": self.ims}, allow_pickle=True)

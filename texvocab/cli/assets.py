@@ -1,5 +1,6 @@
 """``texvocab check-assets``: SMPL model and UV files, or a capture folder, against
 assets_spec/ (the spec checks themselves are :mod:`texvocab.io.spec`)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,11 +23,13 @@ def check_path(path: str | Path) -> list[str]:
         raise AssetError(f"{path}: no such file or folder")
     if path.is_dir() and _is_capture(path):
         return check_capture(path)
-    files = [path] if path.is_file() else sorted(
-        p for p in path.rglob("*") if p.suffix in (".pkl", ".npz", ".obj"))
+    files = (
+        [path]
+        if path.is_file()
+        else sorted(p for p in path.rglob("*") if p.suffix in (".pkl", ".npz", ".obj"))
+    )
     if not files:
-        return [f"{path}: no SMPL model (.pkl/.npz) or UV (.obj) file found; "
-                f"see {spec_ref('smpl_model')}"]
+        return [f"{path}: no SMPL model (.pkl/.npz) or UV (.obj) file found; see {spec_ref('smpl_model')}"]
     lines = []
     for f in files:
         kind = "smpl_uv" if f.suffix == ".obj" else "smpl_model"
@@ -55,29 +58,36 @@ def _check_content(cap) -> list[str]:
     stated bounds, every mask non-empty, the default held-out views present."""
     lines = []
     try:
-        cap.body.check_pose(torch.as_tensor(np.asarray(cap.poses)),
-                            torch.as_tensor(np.asarray(cap.trans)))
+        cap.body.check_pose(torch.as_tensor(np.asarray(cap.poses)), torch.as_tensor(np.asarray(cap.trans)))
     except PoseError as exc:
         lines.append(f"FAIL {cap.root}: {exc}")
-    empty = [(t, v) for t in range(cap.num_frames) for v in range(cap.num_views)
-             if not cap.mask(v, t).any()]
+    empty = [(t, v) for t in range(cap.num_frames) for v in range(cap.num_views) if not cap.mask(v, t).any()]
     if empty:
         t, v = empty[0]
-        lines.append(f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(empty)} of "
-                     f"{cap.num_frames * cap.num_views} masks are empty); training and "
-                     "evaluation need the person in every view")
+        lines.append(
+            f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(empty)} of "
+            f"{cap.num_frames * cap.num_views} masks are empty); training and "
+            "evaluation need the person in every view"
+        )
     held_out = [v for v in Settings().data.eval_views if v >= cap.num_views]
     novel = cap.num_frames - cap.num_train
     if cap.num_views == 1:
-        held = (f"the last {novel} frames ({cap.frame_ids[cap.num_train]}.."
-                f"{cap.frame_ids[-1]}) are held out as novel poses, scored from this camera"
-                if novel else "no frame is held out (every frame trains)")
-        lines.append(f"note {cap.root}: one camera, so no held-out view: {held}; training "
-                     "frames are scored as seen views")
+        held = (
+            f"the last {novel} frames ({cap.frame_ids[cap.num_train]}.."
+            f"{cap.frame_ids[-1]}) are held out as novel poses, scored from this camera"
+            if novel
+            else "no frame is held out (every frame trains)"
+        )
+        lines.append(
+            f"note {cap.root}: one camera, so no held-out view: {held}; training "
+            "frames are scored as seen views"
+        )
     elif held_out:
-        lines.append(f"note {cap.root}: has views 0..{cap.num_views - 1}, but the default "
-                     f"eval_views are {list(Settings().data.eval_views)}: train and eval "
-                     "with --set data.eval_views=... (views that exist)")
+        lines.append(
+            f"note {cap.root}: has views 0..{cap.num_views - 1}, but the default "
+            f"eval_views are {list(Settings().data.eval_views)}: train and eval "
+            "with --set data.eval_views=... (views that exist)"
+        )
     return lines
 
 
@@ -87,8 +97,9 @@ def check_capture(path: Path) -> list[str]:
         cap = open_capture(path)
     except AssetError as exc:
         return [f"FAIL {exc}"]
-    missing = [p for rows in (cap.image_paths, cap.mask_paths) for row in rows for p in row
-               if not p.is_file()]
+    missing = [
+        p for rows in (cap.image_paths, cap.mask_paths) for row in rows for p in row if not p.is_file()
+    ]
     lines = [f"FAIL {p}: listed by the capture but missing" for p in missing[:10]]
     if len(missing) > 10:
         lines.append(f"FAIL ... and {len(missing) - 10} more missing files")
@@ -100,7 +111,9 @@ def check_capture(path: Path) -> list[str]:
     if not lines:
         lines += _check_content(cap)
     if not [ln for ln in lines if ln.startswith("FAIL")]:
-        lines.append(f"OK   {path}: {cap.layout} capture, {cap.num_views} "
-                     f"view{'s' if cap.num_views != 1 else ''} x "
-                     f"{cap.num_frames} frames ({cap.num_train} training)")
+        lines.append(
+            f"OK   {path}: {cap.layout} capture, {cap.num_views} "
+            f"view{'s' if cap.num_views != 1 else ''} x "
+            f"{cap.num_frames} frames ({cap.num_train} training)"
+        )
     return lines

@@ -2,6 +2,7 @@
 
 build_parser imports this module, so the commands import what they run (torch, PIL)
 inside their functions: ``texvocab --help`` stays light."""
+
 from __future__ import annotations
 
 import argparse
@@ -15,32 +16,49 @@ from texvocab.errors import TexvocabError
 
 def add_synth_parser(sub, add_smpl) -> None:
     p = sub.add_parser(
-        "synth", help="render a synthetic multi-view capture with ground truth",
+        "synth",
+        help="render a synthetic multi-view capture with ground truth",
         description="Render the default body (or --smpl) wearing procedural, pose-dependent "
-                    "clothing from a ring of cameras, written as a ZJU-MoCap (default) or "
-                    "THUman4.0 capture folder. With --poses, render any pose sequence "
-                    "(novel poses); with --like, reuse another synthetic capture's cameras "
-                    "and settings so the images are its ground truth.")
+        "clothing from a ring of cameras, written as a ZJU-MoCap (default) or "
+        "THUman4.0 capture folder. With --poses, render any pose sequence "
+        "(novel poses); with --like, reuse another synthetic capture's cameras "
+        "and settings so the images are its ground truth.",
+    )
     p.add_argument("out", help="capture folder to create")
     p.add_argument("--layout", choices=("zju", "thuman"), default="zju")
-    p.add_argument("--motion", choices=("default", "compositional"), default="default",
-                   help="default: walk, arm raises, squat, twist, random poses (72 training "
-                        "frames), then 30 novel frames of the same kinds; compositional: "
-                        "five whole-body combinations of part motions train, and 30 novel "
-                        "frames recombine those part poses in ways never seen together "
-                        "(the body-part vocabulary's case; README, 'Captures')")
-    p.add_argument("--poses", metavar="FILE.npz", default=None,
-                   help="poses instead of the default procedural motion: SMPL (T, 24, 3) or "
-                        "(T, 72) [+ trans (T, 3)], AMASS SMPL-H (T, 156) or SMPL-X (T, 165) "
-                        "(resampled to 30 fps, turned Z-up -> +Y up)")
-    p.add_argument("--like", metavar="CAPTURE", default=None,
-                   help="copy cameras and settings from this synthetic capture")
-    p.add_argument("--frames", type=int, default=None,
-                   help="use only the first N frames of the motion")
-    p.add_argument("--train-frames", type=int, default=None,
-                   help="leading frames used for training (default: the motion's training "
-                        "part; with --poses: all frames, or none with --like, i.e. a "
-                        "novel-pose ground-truth set)")
+    p.add_argument(
+        "--motion",
+        choices=("default", "compositional"),
+        default="default",
+        help="default: walk, arm raises, squat, twist, random poses (72 training "
+        "frames), then 30 novel frames of the same kinds; compositional: "
+        "five whole-body combinations of part motions train, and 30 novel "
+        "frames recombine those part poses in ways never seen together "
+        "(the body-part vocabulary's case; README, 'Captures')",
+    )
+    p.add_argument(
+        "--poses",
+        metavar="FILE.npz",
+        default=None,
+        help="poses instead of the default procedural motion: SMPL (T, 24, 3) or "
+        "(T, 72) [+ trans (T, 3)], AMASS SMPL-H (T, 156) or SMPL-X (T, 165) "
+        "(resampled to 30 fps, turned Z-up -> +Y up)",
+    )
+    p.add_argument(
+        "--like",
+        metavar="CAPTURE",
+        default=None,
+        help="copy cameras and settings from this synthetic capture",
+    )
+    p.add_argument("--frames", type=int, default=None, help="use only the first N frames of the motion")
+    p.add_argument(
+        "--train-frames",
+        type=int,
+        default=None,
+        help="leading frames used for training (default: the motion's training "
+        "part; with --poses: all frames, or none with --like, i.e. a "
+        "novel-pose ground-truth set)",
+    )
     p.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
     p.add_argument("--ring-views", type=int, default=8)
     p.add_argument("--raised-views", type=int, default=2)
@@ -70,8 +88,13 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
         settings, cameras = settings_of(open_capture(args.like, body=body))
     else:
-        settings = SynthSettings(ring_views=args.ring_views, raised_views=args.raised_views,
-                                 size=args.size, texture_size=args.texture_size, seed=args.seed)
+        settings = SynthSettings(
+            ring_views=args.ring_views,
+            raised_views=args.raised_views,
+            size=args.size,
+            texture_size=args.texture_size,
+            seed=args.seed,
+        )
     if args.poses:
         poses, trans = load_pose_file(args.poses)
         num_train = 0 if args.like else len(poses)
@@ -89,23 +112,38 @@ def cmd_synth(args: argparse.Namespace) -> int:
         num_train = args.train_frames
     num_train = min(num_train, len(poses))
     t0 = time.perf_counter()
-    out = synthesize(args.out, poses, trans, num_train, body, settings, args.layout, cameras,
-                     overwrite=args.overwrite, body_source=args.smpl or "default")
+    out = synthesize(
+        args.out,
+        poses,
+        trans,
+        num_train,
+        body,
+        settings,
+        args.layout,
+        cameras,
+        overwrite=args.overwrite,
+        body_source=args.smpl or "default",
+    )
     n_views = len(cameras) if cameras else settings.ring_views + settings.raised_views
-    print(f"wrote {len(poses)} frames x {n_views} views ({args.layout} layout, "
-          f"{num_train} training frames) to {Path(out).resolve()} in "
-          f"{time.perf_counter() - t0:.1f} s")
+    print(
+        f"wrote {len(poses)} frames x {n_views} views ({args.layout} layout, "
+        f"{num_train} training frames) to {Path(out).resolve()} in "
+        f"{time.perf_counter() - t0:.1f} s"
+    )
     return 0
 
 
 def add_sheet_parser(sub) -> None:
-    p = sub.add_parser("contact-sheet", help="write a views x frames PNG of a capture",
-                       description="Tile a capture's images (rows: views, columns: frames) "
-                                   "into one PNG to look at.")
+    p = sub.add_parser(
+        "contact-sheet",
+        help="write a views x frames PNG of a capture",
+        description="Tile a capture's images (rows: views, columns: frames) into one PNG to look at.",
+    )
     p.add_argument("capture", help="capture folder (ZJU-MoCap, THUman4.0 or HumanNeRF layout)")
     p.add_argument("--out", default=None, help="PNG path (default: CAPTURE/contact_sheet.png)")
-    p.add_argument("--frames", default=None,
-                   help="comma-separated frame indices (default: 8 spread over the sequence)")
+    p.add_argument(
+        "--frames", default=None, help="comma-separated frame indices (default: 8 spread over the sequence)"
+    )
     p.add_argument("--masks", action="store_true", help="tile the masks instead of images")
     p.set_defaults(func=cmd_sheet)
 
@@ -120,8 +158,9 @@ def cmd_sheet(args: argparse.Namespace) -> int:
         try:
             frames = [int(f) for f in args.frames.split(",")]
         except ValueError:
-            raise TexvocabError(f"--frames {args.frames}: expected frame numbers separated by "
-                                "commas, e.g. 0,10,20") from None
+            raise TexvocabError(
+                f"--frames {args.frames}: expected frame numbers separated by commas, e.g. 0,10,20"
+            ) from None
     else:
         frames = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
     bad = [f for f in frames if not 0 <= f < cap.num_frames]

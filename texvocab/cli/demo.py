@@ -1,6 +1,7 @@
 """``texvocab demo``: what exists so far — the body (default or the user's SMPL) in six
 poses, rendered offscreen front and side, and the default synthetic capture (views ×
 frames contact sheet), written as PNGs."""
+
 from __future__ import annotations
 
 import logging
@@ -34,8 +35,10 @@ def render_pose_sheet(body, size: int = 320, poses=DEMO_POSES) -> tuple[np.ndarr
     from texvocab.capture.mesh_renderer import MeshRenderer, intrinsics, look_at
 
     K = intrinsics(size, size, fov_y_deg=40.0)
-    views = {"front": look_at((0, -0.25, 3.6), (0, -0.25, 0)),
-             "side": look_at((3.6, -0.25, 0), (0, -0.25, 0))}
+    views = {
+        "front": look_at((0, -0.25, 3.6), (0, -0.25, 0)),
+        "side": look_at((3.6, -0.25, 0), (0, -0.25, 0)),
+    }
     renders: dict[tuple[str, str], np.ndarray] = {}
     with MeshRenderer(size, size) as renderer:
         for name in poses:
@@ -59,8 +62,9 @@ def run_demo(out_dir: str | Path, smpl: str | None = None, size: int = 320) -> l
     return written
 
 
-def demo_capture(out_dir: str | Path, smpl: str | None = None,
-                 frames: int | None = None) -> tuple[Path, Path]:
+def demo_capture(
+    out_dir: str | Path, smpl: str | None = None, frames: int | None = None
+) -> tuple[Path, Path]:
     """Synthesise the default capture under ``out_dir/capture`` (reused when present) and
     write its contact sheet; returns (capture folder, sheet path)."""
     out_dir = Path(out_dir)
@@ -75,21 +79,22 @@ def demo_capture(out_dir: str | Path, smpl: str | None = None,
     picks = sorted(set(np.linspace(0, cap.num_frames - 1, min(8, cap.num_frames)).astype(int)))
     rows = [[cap.image(v, t) for t in picks] for v in range(cap.num_views)]
     labels = [f"{'train' if t < cap.num_train else 'novel'} {t}" for t in picks]
-    sheet = save_png(out_dir / "capture_sheet.png",
-                     contact_sheet(rows, [c.name for c in cap.cameras], labels))
+    sheet = save_png(
+        out_dir / "capture_sheet.png", contact_sheet(rows, [c.name for c in cap.cameras], labels)
+    )
     return root, sheet
 
 
-def demo_avatar(out_dir: str | Path, capture_root: Path, minutes: float = 3.0,
-                smpl: str | None = None) -> tuple[Path, Path]:
+def demo_avatar(
+    out_dir: str | Path, capture_root: Path, minutes: float = 3.0, smpl: str | None = None
+) -> tuple[Path, Path]:
     """Prepare texture maps, train a short avatar (``minutes`` of wall time, resumed on
     later runs until it has had that long) and evaluate it on the full default test sets
     (every novel frame and as many training frames, each from every evaluation view, with
     a progress bar); returns (checkpoint, report)."""
     run = Path(out_dir) / "avatar"
     cap = open_capture(capture_root, body=load_body(smpl))
-    settings = Settings(train=TrainSettings(iterations=100000, max_minutes=minutes,
-                                            checkpoint_every=100))
+    settings = Settings(train=TrainSettings(iterations=100000, max_minutes=minutes, checkpoint_every=100))
     trainer = Trainer(cap, settings, run)
     try:
         trainer.resume()
@@ -100,9 +105,17 @@ def demo_avatar(out_dir: str | Path, capture_root: Path, minutes: float = 3.0,
     trainer.run()
     trainer.model.eval()
     sets = build_sets(cap, settings)  # the full test split: every novel frame x eval view
-    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(settings),
-                                          progress=True)
-    paths = write_report(run / "eval", table, records, grids,
-                         {"checkpoint": str(trainer.checkpoint_path), "step": trainer.step,
-                          "capture": str(capture_root), "settings": settings.to_dict()})
+    table, records, grids = evaluate_sets(trainer.model, sets, march_settings(settings), progress=True)
+    paths = write_report(
+        run / "eval",
+        table,
+        records,
+        grids,
+        {
+            "checkpoint": str(trainer.checkpoint_path),
+            "step": trainer.step,
+            "capture": str(capture_root),
+            "settings": settings.to_dict(),
+        },
+    )
     return trainer.checkpoint_path, paths[0]

@@ -1,5 +1,6 @@
 """The ``texvocab`` command line. Every subcommand has ``--help``; user errors print one
 ``error: ...`` line and exit with status 2."""
+
 from __future__ import annotations
 
 import argparse
@@ -21,9 +22,12 @@ from texvocab_viewer.arguments import add_view_arguments
 
 
 def _add_smpl(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--smpl", metavar="PATH", default=None,
-                   help="your SMPL model file or folder (see assets_spec/README.md); "
-                        "default: the embedded default body")
+    p.add_argument(
+        "--smpl",
+        metavar="PATH",
+        default=None,
+        help="your SMPL model file or folder (see assets_spec/README.md); default: the embedded default body",
+    )
 
 
 def cmd_demo(args) -> int:
@@ -87,72 +91,116 @@ SHOT_OVERLAYS = ("part_colors", "novelty", "wireframe", "skeleton")
 
 def add_viewer_parsers(sub) -> None:
     """``view`` (the desktop viewer, texvocab_viewer) and ``shot`` (its headless screenshot)."""
-    p = sub.add_parser("view", help="the desktop viewer: pose, 3D view, vocabulary, neural render",
-                       description="Open the viewer window on a checkpoint (its avatar, "
-                                   "vocabulary and capture), a capture folder (its vocabulary "
-                                   "and texture maps) or, with no SOURCE, the body alone.")
+    p = sub.add_parser(
+        "view",
+        help="the desktop viewer: pose, 3D view, vocabulary, neural render",
+        description="Open the viewer window on a checkpoint (its avatar, "
+        "vocabulary and capture), a capture folder (its vocabulary "
+        "and texture maps) or, with no SOURCE, the body alone.",
+    )
     add_view_arguments(p)
     p.set_defaults(func=cmd_view)
 
-    p = sub.add_parser("shot", help="headless screenshot of the viewer's 3D view (+ neural render)",
-                       description="Render the viewer's 3D view of a pose, and for a checkpoint "
-                                   "the neural render from the same camera, offscreen (OSMesa, "
-                                   "no display); write view3d.png, neural.png and shot.png "
-                                   "(side by side) to --out and print their paths.")
-    p.add_argument("source", nargs="?", default=None,
-                   help="checkpoint.pt or capture folder (default: the body alone)")
-    p.add_argument("--pose", default="a_pose",
-                   help="a preset name (t_pose, a_pose, walk, squat, ...), a capture frame "
-                        "index N (or frame:N), or FILE.npz[:N] (default: a_pose)")
-    p.add_argument("--camera", default="0,0,3.2",
-                   help="a capture view index, or 'yaw,pitch,distance' of an orbit camera "
-                        "around the body (degrees, degrees, metres; default 0,0,3.2: the "
-                        "front)")
-    p.add_argument("--size", default=None, metavar="WxH",
-                   help="image size (default: the capture view's size, else 640x400)")
+    p = sub.add_parser(
+        "shot",
+        help="headless screenshot of the viewer's 3D view (+ neural render)",
+        description="Render the viewer's 3D view of a pose, and for a checkpoint "
+        "the neural render from the same camera, offscreen (OSMesa, "
+        "no display); write view3d.png, neural.png and shot.png "
+        "(side by side) to --out and print their paths.",
+    )
+    p.add_argument(
+        "source", nargs="?", default=None, help="checkpoint.pt or capture folder (default: the body alone)"
+    )
+    p.add_argument(
+        "--pose",
+        default="a_pose",
+        help="a preset name (t_pose, a_pose, walk, squat, ...), a capture frame "
+        "index N (or frame:N), or FILE.npz[:N] (default: a_pose)",
+    )
+    p.add_argument(
+        "--camera",
+        default="0,0,3.2",
+        help="a capture view index, or 'yaw,pitch,distance' of an orbit camera "
+        "around the body (degrees, degrees, metres; default 0,0,3.2: the "
+        "front)",
+    )
+    p.add_argument(
+        "--size",
+        default=None,
+        metavar="WxH",
+        help="image size (default: the capture view's size, else 640x400)",
+    )
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--overlay", nargs="+", default=[], choices=SHOT_OVERLAYS, metavar="NAME",
-                   help="any of: " + ", ".join(SHOT_OVERLAYS) + " (over the blended texture)")
-    p.add_argument("--neural", action=argparse.BooleanOptionalAction, default=None,
-                   help="also render the trained avatar (default: when SOURCE is a checkpoint)")
-    p.add_argument("--capture", metavar="FOLDER", default=None,
-                   help="the capture folder a checkpoint was trained on, when it is not where the "
-                        "checkpoint records it (moved, or another machine)")
+    p.add_argument(
+        "--overlay",
+        nargs="+",
+        default=[],
+        choices=SHOT_OVERLAYS,
+        metavar="NAME",
+        help="any of: " + ", ".join(SHOT_OVERLAYS) + " (over the blended texture)",
+    )
+    p.add_argument(
+        "--neural",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="also render the trained avatar (default: when SOURCE is a checkpoint)",
+    )
+    p.add_argument(
+        "--capture",
+        metavar="FOLDER",
+        default=None,
+        help="the capture folder a checkpoint was trained on, when it is not where the "
+        "checkpoint records it (moved, or another machine)",
+    )
     _add_smpl(p)
     p.set_defaults(func=cmd_shot)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="texvocab",
-        description="TexVocab: pose-driven avatars from multi-view video (CVPR 2024).")
+        prog="texvocab", description="TexVocab: pose-driven avatars from multi-view video (CVPR 2024)."
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("demo", help="body poses, a synthetic capture, a short avatar run",
-                       description="Render the body (default, or --smpl) in six poses, front "
-                                   "and side, offscreen; synthesise the default multi-view "
-                                   "capture (reused if present), prepare its texture maps, "
-                                   "train a short avatar and evaluate it; then open the "
-                                   "viewer on it, or with no display write the viewer's "
-                                   "screenshots; write PNGs and print where they are.")
+    p = sub.add_parser(
+        "demo",
+        help="body poses, a synthetic capture, a short avatar run",
+        description="Render the body (default, or --smpl) in six poses, front "
+        "and side, offscreen; synthesise the default multi-view "
+        "capture (reused if present), prepare its texture maps, "
+        "train a short avatar and evaluate it; then open the "
+        "viewer on it, or with no display write the viewer's "
+        "screenshots; write PNGs and print where they are.",
+    )
     p.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     p.add_argument("--size", type=int, default=320, help="tile size in pixels (default: 320)")
-    p.add_argument("--frames", type=int, default=None,
-                   help="synthesise only the first N frames of the default capture")
-    p.add_argument("--no-view", action="store_true",
-                   help="do not open the viewer at the end even with a display; write its "
-                        "screenshots instead (as without a display)")
-    p.add_argument("--train-minutes", type=float, default=3.0,
-                   help="train the demo avatar this long (default 3; 0 skips training)")
+    p.add_argument(
+        "--frames", type=int, default=None, help="synthesise only the first N frames of the default capture"
+    )
+    p.add_argument(
+        "--no-view",
+        action="store_true",
+        help="do not open the viewer at the end even with a display; write its "
+        "screenshots instead (as without a display)",
+    )
+    p.add_argument(
+        "--train-minutes",
+        type=float,
+        default=3.0,
+        help="train the demo avatar this long (default 3; 0 skips training)",
+    )
     _add_smpl(p)
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("check-assets", help="check SMPL files or a capture against assets_spec/",
-                       description="Say exactly what is wrong with an SMPL model file, UV file, "
-                                   "a folder of them, or a capture folder (ZJU-MoCap / "
-                                   "THUman4.0 / HumanNeRF), or that all is well.")
-    p.add_argument("path", help="a .pkl/.npz model, a smpl_uv.obj, a folder of them, or a "
-                                "capture folder")
+    p = sub.add_parser(
+        "check-assets",
+        help="check SMPL files or a capture against assets_spec/",
+        description="Say exactly what is wrong with an SMPL model file, UV file, "
+        "a folder of them, or a capture folder (ZJU-MoCap / "
+        "THUman4.0 / HumanNeRF), or that all is well.",
+    )
+    p.add_argument("path", help="a .pkl/.npz model, a smpl_uv.obj, a folder of them, or a capture folder")
     p.set_defaults(func=cmd_check_assets)
 
     add_synth_parser(sub, _add_smpl)

@@ -1,5 +1,6 @@
 """``texvocab render CKPT --poses FILE --out clip.mp4``: a pose sequence (SMPL, AMASS
 SMPL-H or SMPL-X) driving a trained avatar, as an MP4 or a PNG sequence."""
+
 from __future__ import annotations
 
 import argparse
@@ -10,46 +11,97 @@ from texvocab.errors import TexvocabError
 
 
 def add_render_parser(sub, add_smpl) -> None:
-    p = sub.add_parser("render", help="render a pose sequence with a trained avatar to a video",
-                       description="Drive a trained avatar with a pose file (SMPL (T, 24, 3) / "
-                                   "(T, 72), AMASS SMPL-H (T, 156), SMPL-X (T, 165)) and write "
-                                   "an MP4 (--out clip.mp4) or a PNG sequence (--out FOLDER). "
-                                   "Frames are cached beside the video (clip.frames/): run the "
-                                   "same command again to resume an interrupted render.")
+    p = sub.add_parser(
+        "render",
+        help="render a pose sequence with a trained avatar to a video",
+        description="Drive a trained avatar with a pose file (SMPL (T, 24, 3) / "
+        "(T, 72), AMASS SMPL-H (T, 156), SMPL-X (T, 165)) and write "
+        "an MP4 (--out clip.mp4) or a PNG sequence (--out FOLDER). "
+        "Frames are cached beside the video (clip.frames/): run the "
+        "same command again to resume an interrupted render.",
+    )
     p.add_argument("checkpoint", help="trained checkpoint (checkpoint.pt)")
     p.add_argument("--poses", required=True, metavar="FILE.npz", help="pose sequence")
     p.add_argument("--out", required=True, help="clip.mp4, or a folder for PNG frames")
-    p.add_argument("--camera", type=int, default=0, metavar="N",
-                   help="capture camera to render from (default 0)")
-    p.add_argument("--no-follow", dest="follow", action="store_false",
-                   help="keep the camera where the capture had it (default: it moves with the "
-                        "body's root, as a follow camera)")
-    p.add_argument("--orbit", type=float, default=0.0, metavar="TURNS",
-                   help="turn the camera about the body this many times over the clip")
-    p.add_argument("--panels", default="neural", metavar="LIST",
-                   help="comma-separated panels side by side: neural (the avatar), vocab (the "
-                        "body with the pose's blended vocabulary texture), novelty (each "
-                        "part's distance to its nearest key); default: neural")
-    p.add_argument("--fps", type=float, default=30.0,
-                   help="frame rate: files that state theirs (AMASS) are resampled to it")
-    p.add_argument("--root", choices=("keep", "zero"), default="keep",
-                   help="zero: drop the root orientation and translation")
-    p.add_argument("--up", choices=("auto", "y", "z"), default="auto",
-                   help="the file's up axis (auto: Z for AMASS SMPL-H/SMPL-X, else Y)")
-    p.add_argument("--frames", default=None, metavar="A:B",
-                   help="only frames A..B-1 of the (resampled) sequence")
-    p.add_argument("--capture", metavar="FOLDER", default=None,
-                   help="the capture the checkpoint was trained on (default: the one it records)")
-    p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None,
-                   help="render preset (render knobs only; the rest is in the checkpoint)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a render knob, e.g. --set render.image_scale=0.5")
-    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
-                   help="render frames in parallel as Ray tasks: a local Ray with --workers "
-                        "workers, or the cluster at ADDRESS (pip install 'texvocab[scale]')")
+    p.add_argument(
+        "--camera", type=int, default=0, metavar="N", help="capture camera to render from (default 0)"
+    )
+    p.add_argument(
+        "--no-follow",
+        dest="follow",
+        action="store_false",
+        help="keep the camera where the capture had it (default: it moves with the "
+        "body's root, as a follow camera)",
+    )
+    p.add_argument(
+        "--orbit",
+        type=float,
+        default=0.0,
+        metavar="TURNS",
+        help="turn the camera about the body this many times over the clip",
+    )
+    p.add_argument(
+        "--panels",
+        default="neural",
+        metavar="LIST",
+        help="comma-separated panels side by side: neural (the avatar), vocab (the "
+        "body with the pose's blended vocabulary texture), novelty (each "
+        "part's distance to its nearest key); default: neural",
+    )
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=30.0,
+        help="frame rate: files that state theirs (AMASS) are resampled to it",
+    )
+    p.add_argument(
+        "--root",
+        choices=("keep", "zero"),
+        default="keep",
+        help="zero: drop the root orientation and translation",
+    )
+    p.add_argument(
+        "--up",
+        choices=("auto", "y", "z"),
+        default="auto",
+        help="the file's up axis (auto: Z for AMASS SMPL-H/SMPL-X, else Y)",
+    )
+    p.add_argument(
+        "--frames", default=None, metavar="A:B", help="only frames A..B-1 of the (resampled) sequence"
+    )
+    p.add_argument(
+        "--capture",
+        metavar="FOLDER",
+        default=None,
+        help="the capture the checkpoint was trained on (default: the one it records)",
+    )
+    p.add_argument(
+        "--preset",
+        choices=("fast", "balanced", "quality"),
+        default=None,
+        help="render preset (render knobs only; the rest is in the checkpoint)",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a render knob, e.g. --set render.image_scale=0.5",
+    )
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        default=None,
+        metavar="ADDRESS",
+        help="render frames in parallel as Ray tasks: a local Ray with --workers "
+        "workers, or the cluster at ADDRESS (pip install 'texvocab[scale]')",
+    )
     p.add_argument("--workers", type=int, default=2, help="Ray workers (default 2)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace frames cached by a render with other settings")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace frames cached by a render with other settings"
+    )
     add_smpl(p)
     p.set_defaults(func=cmd_render)
 
@@ -92,12 +144,15 @@ def cmd_render(args: argparse.Namespace) -> int:
     panels = [p.strip() for p in args.panels.split(",") if p.strip()]
     known = ("neural", "vocab", "novelty")
     if not panels or any(p not in known for p in panels) or len(set(panels)) < len(panels):
-        raise TexvocabError(f"--panels {args.panels!r}: expected a comma-separated list of "
-                            f"distinct {', '.join(known)}")
+        raise TexvocabError(
+            f"--panels {args.panels!r}: expected a comma-separated list of distinct {', '.join(known)}"
+        )
     gl = [p for p in panels if p != "neural"]
     if gl and args.ray is not None:
-        raise TexvocabError(f"--panels {args.panels}: the {', '.join(gl)} panels are drawn by "
-                            "this process's GL; use --ray with --panels neural")
+        raise TexvocabError(
+            f"--panels {args.panels}: the {', '.join(gl)} panels are drawn by "
+            "this process's GL; use --ray with --panels neural"
+        )
     if args.ray is not None:
         from texvocab.pipeline.clip_ray import _ray
 
@@ -127,21 +182,31 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--camera {args.camera}: the capture has views 0..{cap.num_views - 1}")
     settings = render_overrides(trained, args.preset, args.overrides)
     pelvis = model.body.rest_joints[0].double().numpy()
-    seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=args.root,
-                             pelvis=pelvis)
+    seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=args.root, pelvis=pelvis)
     keep = _frame_range(args.frames, len(seq))
-    poses, trans = seq.poses[keep.start:keep.stop], seq.trans[keep.start:keep.stop]
+    poses, trans = seq.poses[keep.start : keep.stop], seq.trans[keep.start : keep.stop]
     fps = seq.fps or args.fps
     knobs = {k: getattr(settings.render, k) for k in RENDER_KNOBS}
-    spec = ClipSpec.make(args.checkpoint, args.poses, args.camera, args.orbit, args.follow,
-                         fps, settings.render.image_scale,
-                         {**knobs, "frames": [keep.start, keep.stop], "up": args.up,
-                          "root": args.root, "panels": panels})
+    spec = ClipSpec.make(
+        args.checkpoint,
+        args.poses,
+        args.camera,
+        args.orbit,
+        args.follow,
+        fps,
+        settings.render.image_scale,
+        {**knobs, "frames": [keep.start, keep.stop], "up": args.up, "root": args.root, "panels": panels},
+    )
     folder = frames_dir(out)
     cached = prepare_frames_dir(folder, spec, args.overwrite)
-    reference = np.asarray(cap.trans[:cap.num_train], dtype=np.float64).mean(0)
-    cams = frame_cameras(cap.cameras[args.camera], trans.astype(np.float64) + pelvis,
-                         reference + pelvis, args.follow, args.orbit)
+    reference = np.asarray(cap.trans[: cap.num_train], dtype=np.float64).mean(0)
+    cams = frame_cameras(
+        cap.cameras[args.camera],
+        trans.astype(np.float64) + pelvis,
+        reference + pelvis,
+        args.follow,
+        args.orbit,
+    )
     march = march_settings(settings)
     t0 = time.perf_counter()
     if args.ray is None:
@@ -168,14 +233,24 @@ def cmd_render(args: argparse.Namespace) -> int:
     else:
         from texvocab.pipeline.clip_ray import render_frames_ray
 
-        paths = render_frames_ray(model, march, settings.render.image_scale, poses, trans, cams,
-                                  folder, None if args.ray == "local" else args.ray,
-                                  args.workers)
+        paths = render_frames_ray(
+            model,
+            march,
+            settings.render.image_scale,
+            poses,
+            trans,
+            cams,
+            folder,
+            None if args.ray == "local" else args.ray,
+            args.workers,
+        )
     seconds = time.perf_counter() - t0
     done = len(paths) - cached
-    print(f"rendered {done} frames ({cached} cached) in {seconds:.1f} s"
-          + (f", {seconds / done:.2f} s per frame" if done else "")
-          + f"; {seq.layout} poses at {fps:g} fps")
+    print(
+        f"rendered {done} frames ({cached} cached) in {seconds:.1f} s"
+        + (f", {seconds / done:.2f} s per frame" if done else "")
+        + f"; {seq.layout} poses at {fps:g} fps"
+    )
     if out.suffix.lower() == ".mp4":
         write_mp4(paths, out, fps)
         print(f"  video:  {out.resolve()} ({len(paths)} frames, {len(paths) / fps:.1f} s)")

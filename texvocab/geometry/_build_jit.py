@@ -8,6 +8,7 @@ face id instead of by the previous order, a leaf's faces by id): where no two ce
 share a coordinate (any posed body), every node holds the faces it held with the sort
 and only the order inside a leaf differs, so every query answer is the same up to ties
 between equally near faces."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -100,8 +101,7 @@ def face_centroids(vertices, faces):
     out = np.empty((faces.shape[0], 3))
     for f in range(faces.shape[0]):
         for k in range(3):
-            out[f, k] = (vertices[faces[f, 0], k] + vertices[faces[f, 1], k]
-                         + vertices[faces[f, 2], k]) / 3.0
+            out[f, k] = (vertices[faces[f, 0], k] + vertices[faces[f, 1], k] + vertices[faces[f, 2], k]) / 3.0
     return out
 
 
@@ -186,8 +186,7 @@ def pseudo_normals(vertices, faces, edge_of_corner, num_edges):
             e1x, e1y, e1z = q[0] - p[0], q[1] - p[1], q[2] - p[2]
             e2x, e2y, e2z = r[0] - p[0], r[1] - p[1], r[2] - p[2]
             cx, cy, cz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-            angle = np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz),
-                               e1x * e2x + e1y * e2y + e1z * e2z)
+            angle = np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), e1x * e2x + e1y * e2y + e1z * e2z)
             for j in range(3):
                 corner_sum[faces[f, k], j] += angle * face_normal[f, j]
         for v in range(nv):

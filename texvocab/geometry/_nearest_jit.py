@@ -13,6 +13,7 @@ is Ericson's closest-point region test (Real-Time Collision Detection, 5.1.5), t
 formulas as ``texvocab.geometry.surface._closest_vw``, with zero-area faces tested as their three
 edges.
 """
+
 from __future__ import annotations
 
 import math
@@ -96,8 +97,7 @@ def _closest_on_face(px, py, pz, g, s):
 
 
 @njit(cache=True, nogil=True)
-def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_out,
-                  d2_out):
+def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_out, d2_out):
     """Closest face slot of each point x (M, 3) within squared distance ``bound2``.
 
     lo, hi (N, 3): the boxes of all levels, finest (one per face slot) first, level l
@@ -160,8 +160,21 @@ def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_ou
 
 
 @njit(cache=True, nogil=True)
-def closest_and_distance(x, face, bary, vertices, faces, signed, face_normal, edge_normal,
-                         vertex_normal, orientation, feature_eps, closest, distance):
+def closest_and_distance(
+    x,
+    face,
+    bary,
+    vertices,
+    faces,
+    signed,
+    face_normal,
+    edge_normal,
+    vertex_normal,
+    orientation,
+    feature_eps,
+    closest,
+    distance,
+):
     """Closest points (M, 3) and distances (M,) from face (M,) and bary (M, 3); NaN and
     inf where face < 0. With ``signed``, a distance is negative when x lies behind the
     angle-weighted pseudo-normal of the feature (face, edge or vertex) holding its
@@ -184,8 +197,11 @@ def closest_and_distance(x, face, bary, vertices, faces, signed, face_normal, ed
             if bary[i, k] > bary[i, corner]:
                 corner = k
         for a in range(3):
-            c = (bary[i, 0] * vertices[faces[f, 0], a] + bary[i, 1] * vertices[faces[f, 1], a]
-                 + bary[i, 2] * vertices[faces[f, 2], a])
+            c = (
+                bary[i, 0] * vertices[faces[f, 0], a]
+                + bary[i, 1] * vertices[faces[f, 1], a]
+                + bary[i, 2] * vertices[faces[f, 2], a]
+            )
             closest[i, a] = c
             diff = x[i, a] - c
             d2 += diff * diff
@@ -212,5 +228,4 @@ def interpolate(values, corners, face, bary, out):
             continue
         a, b, c = corners[f, 0], corners[f, 1], corners[f, 2]
         for j in range(values.shape[1]):
-            out[i, j] = (bary[i, 0] * values[a, j] + bary[i, 1] * values[b, j]
-                         + bary[i, 2] * values[c, j])
+            out[i, j] = bary[i, 0] * values[a, j] + bary[i, 1] * values[b, j] + bary[i, 2] * values[c, j]

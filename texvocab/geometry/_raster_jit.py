@@ -1,6 +1,7 @@
 """Compiled inner loop of :func:`texvocab.geometry.raster.rasterize`: each triangle walks
 the pixels of its bounding box and keeps, per pixel, the nearest covering triangle with a
 z-buffer (numba; ``cache`` keeps the machine code in ``__pycache__``)."""
+
 from __future__ import annotations
 
 import math

@@ -4,6 +4,7 @@ silhouettes, and for the posed body's depth that bounds the ray marcher's shell.
 
 Pixel centres sit at integer coordinates (OpenCV convention).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,8 +28,7 @@ class Raster:
         return self.face >= 0
 
 
-def rasterize(pix: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, width: int,
-              height: int) -> Raster:
+def rasterize(pix: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, width: int, height: int) -> Raster:
     """Rasterise projected triangles with a z-buffer (compiled:
     :func:`texvocab.geometry._raster_jit.raster_triangles`).
 
@@ -46,13 +46,21 @@ def rasterize(pix: torch.Tensor, depth: torch.Tensor, faces: torch.Tensor, width
     face = np.full(height * width, -1, dtype=np.int64)
     bary = np.zeros((height * width, 3))
     best = np.full(height * width, np.inf)
-    raster_triangles(np.ascontiguousarray(torch.as_tensor(pix).double().numpy()),
-                     np.ascontiguousarray(torch.as_tensor(depth).double().numpy()),
-                     np.ascontiguousarray(torch.as_tensor(faces).long().numpy()), int(width),
-                     int(height), face, bary, best)
-    return Raster(torch.from_numpy(face).view(height, width),
-                  torch.from_numpy(bary).float().view(height, width, 3),
-                  torch.from_numpy(best).float().view(height, width))
+    raster_triangles(
+        np.ascontiguousarray(torch.as_tensor(pix).double().numpy()),
+        np.ascontiguousarray(torch.as_tensor(depth).double().numpy()),
+        np.ascontiguousarray(torch.as_tensor(faces).long().numpy()),
+        int(width),
+        int(height),
+        face,
+        bary,
+        best,
+    )
+    return Raster(
+        torch.from_numpy(face).view(height, width),
+        torch.from_numpy(bary).float().view(height, width, 3),
+        torch.from_numpy(best).float().view(height, width),
+    )
 
 
 def rasterize_mesh(vertices: torch.Tensor, faces: torch.Tensor, camera) -> Raster:

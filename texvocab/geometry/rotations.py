@@ -66,9 +66,7 @@ def _half_angle_terms(theta2: Tensor) -> tuple[Tensor, Tensor]:
     small = theta2 < _SMALL
     theta = torch.sqrt(torch.where(small, torch.ones_like(theta2), theta2))
     cos_half = torch.where(small, 1 - theta2 / 8 + theta2**2 / 384, torch.cos(theta / 2))
-    sinc_half = torch.where(
-        small, 0.5 - theta2 / 48 + theta2**2 / 3840, torch.sin(theta / 2) / theta
-    )
+    sinc_half = torch.where(small, 0.5 - theta2 / 48 + theta2**2 / 3840, torch.sin(theta / 2) / theta)
     return cos_half, sinc_half
 
 

@@ -20,6 +20,7 @@ Sign. Angle-weighted pseudo-normal of the closest feature (face, edge or vertex;
 Baerentzen & Aanaes 2005), used when the mesh is closed (every edge shared by exactly two
 faces) and consistently oriented; negative inside, whichever way the faces wind.
 """
+
 from __future__ import annotations
 
 import os
@@ -160,12 +161,14 @@ def _closest_vw(x: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _closest_on_edges(ap, ab, ac) -> tuple[np.ndarray, np.ndarray]:
     """(v, w) of the closest point on the three edges; inputs (3, P) relative to corner a."""
     v, w, best = np.zeros(ap.shape[1]), np.zeros(ap.shape[1]), np.full(ap.shape[1], np.inf)
-    for start, edge, to_vw in ((0, ab, lambda t: (t, 0 * t)), (0, ac, lambda t: (0 * t, t)),
-                               (1, ac - ab, lambda t: (1 - t, t))):
+    for start, edge, to_vw in (
+        (0, ab, lambda t: (t, 0 * t)),
+        (0, ac, lambda t: (0 * t, t)),
+        (1, ac - ab, lambda t: (1 - t, t)),
+    ):
         rel = ap - ab * start
         len2 = (edge * edge).sum(0)
-        t = np.clip(np.divide((rel * edge).sum(0), len2, out=np.zeros_like(len2),
-                              where=len2 > 0), 0.0, 1.0)
+        t = np.clip(np.divide((rel * edge).sum(0), len2, out=np.zeros_like(len2), where=len2 > 0), 0.0, 1.0)
         d2 = ((rel - t * edge) ** 2).sum(0)
         tv, tw = to_vw(t)
         closer = d2 < best
@@ -176,8 +179,13 @@ def _closest_on_edges(ap, ab, ac) -> tuple[np.ndarray, np.ndarray]:
 def closest_on_triangles(points, a, b, c) -> np.ndarray:
     """Barycentrics (P, 3) of the closest point to points (P, 3) on triangles (a, b, c),
     each (P, 3) or (3,). Zero-area triangles are handled as segments/points."""
-    p, a, b, c = (np.broadcast_to(_numpy(t, np.float64), np.broadcast_shapes(
-        np.shape(points), np.shape(a), np.shape(b), np.shape(c))) for t in (points, a, b, c))
+    p, a, b, c = (
+        np.broadcast_to(
+            _numpy(t, np.float64),
+            np.broadcast_shapes(np.shape(points), np.shape(a), np.shape(b), np.shape(c)),
+        )
+        for t in (points, a, b, c)
+    )
     v, w = _closest_vw(np.ascontiguousarray(p.T), _face_table(a, b, c))
     return np.column_stack([1.0 - v - w, v, w])
 
@@ -207,16 +215,17 @@ class SurfaceIndex:
             about half of a build (3 of 6 ms for the 13.8k-face body).
     """
 
-    def __init__(self, vertices, faces, workers: int | None = None,
-                 like: SurfaceIndex | None = None):
+    def __init__(self, vertices, faces, workers: int | None = None, like: SurfaceIndex | None = None):
         self.vertices = _numpy(vertices, np.float64)
         self.faces = _numpy(faces, np.int64).reshape(-1, 3)
         if not len(self.faces):
             raise ValueError("SurfaceIndex needs at least one face")
         if self.faces.min() < 0 or self.faces.max() >= len(self.vertices):
             # the compiled build reads vertices[faces] unchecked
-            raise ValueError(f"faces index vertices 0..{len(self.vertices) - 1}, got "
-                             f"{self.faces.min()}..{self.faces.max()}")
+            raise ValueError(
+                f"faces index vertices 0..{len(self.vertices) - 1}, got "
+                f"{self.faces.min()}..{self.faces.max()}"
+            )
         self.workers = workers  # None: decided per query (_default_workers)
         #: True while the slot layout is another pose's (``like``), until :meth:`relayout`
         self.borrowed = like is not None and np.array_equal(like.faces, self.faces)
@@ -224,15 +233,18 @@ class SurfaceIndex:
         # pseudo-normals of faces, edges (edge k of a face joins corners k and k + 1; its
         # pseudo-normal sums the faces on it) and vertices; closedness from the topology
         inverse, edges, self.closed = _edge_topology(self.faces, len(self.vertices))
-        (self._face_normal, self._vertex_normal, self._edge_normal,
-         self._orientation) = pseudo_normals(self.vertices, self.faces, inverse, edges)
+        (self._face_normal, self._vertex_normal, self._edge_normal, self._orientation) = pseudo_normals(
+            self.vertices, self.faces, inverse, edges
+        )
 
     def _lay_out(self, slot_face: np.ndarray | None) -> None:
         """Slot layout (this pose's median split when None) and the tables over it."""
-        self._slot_face = (_slot_layout(face_centroids(self.vertices, self.faces))
-                           if slot_face is None else slot_face)
+        self._slot_face = (
+            _slot_layout(face_centroids(self.vertices, self.faces)) if slot_face is None else slot_face
+        )
         self._table, self._box_lo, self._box_hi, self._box_offset = slot_tables(
-            self.vertices, self.faces, self._slot_face, _DEGENERATE, _FAN)
+            self.vertices, self.faces, self._slot_face, _DEGENERATE, _FAN
+        )
 
     def relayout(self) -> None:
         """Replace a borrowed slot layout by this pose's own split (no-op otherwise):
@@ -241,8 +253,9 @@ class SurfaceIndex:
             self._lay_out(None)
             self.borrowed = False
 
-    def project(self, points, vt=None, ft=None, weights=None,
-                max_distance: float | None = None) -> SurfaceProjection:
+    def project(
+        self, points, vt=None, ft=None, weights=None, max_distance: float | None = None
+    ) -> SurfaceProjection:
         """Closest surface point of each of ``points`` (N, 3) (Eq. 7).
 
         vt (T, 2) with ft (F, 3) add ``uv`` (N, 2); weights (V, J) add ``weights`` (N, J).
@@ -262,9 +275,18 @@ class SurfaceIndex:
         def work(start: int) -> None:
             sl = slice(start, start + chunk)
             face[sl], bary[sl] = self._nearest(x[sl], bound)
-            self._fill(x[sl], face[sl], bary[sl], closest[sl], distance[sl], vt, ft,
-                       None if uv is None else uv[sl], weights,
-                       None if wts is None else wts[sl])
+            self._fill(
+                x[sl],
+                face[sl],
+                bary[sl],
+                closest[sl],
+                distance[sl],
+                vt,
+                ft,
+                None if uv is None else uv[sl],
+                weights,
+                None if wts is None else wts[sl],
+            )
 
         workers = self.workers or _default_workers()
         chunk = min(_CHUNK, max(256, -(-n // workers)))
@@ -274,28 +296,51 @@ class SurfaceIndex:
         else:
             for start in starts:
                 work(start)
-        return _like(points, SurfaceProjection(face, bary, closest, distance, uv, wts,
-                                               self.closed))
+        return _like(points, SurfaceProjection(face, bary, closest, distance, uv, wts, self.closed))
 
     def _nearest(self, x: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """(face (M,), bary (M, 3)) for one chunk x (M, 3); face -1 beyond ``bound``."""
         slot = np.empty(len(x), np.int64)
         v, w, d2 = np.empty(len(x)), np.empty(len(x)), np.empty(len(x))
-        nearest_faces(np.ascontiguousarray(x), bound * bound, self._box_lo, self._box_hi,
-                      self._box_offset, self._table, self._slot_face, slot, v, w, d2)
+        nearest_faces(
+            np.ascontiguousarray(x),
+            bound * bound,
+            self._box_lo,
+            self._box_hi,
+            self._box_offset,
+            self._table,
+            self._slot_face,
+            slot,
+            v,
+            w,
+            d2,
+        )
         ok = slot >= 0
         face = np.where(ok, self._slot_face[np.maximum(slot, 0)], -1)
         bary = np.where(ok[:, None], np.column_stack([1.0 - v - w, v, w]), np.nan)
         return face, bary
 
-    def _fill(self, x, face, bary, closest, distance, vt=None, ft=None, uv=None,
-              weights=None, wts=None) -> None:
+    def _fill(
+        self, x, face, bary, closest, distance, vt=None, ft=None, uv=None, weights=None, wts=None
+    ) -> None:
         """Write closest points, (signed) distances and, if given, UV (from vt (T, 2), ft)
         and skinning weights (from weights (V, J)) of face (M,), bary (M, 3) into the
         output arrays (NaN / inf where face < 0)."""
-        closest_and_distance(x, face, bary, self.vertices, self.faces, self.closed,
-                             self._face_normal, self._edge_normal, self._vertex_normal,
-                             self._orientation, _FEATURE_EPS, closest, distance)
+        closest_and_distance(
+            x,
+            face,
+            bary,
+            self.vertices,
+            self.faces,
+            self.closed,
+            self._face_normal,
+            self._edge_normal,
+            self._vertex_normal,
+            self._orientation,
+            _FEATURE_EPS,
+            closest,
+            distance,
+        )
         if uv is not None:
             interpolate(vt, ft, face, bary, uv)
         if wts is not None:
@@ -305,8 +350,8 @@ class SurfaceIndex:
         """The projection of points x (N, 3) from face (N,), bary (N, 3) (no UV/weights)."""
         closest, distance = np.empty_like(x), np.empty(len(x))
         self._fill(x, face, bary, closest, distance)
-        return _like(points, SurfaceProjection(face, bary, closest, distance, None, None,
-                                               self.closed))
+        return _like(points, SurfaceProjection(face, bary, closest, distance, None, None, self.closed))
+
 
 def _like(points, out: SurfaceProjection) -> SurfaceProjection:
     """Convert the numpy result to torch (points' float dtype and device) if needed."""
@@ -321,9 +366,16 @@ def _like(points, out: SurfaceProjection) -> SurfaceProjection:
     return out
 
 
-def project_to_surface(points, vertices, faces, vt=None, ft=None, weights=None,
-                       max_distance: float | None = None,
-                       index: SurfaceIndex | None = None) -> SurfaceProjection:
+def project_to_surface(
+    points,
+    vertices,
+    faces,
+    vt=None,
+    ft=None,
+    weights=None,
+    max_distance: float | None = None,
+    index: SurfaceIndex | None = None,
+) -> SurfaceProjection:
     """Exact closest point of ``points`` (N, 3) on the mesh (vertices (V, 3), faces (F, 3)).
 
     TexVocab Eq. 7: (u*, v*, f*) = argmin ||x - B_{u,v}(V[F(f)])||. Pass ``index`` (a
@@ -333,8 +385,7 @@ def project_to_surface(points, vertices, faces, vt=None, ft=None, weights=None,
     if index is None:
         index = SurfaceIndex(vertices, faces)
     elif faces is not None and tuple(np.shape(faces)) != index.faces.shape:
-        raise ValueError(f"index was built for faces {index.faces.shape}, "
-                         f"got {tuple(np.shape(faces))}")
+        raise ValueError(f"index was built for faces {index.faces.shape}, got {tuple(np.shape(faces))}")
     return index.project(points, vt=vt, ft=ft, weights=weights, max_distance=max_distance)
 
 
@@ -348,13 +399,13 @@ def project_brute_force(points, vertices, faces, chunk: int = 32) -> SurfaceProj
     nf = len(index.faces)
     face, bary = np.zeros(len(x), np.int64), np.zeros((len(x), 3))
     for s in range(0, len(x), chunk):
-        xs = x[s:s + chunk]
+        xs = x[s : s + chunk]
         g = np.tile(table, len(xs))
         xt = np.repeat(xs.T, nf, axis=1)
         v, w = _closest_vw(xt, g)
         d2 = ((xt - g[0:3] - v * g[3:6] - w * g[6:9]) ** 2).sum(0).reshape(len(xs), nf)
         best = d2.argmin(1)
         pick = np.arange(len(xs)) * nf + best
-        face[s:s + chunk] = best
-        bary[s:s + chunk] = np.column_stack([1 - v[pick] - w[pick], v[pick], w[pick]])
+        face[s : s + chunk] = best
+        bary[s : s + chunk] = np.column_stack([1 - v[pick] - w[pick], v[pick], w[pick]])
     return index._finish(points, x, face, bary)

@@ -4,6 +4,7 @@ map that inverts the UV parameterisation A of Sec. 3.2 (each texel's face and ba
 ``vt`` is in [0, 1]² with the origin at the bottom-left (OBJ); a texture image's row 0 is
 the top (v = 1). Texel centres sit at ``(i + 0.5) / size``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -33,7 +34,6 @@ def pixel_to_uv(pix: torch.Tensor, width: int, height: int) -> torch.Tensor:
 def uv_to_grid(uv: torch.Tensor) -> torch.Tensor:
     """UV -> ``torch.nn.functional.grid_sample`` coordinates in [-1, 1] (align_corners=False)."""
     return torch.stack([uv[..., 0] * 2 - 1, 1 - uv[..., 1] * 2], -1)
-
 
 
 @dataclass
@@ -84,15 +84,16 @@ def _texel_map(vt_bytes: bytes, ft_bytes: bytes, n_vt: int, size: int) -> TexelM
     face = r.face.numpy()
     covered = face >= 0
     _, nearest = ndimage.distance_transform_edt(~covered, return_indices=True)
-    return TexelMap(size, covered, face[covered], r.bary.double().numpy()[covered],
-                    (nearest[0], nearest[1]))
+    return TexelMap(size, covered, face[covered], r.bary.double().numpy()[covered], (nearest[0], nearest[1]))
 
 
 def texel_map(body, size: int) -> TexelMap:
     """The (cached) :class:`TexelMap` of ``body``'s UV layout at ``size`` × ``size``."""
     if body.vt is None or body.ft is None:
-        raise ValueError(f"{body.name} has no UV layout (vt/ft); give an SMPL UV file "
-                         "(smpl_uv.obj next to the model) or use the default body")
+        raise ValueError(
+            f"{body.name} has no UV layout (vt/ft); give an SMPL UV file "
+            "(smpl_uv.obj next to the model) or use the default body"
+        )
     vt = np.ascontiguousarray(body.vt.double().numpy())
     ft = np.ascontiguousarray(body.ft.numpy().astype(np.int64))
     return _texel_map(vt.tobytes(), ft.tobytes(), len(vt), int(size))

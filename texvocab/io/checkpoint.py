@@ -7,6 +7,7 @@ Layout (see assets_spec/checkpoint.md): {"format": "texvocab-checkpoint", "versi
 the settings as a dict per group; version 1 stored them flat. Both are read
 (:meth:`texvocab.pipeline.settings.Settings.from_dict`).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,15 +37,20 @@ def load_checkpoint(path: str | Path) -> dict:
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # unpickling refused / truncated / not a torch file
-        raise AssetError(f"{path}: not a loadable texvocab checkpoint, refused by the "
-                         f"weights-only reader ({load_error_reason(exc)})") from None
+        raise AssetError(
+            f"{path}: not a loadable texvocab checkpoint, refused by the "
+            f"weights-only reader ({load_error_reason(exc)})"
+        ) from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise AssetError(f"{path}: not a texvocab checkpoint (no format tag {FORMAT!r}); see "
-                         "assets_spec/checkpoint.md")
+        raise AssetError(
+            f"{path}: not a texvocab checkpoint (no format tag {FORMAT!r}); see assets_spec/checkpoint.md"
+        )
     missing = [k for k in REQUIRED if k not in data]
     if missing:
         raise AssetError(f"{path}: checkpoint lacks {missing}; see assets_spec/checkpoint.md")
     if data["version"] > VERSION:
-        raise AssetError(f"{path}: checkpoint version {data['version']} is newer than this "
-                         f"texvocab understands ({VERSION})")
+        raise AssetError(
+            f"{path}: checkpoint version {data['version']} is newer than this "
+            f"texvocab understands ({VERSION})"
+        )
     return data

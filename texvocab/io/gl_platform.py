@@ -4,6 +4,7 @@ PyOpenGL binds its platform (osmesa / egl / glx) at first import and cannot chan
 mixing OSMesa with EGL/GLX contexts in one process gives wrong pixels (the
 second platform's reads come back black or stale). Call :func:`ensure_offscreen` before importing pyrender.
 """
+
 from __future__ import annotations
 
 import os
@@ -24,6 +25,8 @@ def ensure_offscreen(default: str = "osmesa") -> str:
 
         bound = type(glp.PLATFORM).__name__.lower()
         if chosen not in bound:
-            raise RuntimeError(f"OpenGL is already bound to {bound}; PYOPENGL_PLATFORM={chosen} "
-                               "must be set before anything imports OpenGL")
+            raise RuntimeError(
+                f"OpenGL is already bound to {bound}; PYOPENGL_PLATFORM={chosen} "
+                "must be set before anything imports OpenGL"
+            )
     return chosen

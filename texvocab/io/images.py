@@ -1,4 +1,5 @@
 """PNG writing (atomic) and contact sheets."""
+
 from __future__ import annotations
 
 import os
@@ -37,15 +38,17 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
     return atomic_write_bytes(path, lambda tmp: img.save(tmp, format="PNG"))
 
 
-def contact_sheet(rows: list[list[np.ndarray]], row_labels=None, col_labels=None,
-                  pad: int = 4, label_h: int = 16) -> np.ndarray:
+def contact_sheet(
+    rows: list[list[np.ndarray]], row_labels=None, col_labels=None, pad: int = 4, label_h: int = 16
+) -> np.ndarray:
     """Grid of equally sized images with optional labels; returns uint8 (H, W, 3)."""
     h, w = rows[0][0].shape[:2]
     n_rows, n_cols = len(rows), max(len(r) for r in rows)
     left = 90 if row_labels else 0
     top = label_h if col_labels else 0
-    sheet = Image.new("RGB", (left + n_cols * (w + pad) + pad, top + n_rows * (h + pad) + pad),
-                      (255, 255, 255))
+    sheet = Image.new(
+        "RGB", (left + n_cols * (w + pad) + pad, top + n_rows * (h + pad) + pad), (255, 255, 255)
+    )
     draw = ImageDraw.Draw(sheet)
     for r, row in enumerate(rows):
         y = top + pad + r * (h + pad)

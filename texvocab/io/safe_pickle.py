@@ -6,6 +6,7 @@ inert data holders) are allowed; anything else is refused before any of it runs.
 for SMPL ``.pkl`` files, ZJU-MoCap's pickled ``annots.npy`` / ``params/*.npy`` and
 HumanNeRF's ``cameras.pkl`` / ``mesh_infos.pkl`` (dicts of numpy arrays per frame).
 """
+
 from __future__ import annotations
 
 import codecs
@@ -51,12 +52,27 @@ def _safe_reconstructor(cls, base, state):
     return cls.__new__(cls)
 
 
-_NUMPY = {"_reconstruct": _reconstruct, "scalar": scalar, "ndarray": np.ndarray,
-          "dtype": np.dtype, "_frombuffer": _frombuffer}
-_NUMPY_MODULES = {"numpy", "numpy.core.multiarray", "numpy._core.multiarray",
-                  "numpy.core.numeric", "numpy._core.numeric"}
-_SPARSE_MODULES = {"scipy.sparse", "scipy.sparse.csc", "scipy.sparse._csc",
-                   "scipy.sparse.csr", "scipy.sparse._csr"}
+_NUMPY = {
+    "_reconstruct": _reconstruct,
+    "scalar": scalar,
+    "ndarray": np.ndarray,
+    "dtype": np.dtype,
+    "_frombuffer": _frombuffer,
+}
+_NUMPY_MODULES = {
+    "numpy",
+    "numpy.core.multiarray",
+    "numpy._core.multiarray",
+    "numpy.core.numeric",
+    "numpy._core.numeric",
+}
+_SPARSE_MODULES = {
+    "scipy.sparse",
+    "scipy.sparse.csc",
+    "scipy.sparse._csc",
+    "scipy.sparse.csr",
+    "scipy.sparse._csr",
+}
 _BUILTINS = {"object": object, "set": set, "frozenset": frozenset, "complex": complex}
 
 
@@ -80,9 +96,11 @@ class RestrictedUnpickler(pickle.Unpickler):
             return type(name, (_ChumpyValue,), {"origin": f"{module}.{name}"})
         if module in _SPARSE_MODULES and name in ("csc_matrix", "csr_matrix"):
             return type(name, (_SparseValue,), {"origin": f"{module}.{name}"})
-        raise AssetError(f"refusing to load {self.source}: it names {module}.{name}, which is "
-                         f"not on the allow-list (numpy arrays, scipy sparse, chumpy Ch); "
-                         f"see assets_spec/README.md")
+        raise AssetError(
+            f"refusing to load {self.source}: it names {module}.{name}, which is "
+            f"not on the allow-list (numpy arrays, scipy sparse, chumpy Ch); "
+            f"see assets_spec/README.md"
+        )
 
 
 def _to_plain(value, key: str, source: str):
@@ -90,8 +108,10 @@ def _to_plain(value, key: str, source: str):
     if isinstance(value, _ChumpyValue):
         state = getattr(value, "state", None)
         if not isinstance(state, dict) or "x" not in state:
-            raise AssetError(f"{source}: '{key}' is a chumpy {value.origin} expression, not a "
-                             "plain Ch array; only Ch arrays can be read without chumpy")
+            raise AssetError(
+                f"{source}: '{key}' is a chumpy {value.origin} expression, not a "
+                "plain Ch array; only Ch arrays can be read without chumpy"
+            )
         return np.asarray(state["x"])
     if isinstance(value, _SparseValue):
         s = getattr(value, "state", {})
@@ -118,8 +138,6 @@ def read_pickle(path: Path, what: str = "SMPL pickle") -> dict:
     return {k: _to_plain(v, k, str(path)) for k, v in data.items()}
 
 
-
-
 def read_npy_object(path: str | Path) -> object:
     """The object inside a pickled ``.npy`` (np.save of a dict), loaded safely.
 
@@ -129,8 +147,11 @@ def read_npy_object(path: str | Path) -> object:
     try:
         with open(path, "rb") as fh:
             version = np.lib.format.read_magic(fh)
-            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                           else np.lib.format.read_array_header_2_0)
+            read_header = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
             _, _, dtype = read_header(fh)
             if dtype.hasobject:
                 arr = RestrictedUnpickler(fh, str(path)).load()
@@ -165,9 +186,9 @@ def read_npz(path: str | Path, what: str = "file") -> dict:
         with np.load(path, allow_pickle=False) as npz:
             data = {k: npz[k] for k in npz.files}
     except ValueError:
-        raise AssetError(f"{path}: holds object (pickled) arrays, which are refused; expected "
-                         f"{what} with numeric arrays") from None
+        raise AssetError(
+            f"{path}: holds object (pickled) arrays, which are refused; expected {what} with numeric arrays"
+        ) from None
     except Exception as exc:  # noqa: BLE001 - any damaged archive is the user's file problem
-        raise AssetError(f"{path}: not a readable .npz ({type(exc).__name__}); expected "
-                         f"{what}") from None
+        raise AssetError(f"{path}: not a readable .npz ({type(exc).__name__}); expected {what}") from None
     return data

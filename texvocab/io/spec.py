@@ -2,6 +2,7 @@
 ``texvocab.assets_spec``): load a spec, check arrays against it, one error naming the spec.
 
 A leaf: it imports nothing of the project but its errors, so every reader may use it."""
+
 from __future__ import annotations
 
 import json
@@ -49,8 +50,9 @@ def check_arrays(arrays: dict, spec: dict, source: str) -> list[str]:
     for key, rule in spec["keys"].items():
         if key not in arrays:
             if rule.get("required", True):
-                problems.append(f"{source}: missing key '{key}' ({rule['doc']}), expected "
-                                f"shape {tuple(rule['shape'])}")
+                problems.append(
+                    f"{source}: missing key '{key}' ({rule['doc']}), expected shape {tuple(rule['shape'])}"
+                )
             continue
         value = arrays[key]
         if hasattr(value, "tocsc") and not rule.get("sparse_ok"):
@@ -68,8 +70,10 @@ def check_arrays(arrays: dict, spec: dict, source: str) -> list[str]:
             shown = tuple(bound.get(d, d) if isinstance(d, str) else d for d in want)
             problems.append(f"{source}: '{key}' has shape {shape}, expected {shown}")
         elif not _dtype_ok(value, rule["dtype"]):
-            problems.append(f"{source}: '{key}' has dtype "
-                            f"{np.asarray(getattr(value, 'data', value)).dtype}, expected {rule['dtype']}")
+            problems.append(
+                f"{source}: '{key}' has dtype "
+                f"{np.asarray(getattr(value, 'data', value)).dtype}, expected {rule['dtype']}"
+            )
         elif rule["dtype"] == "float":
             data = value.data if hasattr(value, "tocsc") else np.asarray(value)
             if not np.isfinite(data).all():

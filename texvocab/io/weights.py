@@ -4,6 +4,7 @@ Checkpoints are read with ``torch.load(weights_only=True)``: a pickle that names
 code is refused before any of it runs. Missing optional files are reported on the
 ``texvocab`` logger once per process and message.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -54,10 +55,14 @@ def load_error_reason(e: Exception) -> str:
     return f"{type(e).__name__}: {reason}" if reason else type(e).__name__
 
 
-def load_state_dict(path: Path, what: str, expected: Mapping[str, torch.Size],
-                    ignore_prefixes: tuple[str, ...] = (),
-                    defaults: Mapping[str, torch.Tensor] | None = None,
-                    cast_float: bool = True) -> dict[str, torch.Tensor]:
+def load_state_dict(
+    path: Path,
+    what: str,
+    expected: Mapping[str, torch.Size],
+    ignore_prefixes: tuple[str, ...] = (),
+    defaults: Mapping[str, torch.Tensor] | None = None,
+    cast_float: bool = True,
+) -> dict[str, torch.Tensor]:
     """The state dict in ``path`` restricted to the keys of ``expected`` (key -> shape),
     read with weights-only unpickling. Keys starting with ``ignore_prefixes`` are
     dropped; keys in ``defaults`` may be absent and then take that value; any other
@@ -68,8 +73,9 @@ def load_state_dict(path: Path, what: str, expected: Mapping[str, torch.Size],
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - any unreadable/unsafe file is an asset problem
-        raise AssetError(f"{path}: not loadable as a torch state dict with weights_only=True "
-                         f"({load_error_reason(e)})") from None
+        raise AssetError(
+            f"{path}: not loadable as a torch state dict with weights_only=True ({load_error_reason(e)})"
+        ) from None
     if not isinstance(state, Mapping):
         raise AssetError(f"{path}: expected a {what} state dict, got {type(state).__name__}")
     out = {}
@@ -78,8 +84,9 @@ def load_state_dict(path: Path, what: str, expected: Mapping[str, torch.Size],
         if got is None and defaults is not None and key in defaults:
             got = defaults[key]
         if got is None:
-            raise AssetError(f"{path}: key '{key}' missing (expected shape {tuple(want)}); "
-                             f"not a {what} state dict")
+            raise AssetError(
+                f"{path}: key '{key}' missing (expected shape {tuple(want)}); not a {what} state dict"
+            )
         if not isinstance(got, torch.Tensor) or got.shape != want:
             shape = tuple(got.shape) if isinstance(got, torch.Tensor) else type(got).__name__
             raise AssetError(f"{path}: key '{key}' expected shape {tuple(want)}, got {shape}")

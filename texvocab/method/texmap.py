@@ -19,6 +19,7 @@ Uncovered texels (no view saw them) keep coverage 0; their colour is copied from
 nearest covered texel so the CNN sees no artificial black seams. Both the colour and the
 coverage are stored, so later stages can weight or mask by coverage.
 """
+
 from __future__ import annotations
 
 import logging
@@ -67,8 +68,9 @@ def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
 
 
-def build_texture_map(capture, frame: int, settings: TexmapSettings | None = None,
-                      views: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def build_texture_map(
+    capture, frame: int, settings: TexmapSettings | None = None, views: list[int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """U_t of one frame from ``views`` (default ``settings.views``; None there: all).
 
     Returns:
@@ -140,8 +142,11 @@ def cache_dir(capture, settings: TexmapSettings) -> Path:
     scaled = "" if scale == 1.0 else f"_x{scale:g}"
     fit = capture.meta.get("body_fit") if isinstance(getattr(capture, "meta", None), dict) else None
     body = f"_body-{fit}" if fit else ""
-    return (Path(capture.root) / "texvocab_cache"
-            / f"texmaps_{settings.size}_views_{views}{weighting}{scaled}{body}")
+    return (
+        Path(capture.root)
+        / "texvocab_cache"
+        / f"texmaps_{settings.size}_views_{views}{weighting}{scaled}{body}"
+    )
 
 
 def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:
@@ -168,8 +173,9 @@ def load_texture_map(path: Path) -> tuple[np.ndarray, np.ndarray]:
         return npz["texture"].astype(np.float32) / 255.0, npz["coverage"].astype(np.float32)
 
 
-def prepare_texture_maps(capture, settings: TexmapSettings | None = None,
-                         frames=None, progress: bool = True) -> list[Path]:
+def prepare_texture_maps(
+    capture, settings: TexmapSettings | None = None, frames=None, progress: bool = True
+) -> list[Path]:
     """Build and cache U_t for every training frame; resumable (existing files are kept).
 
     Returns the cache file of each frame, in frame order.

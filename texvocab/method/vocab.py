@@ -18,6 +18,7 @@ Root-relative, J_p in Eq. 6 stays the part's joint count (Table 1), the main bod
 distances reach at most J_p − 1, and the ``joint`` strategy's pelvis part sees one pose:
 its keys tie (the first M frames) and every query blends its first K keys uniformly.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -43,8 +44,9 @@ def part_distance(query: torch.Tensor, keys: torch.Tensor) -> torch.Tensor:
     return (1.0 - dots).sum(-1)
 
 
-def farthest_point_sampling(quats: torch.Tensor, num: int, start: int = 0,
-                            min_distance: float = 0.0) -> torch.Tensor:
+def farthest_point_sampling(
+    quats: torch.Tensor, num: int, start: int = 0, min_distance: float = 0.0
+) -> torch.Tensor:
     """Indices of up to ``num`` part-poses chosen by farthest point sampling under Eq. 4.
 
     Args:
@@ -61,14 +63,14 @@ def farthest_point_sampling(quats: torch.Tensor, num: int, start: int = 0,
     t = quats.shape[0]
     num = min(num, t)
     chosen = [start]
-    dist = part_distance(quats, quats[start:start + 1])[:, 0]
+    dist = part_distance(quats, quats[start : start + 1])[:, 0]
     dist[start] = -1.0
     for _ in range(num - 1):
         if float(dist.max()) <= min_distance and min_distance > 0:
             break
         nxt = int(torch.argmax(dist))  # argmax returns the first maximum: lowest index
         chosen.append(nxt)
-        dist = torch.minimum(dist, part_distance(quats, quats[nxt:nxt + 1])[:, 0])
+        dist = torch.minimum(dist, part_distance(quats, quats[nxt : nxt + 1])[:, 0])
         dist[chosen] = -1.0
     return torch.tensor(chosen, dtype=torch.long)
 
@@ -76,8 +78,9 @@ def farthest_point_sampling(quats: torch.Tensor, num: int, start: int = 0,
 WEIGHTINGS = ("paper", "inverse")
 
 
-def knn_weights(dist: torch.Tensor, k: int, num_joints: int,
-                weighting: str = "paper") -> tuple[torch.Tensor, torch.Tensor]:
+def knn_weights(
+    dist: torch.Tensor, k: int, num_joints: int, weighting: str = "paper"
+) -> tuple[torch.Tensor, torch.Tensor]:
     """K nearest keys and their normalised weights (Eqs. 5–6).
 
     Args:
@@ -105,8 +108,7 @@ def knn_weights(dist: torch.Tensor, k: int, num_joints: int,
         w = torch.where(exact.any(-1, keepdim=True), exact.to(d_sorted), 1.0 / safe)
     total = w.sum(-1, keepdim=True)
     uniform = torch.full_like(w, 1.0 / k)
-    weights = torch.where(total > 0, w / torch.where(total > 0, total, torch.ones_like(total)),
-                          uniform)
+    weights = torch.where(total > 0, w / torch.where(total > 0, total, torch.ones_like(total)), uniform)
     return idx, weights
 
 
@@ -144,9 +146,16 @@ class Vocabulary:
     pose_condition: str = "global"
 
     @classmethod
-    def build(cls, poses, strategy: str = "part", num_keys: int = 20, k: int = 3,
-              weighting: str = "paper", min_distance: float = 0.0,
-              pose_condition: str = "root-relative") -> Vocabulary:
+    def build(
+        cls,
+        poses,
+        strategy: str = "part",
+        num_keys: int = 20,
+        k: int = 3,
+        weighting: str = "paper",
+        min_distance: float = 0.0,
+        pose_condition: str = "root-relative",
+    ) -> Vocabulary:
         """Farthest-point-sample ``num_keys`` keys per part from training poses (T, 24, 3)
         (fewer for a part whose poses all lie within ``min_distance`` of its keys), read
         under ``pose_condition``."""
@@ -165,8 +174,9 @@ class Vocabulary:
             idx = farthest_point_sampling(q, num_keys, min_distance=min_distance)
             key_quats.append(q[idx])
             key_frames.append(idx)
-        return cls(strategy, list(parts), list(parts.values()), key_quats, key_frames, k,
-                   weighting, pose_condition)
+        return cls(
+            strategy, list(parts), list(parts.values()), key_quats, key_frames, k, weighting, pose_condition
+        )
 
     @property
     def num_parts(self) -> int:
@@ -193,8 +203,7 @@ class Vocabulary:
             pose = pose[None]
         quats = rotvec_to_quat(self.condition(pose))
         frames, weights, dists = [], [], []
-        for joints, keys, kf in zip(self.part_joints, self.key_quats, self.key_frames,
-                                    strict=True):
+        for joints, keys, kf in zip(self.part_joints, self.key_quats, self.key_frames, strict=True):
             d = part_distance(quats[:, list(joints)], keys)
             idx, w = knn_weights(d, self.k, len(joints), self.weighting)
             frames.append(kf[idx])
@@ -207,8 +216,9 @@ class Vocabulary:
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float64).reshape(24, 3)
         quats = rotvec_to_quat(self.condition(pose))
         out = []
-        for name, joints, keys, kf in zip(self.part_names, self.part_joints, self.key_quats,
-                                          self.key_frames, strict=True):
+        for name, joints, keys, kf in zip(
+            self.part_names, self.part_joints, self.key_quats, self.key_frames, strict=True
+        ):
             d = part_distance(quats[list(joints)], keys)
             idx, w = knn_weights(d, self.k, len(joints), self.weighting)
             out.append(PartQuery(name, idx.numpy(), kf[idx].numpy(), w.numpy(), d[idx].numpy()))
@@ -217,50 +227,65 @@ class Vocabulary:
     def format_query(self, pose) -> str:
         """A table of :meth:`query` for people (``texvocab vocab``)."""
         sizes = sorted({len(f) for f in self.key_frames})
-        keys = "-".join(str(m) for m in sizes[::max(1, len(sizes) - 1)]) if sizes else "0"
-        lines = [f"vocabulary: strategy={self.strategy}, M={keys} keys/part, "
-                 f"K={self.k}, weighting={self.weighting}, pose={self.pose_condition}",
-                 f"{'part':<16}{'novelty':>9}  keys (id:frame weight)"]
+        keys = "-".join(str(m) for m in sizes[:: max(1, len(sizes) - 1)]) if sizes else "0"
+        lines = [
+            f"vocabulary: strategy={self.strategy}, M={keys} keys/part, "
+            f"K={self.k}, weighting={self.weighting}, pose={self.pose_condition}",
+            f"{'part':<16}{'novelty':>9}  keys (id:frame weight)",
+        ]
         for q in self.query(pose):
-            keys = "  ".join(f"{i}:{f} {w:.3f}" for i, f, w in
-                             zip(q.key_ids, q.frames, q.weights, strict=True))
+            keys = "  ".join(
+                f"{i}:{f} {w:.3f}" for i, f, w in zip(q.key_ids, q.frames, q.weights, strict=True)
+            )
             lines.append(f"{q.part:<16}{q.novelty:>9.4f}  {keys}")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
         """Plain containers and tensors (checkpoint-safe)."""
-        return {"strategy": self.strategy, "part_names": list(self.part_names),
-                "part_joints": [list(j) for j in self.part_joints],
-                "key_quats": list(self.key_quats), "key_frames": list(self.key_frames),
-                "k": self.k, "weighting": self.weighting, "pose_condition": self.pose_condition}
+        return {
+            "strategy": self.strategy,
+            "part_names": list(self.part_names),
+            "part_joints": [list(j) for j in self.part_joints],
+            "key_quats": list(self.key_quats),
+            "key_frames": list(self.key_frames),
+            "k": self.k,
+            "weighting": self.weighting,
+            "pose_condition": self.pose_condition,
+        }
 
     def check(self, num_frames: int) -> None:
         """ValueError unless the parts, keys and key frames are consistent: every part's
         keys are (M_p, J_p, 4) finite quaternions pointing to frames in [0, num_frames)."""
         if self.strategy not in STRATEGIES or self.weighting not in WEIGHTINGS or self.k < 1:
-            raise ValueError(f"strategy {self.strategy!r}, weighting {self.weighting!r}, "
-                             f"k {self.k!r}")
+            raise ValueError(f"strategy {self.strategy!r}, weighting {self.weighting!r}, k {self.k!r}")
         check_pose_condition(self.pose_condition)
-        if not len(self.part_names) == len(self.part_joints) == len(self.key_quats) == len(
-                self.key_frames):
+        if not len(self.part_names) == len(self.part_joints) == len(self.key_quats) == len(self.key_frames):
             raise ValueError("parts, joints, keys and key frames differ in number")
-        for name, joints, q, f in zip(self.part_names, self.part_joints, self.key_quats,
-                                      self.key_frames, strict=True):
+        for name, joints, q, f in zip(
+            self.part_names, self.part_joints, self.key_quats, self.key_frames, strict=True
+        ):
             if not all(0 <= j < 24 for j in joints):
                 raise ValueError(f"part {name}: joints {joints} outside 0..23")
             if not (isinstance(q, torch.Tensor) and isinstance(f, torch.Tensor)):
                 raise ValueError(f"part {name}: keys are not tensors")
             if q.ndim != 3 or q.shape[1:] != (len(joints), 4) or len(f) != len(q) or not len(q):
-                raise ValueError(f"part {name}: keys {tuple(q.shape)} and frames "
-                                 f"{tuple(f.shape)} for {len(joints)} joints")
+                raise ValueError(
+                    f"part {name}: keys {tuple(q.shape)} and frames {tuple(f.shape)} for {len(joints)} joints"
+                )
             if not torch.isfinite(q).all() or f.min() < 0 or f.max() >= num_frames:
-                raise ValueError(f"part {name}: non-finite keys or frames outside 0.."
-                                 f"{num_frames - 1}")
+                raise ValueError(f"part {name}: non-finite keys or frames outside 0..{num_frames - 1}")
 
     @classmethod
     def from_dict(cls, d: dict) -> Vocabulary:
         """The vocabulary :meth:`to_dict` wrote; one without ``pose_condition`` (written
         before it existed) is ``global``, so its keys keep their meaning."""
-        return cls(d["strategy"], list(d["part_names"]), [tuple(j) for j in d["part_joints"]],
-                   list(d["key_quats"]), list(d["key_frames"]), int(d["k"]), d["weighting"],
-                   d.get("pose_condition", "global"))
+        return cls(
+            d["strategy"],
+            list(d["part_names"]),
+            [tuple(j) for j in d["part_joints"]],
+            list(d["key_quats"]),
+            list(d["key_frames"]),
+            int(d["k"]),
+            d["weighting"],
+            d.get("pose_condition", "global"),
+        )

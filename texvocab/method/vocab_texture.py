@@ -8,6 +8,7 @@ each texel taking the blend of the part(s) it belongs to with the skinning atten
 Texels deep inside one part (Ω = 1) show exactly that part's blend; texels near a part
 boundary mix the neighbouring parts' blends as the pose feature does. For viewers.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,7 +38,7 @@ def part_coefficients(vocab, pose, query=None) -> tuple[np.ndarray, np.ndarray]:
     start = 0
     for p, q in enumerate(parts):
         k = len(q.weights)
-        np.add.at(coef[p], inverse[start:start + k], np.asarray(q.weights, np.float64))
+        np.add.at(coef[p], inverse[start : start + k], np.asarray(q.weights, np.float64))
         start += k
     return frames, coef
 
@@ -57,8 +58,9 @@ class VocabTexture:
             raise ValueError(f"textures must be (T, S, S, 3), got {textures.shape}")
         top = max(int(kf.max()) for kf in vocab.key_frames)
         if top >= len(textures):
-            raise ValueError(f"the vocabulary points to frame {top}, but only {len(textures)} "
-                             "texture maps were given")
+            raise ValueError(
+                f"the vocabulary points to frame {top}, but only {len(textures)} texture maps were given"
+            )
         self.vocab, self.textures = vocab, textures
         self.size = textures.shape[1]
         self.tmap = texel_map(body, self.size)
@@ -67,7 +69,8 @@ class VocabTexture:
         self.attention = part_attention(torch.as_tensor(weights), vocab.part_joints).numpy()
         # (T, N, 3) row-major: one frame's covered texels contiguous for the gathers
         self._flat = np.ascontiguousarray(
-            textures.reshape(len(textures), -1, 3)[:, self.tmap.covered.reshape(-1)])
+            textures.reshape(len(textures), -1, 3)[:, self.tmap.covered.reshape(-1)]
+        )
         # per part: the texels attending to it at all, and their attention (float32)
         self._part_texels = []
         for p in range(self.attention.shape[1]):
@@ -84,8 +87,15 @@ class VocabTexture:
         pose's ``vocab.query`` if the caller has it."""
         frames, coef = part_coefficients(self.vocab, pose, query)
         colour = np.zeros((self._flat.shape[1], 3), np.float32)
-        blend_texels(self._flat, frames.astype(np.int64), coef.astype(np.float32), self._ptr,
-                     self._idx, self._omega, colour)
+        blend_texels(
+            self._flat,
+            frames.astype(np.int64),
+            coef.astype(np.float32),
+            self._ptr,
+            self._idx,
+            self._omega,
+            colour,
+        )
         return self.tmap.to_image(colour, fill=True)
 
     def blend_reference(self, pose) -> np.ndarray:

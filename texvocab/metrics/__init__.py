@@ -11,6 +11,7 @@ LPIPS, FID; plus KID).
 LPIPS, FID and KID need pretrained files that are never downloaded; without them they
 return ``None`` and say once on the ``texvocab`` logger what is missing.
 """
+
 from texvocab.metrics.frechet import (
     FID_MIN_IMAGES,
     fid,
@@ -38,9 +39,27 @@ from texvocab.metrics.image import (
 from texvocab.metrics.perceptual import LPIPS, lpips, lpips_available
 
 __all__ = [
-    "FID_MIN_IMAGES", "LPIPS", "PSNR_MAX_DB", "evaluate_pair", "fid", "fid_available",
-    "frechet_distance", "frechet_distance_from_features", "inception_extractor",
-    "inception_features", "inception_scores", "kid", "kid_from_features", "lpips",
-    "lpips_available", "mask_bbox", "metrics_full_frame", "metrics_in_bbox", "mmd2_unbiased",
-    "polynomial_kernel", "psnr", "scores_from_features", "ssim",
+    "FID_MIN_IMAGES",
+    "LPIPS",
+    "PSNR_MAX_DB",
+    "evaluate_pair",
+    "fid",
+    "fid_available",
+    "frechet_distance",
+    "frechet_distance_from_features",
+    "inception_extractor",
+    "inception_features",
+    "inception_scores",
+    "kid",
+    "kid_from_features",
+    "lpips",
+    "lpips_available",
+    "mask_bbox",
+    "metrics_full_frame",
+    "metrics_in_bbox",
+    "mmd2_unbiased",
+    "polynomial_kernel",
+    "psnr",
+    "scores_from_features",
+    "ssim",
 ]

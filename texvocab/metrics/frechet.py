@@ -22,6 +22,7 @@ source = destination * in/out, no half-pixel offset, edge clamped), and mapped t
 TF's input range [-1, 0.9921875] by ``x255 / 128 - 1``. (Checked against the package's
 own ``nv_bilinear`` + range mapping: equal to float32 rounding, < 1e-4.)
 """
+
 from __future__ import annotations
 
 import warnings
@@ -51,8 +52,10 @@ def fid_available() -> bool:
 
 
 def _missing_message() -> str:
-    return ("FID and KID unavailable, reported as None: no TorchScript InceptionV3 "
-            f"extractor: {inception_missing_reason()}")
+    return (
+        "FID and KID unavailable, reported as None: no TorchScript InceptionV3 "
+        f"extractor: {inception_missing_reason()}"
+    )
 
 
 def _legacy_bilinear(x: torch.Tensor, size: int) -> torch.Tensor:
@@ -89,13 +92,14 @@ def inception_features(images: Images, extractor: torch.jit.ScriptModule) -> np.
     # calls (profile, then re-optimise) cost several extra passes and fuse nothing useful.
     with torch.inference_mode(), torch.jit.optimized_execution(False):
         for i in range(0, len(batches), FID_BATCH):
-            out = extractor(torch.cat(batches[i:i + FID_BATCH]))
+            out = extractor(torch.cat(batches[i : i + FID_BATCH]))
             feats.append(out.reshape(out.shape[0], -1).double().numpy())
     return np.concatenate(feats) if feats else np.zeros((0, FID_FEATURE_DIM))
 
 
-def frechet_distance(mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma2: np.ndarray,
-                     eps: float = 1e-6) -> float:
+def frechet_distance(
+    mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma2: np.ndarray, eps: float = 1e-6
+) -> float:
     """Fréchet distance between N(mu1, sigma1) and N(mu2, sigma2), means ``(D,)`` and
     covariances ``(D, D)``: ``|mu1 - mu2|^2 + tr(S1 + S2 - 2 sqrtm(S1 S2))``, with
     ``scipy.linalg.sqrtm`` and its real part; when the root is not finite, ``eps * I`` is
@@ -103,8 +107,10 @@ def frechet_distance(mu1: np.ndarray, sigma1: np.ndarray, mu2: np.ndarray, sigma
     mu1, mu2 = np.atleast_1d(np.asarray(mu1, np.float64)), np.atleast_1d(np.asarray(mu2, np.float64))
     s1, s2 = np.atleast_2d(np.asarray(sigma1, np.float64)), np.atleast_2d(np.asarray(sigma2, np.float64))
     if mu1.shape != mu2.shape or s1.shape != s2.shape or s1.shape != mu1.shape * 2:
-        raise ValueError(f"means (D,) and covariances (D, D) must agree, got {mu1.shape}, "
-                         f"{s1.shape}, {mu2.shape}, {s2.shape}")
+        raise ValueError(
+            f"means (D,) and covariances (D, D) must agree, got {mu1.shape}, "
+            f"{s1.shape}, {mu2.shape}, {s2.shape}"
+        )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         covmean = scipy.linalg.sqrtm(s1 @ s2)
@@ -133,8 +139,7 @@ def frechet_distance_from_features(f1: np.ndarray, f2: np.ndarray) -> float:
     if min(n1, n2) < 2:
         raise ValueError(f"FID needs at least 2 images per set, got {n1} and {n2}")
     if max(n1, n2) > d:
-        return frechet_distance(f1.mean(0), np.cov(f1, rowvar=False),
-                                f2.mean(0), np.cov(f2, rowvar=False))
+        return frechet_distance(f1.mean(0), np.cov(f1, rowvar=False), f2.mean(0), np.cov(f2, rowvar=False))
     a1, a2 = f1 - f1.mean(0), f2 - f2.mean(0)
     c1, c2 = n1 - 1, n2 - 1
     cross = np.linalg.svd(a1 @ a2.T, compute_uv=False).sum() / np.sqrt(c1 * c2)
@@ -156,12 +161,20 @@ def mmd2_unbiased(x: np.ndarray, y: np.ndarray) -> float:
     twice the mean of k across the samples."""
     n, m = len(x), len(y)
     kxx, kyy, kxy = polynomial_kernel(x, x), polynomial_kernel(y, y), polynomial_kernel(x, y)
-    return float((kxx.sum() - np.trace(kxx)) / (n * (n - 1))
-                 + (kyy.sum() - np.trace(kyy)) / (m * (m - 1)) - 2.0 * kxy.mean())
+    return float(
+        (kxx.sum() - np.trace(kxx)) / (n * (n - 1))
+        + (kyy.sum() - np.trace(kyy)) / (m * (m - 1))
+        - 2.0 * kxy.mean()
+    )
 
 
-def kid_from_features(f1: np.ndarray, f2: np.ndarray, subsets: int = KID_SUBSETS,
-                      subset_size: int = KID_SUBSET_SIZE, seed: int = 0) -> tuple[float, float | None]:
+def kid_from_features(
+    f1: np.ndarray,
+    f2: np.ndarray,
+    subsets: int = KID_SUBSETS,
+    subset_size: int = KID_SUBSET_SIZE,
+    seed: int = 0,
+) -> tuple[float, float | None]:
     """KID between features ``(N1, D)`` and ``(N2, D)`` (N >= 2 each): ``(kid, std)``.
 
     When both sets have at most ``subset_size`` rows, :func:`mmd2_unbiased` on the whole
@@ -178,13 +191,16 @@ def kid_from_features(f1: np.ndarray, f2: np.ndarray, subsets: int = KID_SUBSETS
         return mmd2_unbiased(f1, f2), None
     m = max(2, min(len(f1), len(f2), subset_size))
     rng = np.random.default_rng(seed)
-    values = [mmd2_unbiased(f1[rng.choice(len(f1), m, replace=False)],
-                            f2[rng.choice(len(f2), m, replace=False)]) for _ in range(subsets)]
+    values = [
+        mmd2_unbiased(f1[rng.choice(len(f1), m, replace=False)], f2[rng.choice(len(f2), m, replace=False)])
+        for _ in range(subsets)
+    ]
     return float(np.mean(values)), float(np.std(values))
 
 
-def scores_from_features(real: np.ndarray, fake: np.ndarray,
-                         min_fid_images: int = FID_MIN_IMAGES) -> dict[str, float | None]:
+def scores_from_features(
+    real: np.ndarray, fake: np.ndarray, min_fid_images: int = FID_MIN_IMAGES
+) -> dict[str, float | None]:
     """``{"fid", "kid", "kid_std"}`` between features ``(N1, D)`` and ``(N2, D)``: FID only
     when both sets have ``min_fid_images`` rows, KID (:func:`kid_from_features`) when both
     have 2; None otherwise."""
@@ -207,8 +223,12 @@ def inception_extractor(extractor: str | Path | None = None) -> torch.jit.Script
     return load_inception(path, True)
 
 
-def inception_scores(real_images: Images, fake_images: Images, extractor: str | Path | None = None,
-                     min_fid_images: int = FID_MIN_IMAGES) -> dict[str, float | None]:
+def inception_scores(
+    real_images: Images,
+    fake_images: Images,
+    extractor: str | Path | None = None,
+    min_fid_images: int = FID_MIN_IMAGES,
+) -> dict[str, float | None]:
     """FID, KID and KID's std (:func:`scores_from_features`) between two sets of images
     ``(H, W, 3)`` in [0, 1] (sequences or ``(N, H, W, 3)`` arrays), through one pass of the
     Inception extractor (:func:`inception_extractor`); all None when it is missing."""
@@ -220,11 +240,15 @@ def inception_scores(real_images: Images, fake_images: Images, extractor: str | 
     if module is None:
         return none
     feats = inception_features(real + fake, module)  # one pass: batches may mix the sets
-    return scores_from_features(feats[:len(real)], feats[len(real):], min_fid_images)
+    return scores_from_features(feats[: len(real)], feats[len(real) :], min_fid_images)
 
 
-def fid(real_images: Images, fake_images: Images, extractor: str | Path | None = None,
-        min_images: int = FID_MIN_IMAGES) -> float | None:
+def fid(
+    real_images: Images,
+    fake_images: Images,
+    extractor: str | Path | None = None,
+    min_images: int = FID_MIN_IMAGES,
+) -> float | None:
     """FID between two sets of images ``(H, W, 3)`` in [0, 1] (:func:`inception_scores`).
     ``None`` when a set has fewer than ``min_images`` images (FID from a few images is
     strongly biased upwards; compare numbers only at equal N) or the extractor is

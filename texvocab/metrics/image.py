@@ -13,6 +13,7 @@ it follows:
   is ``psnr(pred, gt, mask=mask_at_box)``; and its SSIM is scikit-image's *default*
   (7x7 uniform window, sample covariance), not the Gaussian SSIM used here.
 """
+
 from __future__ import annotations
 
 import math
@@ -111,7 +112,7 @@ def ssim(pred: ArrayLike, gt: ArrayLike) -> float:
     vx = _filter_valid(p * p, taps) - ux * ux
     vy = _filter_valid(g * g, taps) - uy * uy
     vxy = _filter_valid(p * g, taps) - ux * uy
-    c1, c2 = SSIM_K1 ** 2, SSIM_K2 ** 2
+    c1, c2 = SSIM_K1**2, SSIM_K2**2
     s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2))
     return float(s.mean(axis=(0, 1)).mean())
 
@@ -130,8 +131,10 @@ def mask_bbox(mask: ArrayLike, margin: int = 0, min_size: int = 0) -> tuple[int,
         raise ValueError("mask is empty: it has no bounding box")
     h, w = m.shape
     box = []
-    for lo, hi, n in ((int(rows[0]) - margin, int(rows[-1]) + 1 + margin, h),
-                      (int(cols[0]) - margin, int(cols[-1]) + 1 + margin, w)):
+    for lo, hi, n in (
+        (int(rows[0]) - margin, int(rows[-1]) + 1 + margin, h),
+        (int(cols[0]) - margin, int(cols[-1]) + 1 + margin, w),
+    ):
         short = max(0, min(min_size, n) - (hi - lo))
         lo, hi = lo - short // 2, hi + short - short // 2
         shift = max(0, -lo) - max(0, hi - n)  # slide back inside the image
@@ -145,8 +148,7 @@ def crop_to_bbox(image: ArrayLike, bbox: tuple[int, int, int, int]) -> ArrayLike
     return image[y0:y1, x0:x1]
 
 
-def metrics_in_bbox(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike,
-                    margin: int = 0) -> dict[str, float]:
+def metrics_in_bbox(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike, margin: int = 0) -> dict[str, float]:
     """``{"psnr", "ssim"}`` on the crop of the bounding box of ``mask`` ``(H, W)`` (plus
     ``margin`` pixels), AniNeRF style: every pixel of the rectangle counts, background
     included. Images ``(H, W, 3)`` in [0, 1]; the crop must be at least 11x11 for SSIM."""
@@ -161,8 +163,9 @@ def metrics_full_frame(pred: ArrayLike, gt: ArrayLike) -> dict[str, float]:
     return {"psnr": psnr(pred, gt), "ssim": ssim(pred, gt)}
 
 
-def evaluate_pair(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike,
-                  lpips_model: LPIPS | None = None) -> dict[str, float | None]:
+def evaluate_pair(
+    pred: ArrayLike, gt: ArrayLike, mask: ArrayLike, lpips_model: LPIPS | None = None
+) -> dict[str, float | None]:
     """All image metrics of one rendering ``pred`` against ``gt`` ((H, W, 3) in [0, 1])
     with the foreground ``mask`` (H, W):
 
@@ -179,5 +182,10 @@ def evaluate_pair(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike,
     bbox = mask_bbox(mask, 0, SSIM_WINDOW)
     p, g = crop_to_bbox(pred, bbox), crop_to_bbox(gt, bbox)
     perceptual = lpips(p, g) if lpips_model is None else lpips_with(lpips_model, p, g)
-    return {"psnr_bbox": box["psnr"], "ssim_bbox": box["ssim"],
-            "psnr_full": full["psnr"], "ssim_full": full["ssim"], "lpips": perceptual}
+    return {
+        "psnr_bbox": box["psnr"],
+        "ssim_bbox": box["ssim"],
+        "psnr_full": full["psnr"],
+        "ssim_full": full["ssim"],
+        "lpips": perceptual,
+    }

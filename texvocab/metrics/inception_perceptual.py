@@ -11,6 +11,7 @@ channels, averaged over space and summed over the two taps — LPIPS with unifor
 weights instead of learned linear heads (Zhang et al. 2018 call this variant
 "baseline"). 0 for equal images; at most 4 (two taps, each at most 2).
 """
+
 from __future__ import annotations
 
 import torch
@@ -36,16 +37,19 @@ class InceptionPerceptual(nn.Module):
 
     def forward(self, pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
         if pred.shape != gt.shape or pred.ndim != 4 or pred.shape[1] != 3:
-            raise ValueError(f"inception-perceptual expects pred and gt (B, 3, H, W) of equal "
-                             f"shape, got {tuple(pred.shape)} and {tuple(gt.shape)}")
+            raise ValueError(
+                f"inception-perceptual expects pred and gt (B, 3, H, W) of equal "
+                f"shape, got {tuple(pred.shape)} and {tuple(gt.shape)}"
+            )
         if min(pred.shape[-2:]) * self.upsample < MIN_PATCH * 2:
-            raise ValueError(f"inception-perceptual needs images of at least {MIN_PATCH}² "
-                             f"pixels at upsample 2, got {tuple(pred.shape[-2:])}")
+            raise ValueError(
+                f"inception-perceptual needs images of at least {MIN_PATCH}² "
+                f"pixels at upsample 2, got {tuple(pred.shape[-2:])}"
+            )
         b = pred.shape[0]
         x = torch.cat([pred, gt]).float()
         if self.upsample != 1.0:
-            x = F.interpolate(x, scale_factor=self.upsample, mode="bilinear",
-                              align_corners=False)
+            x = F.interpolate(x, scale_factor=self.upsample, mode="bilinear", align_corners=False)
         total = x.new_zeros(b)
         for f in self.taps(x):
             f = f / (torch.linalg.vector_norm(f, dim=1, keepdim=True) + 1e-10)

@@ -26,6 +26,7 @@ search finds no file, :func:`lpips` returns ``None`` and logs one line naming wh
 missing and where it looked; an explicit path that does not exist, or a file with the
 wrong keys/shapes, raises :class:`~texvocab.errors.AssetError`.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -69,7 +70,7 @@ class VGG16Features(nn.Module):
         """relu1_2 ``(B, 64, H, W)``, relu2_2 ``(B, 128, H/2, W/2)``, relu3_3 ``(B, 256,
         H/4, W/4)``, relu4_3 ``(B, 512, H/8, W/8)``, relu5_3 ``(B, 512, H/16, W/16)``."""
         out = []
-        for i, layer in enumerate(self.features[:LPIPS_TAPS[-1] + 1]):
+        for i, layer in enumerate(self.features[: LPIPS_TAPS[-1] + 1]):
             x = layer(x)
             if i in LPIPS_TAPS:
                 out.append(x)
@@ -131,12 +132,17 @@ def _missing_message() -> str | None:
     """One line naming what the default search could not find, or ``None``."""
     missing = []
     if find_vgg16_weights() is None:
-        missing.append(f"no VGG16 ImageNet weights (vgg16-*.pth, e.g. {KNOWN_VGG16_FILES[0]}) "
-                       f"in {torch_checkpoint_dir()}")
+        missing.append(
+            f"no VGG16 ImageNet weights (vgg16-*.pth, e.g. {KNOWN_VGG16_FILES[0]}) "
+            f"in {torch_checkpoint_dir()}"
+        )
     if find_lpips_heads() is None:
         pkg = package_dir("lpips")
-        where = (f"{pkg / LPIPS_HEADS_IN_PACKAGE} does not exist" if pkg is not None else
-                 "Python package 'lpips' is not installed (pip install --no-deps lpips==0.1.4)")
+        where = (
+            f"{pkg / LPIPS_HEADS_IN_PACKAGE} does not exist"
+            if pkg is not None
+            else "Python package 'lpips' is not installed (pip install --no-deps lpips==0.1.4)"
+        )
         missing.append(f"no LPIPS VGG heads: {where}")
     if not missing:
         return None
@@ -159,8 +165,8 @@ class LPIPS(nn.Module):
         self.vgg_path, self.heads_path = vgg_path, heads_path
         self.net = VGG16Features()
         self.net.features.load_state_dict(
-            {k.removeprefix("features."): v for k, v in load_vgg16_state_dict(vgg_path).items()},
-            strict=True)
+            {k.removeprefix("features."): v for k, v in load_vgg16_state_dict(vgg_path).items()}, strict=True
+        )
         self.lins = LinearHeads()
         self.lins.load_state_dict(load_lpips_heads_state_dict(heads_path), strict=True)
         self.register_buffer("shift", torch.tensor(LPIPS_SHIFT).view(1, 3, 1, 1), False)
@@ -174,8 +180,10 @@ class LPIPS(nn.Module):
     def forward(self, pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
         """LPIPS distance ``(B,)`` between ``pred`` and ``gt`` ``(B, 3, H, W)`` in [0, 1]."""
         if pred.shape != gt.shape or pred.ndim != 4 or pred.shape[1] != 3:
-            raise ValueError(f"LPIPS expects pred and gt (B, 3, H, W) of equal shape, got "
-                             f"{tuple(pred.shape)} and {tuple(gt.shape)}")
+            raise ValueError(
+                f"LPIPS expects pred and gt (B, 3, H, W) of equal shape, got "
+                f"{tuple(pred.shape)} and {tuple(gt.shape)}"
+            )
         b = pred.shape[0]
         x = torch.cat([pred, gt]).to(self.shift.dtype)
         feats = self.net.taps(((2 * x - 1) - self.shift) / self.scale)
@@ -198,8 +206,7 @@ def lpips_with(model: LPIPS, pred: ArrayLike, gt: ArrayLike) -> float:
     """LPIPS of images ``(H, W, 3)`` in [0, 1] under a loaded :class:`LPIPS`."""
     p, g = _to_batch(pred), _to_batch(gt)
     if p.shape != g.shape:
-        raise ValueError(f"pred and gt must have the same shape, got {tuple(p.shape)} and "
-                         f"{tuple(g.shape)}")
+        raise ValueError(f"pred and gt must have the same shape, got {tuple(p.shape)} and {tuple(g.shape)}")
     with torch.no_grad():
         return float(model(p.to(model.shift.device), g.to(model.shift.device))[0])
 
@@ -216,8 +223,9 @@ def lpips_available(vgg_weights: str | Path | None = None, heads: str | Path | N
     return vgg is not None and lin is not None and vgg.is_file() and lin.is_file()
 
 
-def lpips(pred: ArrayLike, gt: ArrayLike, vgg_weights: str | Path | None = None,
-          heads: str | Path | None = None) -> float | None:
+def lpips(
+    pred: ArrayLike, gt: ArrayLike, vgg_weights: str | Path | None = None, heads: str | Path | None = None
+) -> float | None:
     """LPIPS (VGG, v0.1) between images ``(H, W, 3)`` in [0, 1] (numpy or torch), or
     ``None`` when the default search finds no weights (one log line per process). The
     network is built once per pair of files and reused."""

@@ -6,6 +6,7 @@ package loads neither torch nor GL until a name is used. The import contract in
 pyproject.toml (``[tool.importlinter]``) holds ``app`` to this module and
 :mod:`texvocab.errors`.
 """
+
 from __future__ import annotations
 
 import importlib

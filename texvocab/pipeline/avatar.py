@@ -6,6 +6,7 @@ Nothing the caller passes is changed: the capture returned is a shallow copy who
 from), so evaluation and the viewer see the frames the avatar was trained on as training
 frames, whatever split the folder's metadata gives today.
 """
+
 from __future__ import annotations
 
 import copy
@@ -45,18 +46,24 @@ def _capture_path(ck: dict, checkpoint: str | Path) -> Path:
     if not isinstance(recorded, str) or not recorded:
         raise TexvocabError(f"{checkpoint}: records no capture folder; pass the capture folder")
     cap_path = Path(recorded)
-    candidates = [cap_path] if cap_path.is_absolute() else (
-        [cap_path] + [p / cap_path for p in Path(checkpoint).resolve().parents])
+    candidates = (
+        [cap_path]
+        if cap_path.is_absolute()
+        else ([cap_path] + [p / cap_path for p in Path(checkpoint).resolve().parents])
+    )
     for c in candidates:
         if c.is_dir():
             return c
-    raise TexvocabError(f"{checkpoint}: its capture folder {recorded!r} is missing; the avatar "
-                        "needs the capture it was trained on (eval: its CAPTURE argument; "
-                        "shot and view: --capture FOLDER)")
+    raise TexvocabError(
+        f"{checkpoint}: its capture folder {recorded!r} is missing; the avatar "
+        "needs the capture it was trained on (eval: its CAPTURE argument; "
+        "shot and view: --capture FOLDER)"
+    )
 
 
-def load_avatar(checkpoint: str | Path, capture=None, smpl: str | None = None,
-                progress: bool = True) -> Avatar:
+def load_avatar(
+    checkpoint: str | Path, capture=None, smpl: str | None = None, progress: bool = True
+) -> Avatar:
     """Rebuild the avatar of ``checkpoint`` on ``capture`` (the one it was trained on);
     None opens the capture folder the checkpoint records, posed by ``smpl`` (None: the
     default body). The checkpoint file is read once."""
@@ -70,29 +77,38 @@ def load_avatar(checkpoint: str | Path, capture=None, smpl: str | None = None,
     capture = copy.copy(capture)
     num_train = ck.get("num_train", capture.num_train)
     if type(num_train) is not int or not 1 <= num_train <= capture.num_frames:
-        raise TexvocabError(f"{checkpoint}: num_train={num_train!r}; expected 1..{capture.num_frames} "
-                            f"(the frames of {capture.root})")
+        raise TexvocabError(
+            f"{checkpoint}: num_train={num_train!r}; expected 1..{capture.num_frames} "
+            f"(the frames of {capture.root})"
+        )
     capture.num_train = num_train
     try:
         vocab = Vocabulary.from_dict(ck["vocab"])
         vocab.check(capture.num_train)
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as e:
-        raise TexvocabError(f"{checkpoint}: its vocabulary is not readable ({type(e).__name__}: "
-                            f"{str(e).splitlines()[0] if str(e) else ''})") from None
+        raise TexvocabError(
+            f"{checkpoint}: its vocabulary is not readable ({type(e).__name__}: "
+            f"{str(e).splitlines()[0] if str(e) else ''})"
+        ) from None
     textures = load_textures(capture, settings, progress)
     model = build_model(capture, settings, textures, vocab)
     if not isinstance(ck["model"], dict):
-        raise TexvocabError(f"{checkpoint}: 'model' holds {type(ck['model']).__name__}, expected "
-                            "the weights (a state dict)")
+        raise TexvocabError(
+            f"{checkpoint}: 'model' holds {type(ck['model']).__name__}, expected the weights (a state dict)"
+        )
     try:
         missing, unexpected = model.load_state_dict(ck["model"], strict=False)
     except RuntimeError as e:
-        first = next((ln.strip() for ln in str(e).splitlines() if "size mismatch" in ln),
-                     str(e).splitlines()[0])
-        raise TexvocabError(f"{checkpoint}: weights do not fit the model its settings "
-                            f"describe ({first})") from None
+        first = next(
+            (ln.strip() for ln in str(e).splitlines() if "size mismatch" in ln), str(e).splitlines()[0]
+        )
+        raise TexvocabError(
+            f"{checkpoint}: weights do not fit the model its settings describe ({first})"
+        ) from None
     if unexpected or [k for k in missing if not k.startswith("pose_feature.textures")]:
-        raise TexvocabError(f"{checkpoint}: weights do not fit this model (missing "
-                            f"{missing[:3]}, unexpected {unexpected[:3]})")
+        raise TexvocabError(
+            f"{checkpoint}: weights do not fit this model (missing "
+            f"{missing[:3]}, unexpected {unexpected[:3]})"
+        )
     model.eval()
     return Avatar(model, settings, ck, capture)

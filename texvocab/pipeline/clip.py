@@ -3,6 +3,7 @@ that follows the body (or orbits it), frames cached as PNGs so an interrupted re
 resumes where it stopped, then an MP4 (H.264 through the ffmpeg that ``imageio-ffmpeg``
 ships) or the PNG sequence itself.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -44,10 +45,20 @@ class ClipSpec:
 
     @classmethod
     def make(cls, checkpoint, poses, view, orbit, follow, fps, scale, knobs) -> ClipSpec:
-        stamps = {str(p): [os.stat(p).st_size, os.stat(p).st_mtime_ns]
-                  for p in (Path(checkpoint), Path(poses))}
-        return cls(str(Path(checkpoint).resolve()), str(Path(poses).resolve()), int(view),
-                   float(orbit), bool(follow), float(fps), float(scale), dict(knobs), stamps)
+        stamps = {
+            str(p): [os.stat(p).st_size, os.stat(p).st_mtime_ns] for p in (Path(checkpoint), Path(poses))
+        }
+        return cls(
+            str(Path(checkpoint).resolve()),
+            str(Path(poses).resolve()),
+            int(view),
+            float(orbit),
+            bool(follow),
+            float(fps),
+            float(scale),
+            dict(knobs),
+            stamps,
+        )
 
     def digest(self) -> str:
         return hashlib.sha1(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:16]
@@ -66,8 +77,9 @@ def prepare_frames_dir(folder: Path, spec: ClipSpec, overwrite: bool) -> int:
     key = folder / KEY_FILE
     if folder.exists() and any(folder.iterdir()):
         if not key.is_file():
-            raise TexvocabError(f"{folder}: exists and is not a texvocab frame folder (no "
-                                f"{KEY_FILE}); choose another --out")
+            raise TexvocabError(
+                f"{folder}: exists and is not a texvocab frame folder (no {KEY_FILE}); choose another --out"
+            )
         try:
             old = json.loads(key.read_text())
         except (OSError, ValueError):
@@ -75,21 +87,26 @@ def prepare_frames_dir(folder: Path, spec: ClipSpec, overwrite: bool) -> int:
         if old.get("digest") != spec.digest():
             if not overwrite:
                 diff = [k for k, v in asdict(spec).items() if old.get("spec", {}).get(k) != v]
-                raise TexvocabError(f"{folder}: holds frames of another render ({', '.join(diff)}"
-                                    " differ); pass --overwrite to replace them, or another --out")
+                raise TexvocabError(
+                    f"{folder}: holds frames of another render ({', '.join(diff)}"
+                    " differ); pass --overwrite to replace them, or another --out"
+                )
             for f in folder.glob("frame_*.png"):
                 f.unlink()
     folder.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(key, lambda t: Path(t).write_text(json.dumps(
-        {"digest": spec.digest(), "spec": asdict(spec)}, indent=1)))
+    atomic_write_bytes(
+        key,
+        lambda t: Path(t).write_text(json.dumps({"digest": spec.digest(), "spec": asdict(spec)}, indent=1)),
+    )
     return sum(1 for _ in folder.glob("frame_*.png"))
 
 
 def follow_camera(camera: Camera, shift: np.ndarray) -> Camera:
     """``camera`` moved by ``shift`` (3,) in the world (same orientation)."""
     centre = camera.center + np.asarray(shift, dtype=np.float64)
-    return Camera(camera.K, camera.R, -camera.R @ centre, camera.width, camera.height,
-                  camera.dist, camera.name)
+    return Camera(
+        camera.K, camera.R, -camera.R @ centre, camera.width, camera.height, camera.dist, camera.name
+    )
 
 
 def orbit_camera(camera: Camera, pivot: np.ndarray, angle: float) -> Camera:
@@ -99,12 +116,12 @@ def orbit_camera(camera: Camera, pivot: np.ndarray, angle: float) -> Camera:
     turn = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
     centre = pivot + turn @ (camera.center - pivot)
     R = camera.R @ turn.T
-    return Camera(camera.K, R, -R @ centre, camera.width, camera.height, camera.dist,
-                  camera.name)
+    return Camera(camera.K, R, -R @ centre, camera.width, camera.height, camera.dist, camera.name)
 
 
-def frame_cameras(camera: Camera, roots: np.ndarray, reference: np.ndarray, follow: bool,
-                  orbit: float) -> list[Camera]:
+def frame_cameras(
+    camera: Camera, roots: np.ndarray, reference: np.ndarray, follow: bool, orbit: float
+) -> list[Camera]:
     """One camera per frame: ``camera`` shifted by each root (T, 3) minus ``reference``
     (3,) when ``follow``, turned about the root by ``orbit`` turns over the clip."""
     cams = []
@@ -116,14 +133,16 @@ def frame_cameras(camera: Camera, roots: np.ndarray, reference: np.ndarray, foll
     return cams
 
 
-def render_frames(render, poses: np.ndarray, trans: np.ndarray, cameras: list[Camera],
-                  folder: Path, progress: bool = True) -> list[Path]:
+def render_frames(
+    render, poses: np.ndarray, trans: np.ndarray, cameras: list[Camera], folder: Path, progress: bool = True
+) -> list[Path]:
     """``render(pose, trans, camera) -> (H, W, 3) uint8`` for every frame not yet in
     ``folder``; frames written atomically as frame_00000.png, ..."""
     paths = [folder / f"frame_{i:05d}.png" for i in range(len(poses))]
     todo = [i for i, p in enumerate(paths) if not p.is_file()]
-    bar = tqdm(total=len(paths), initial=len(paths) - len(todo), unit="frame",
-               desc="render", disable=not progress)
+    bar = tqdm(
+        total=len(paths), initial=len(paths) - len(todo), unit="frame", desc="render", disable=not progress
+    )
     for i in todo:
         save_png(paths[i], render(poses[i], trans[i], cameras[i]))
         bar.update(1)
@@ -141,9 +160,16 @@ def write_mp4(paths: list[Path], out: Path, fps: float) -> Path:
     h, w = first.shape[:2]
     H, W = h + h % 2, w + w % 2
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp.mp4")
-    writer = imageio_ffmpeg.write_frames(str(tmp), (W, H), fps=fps, codec="libx264",
-                                         pix_fmt_out="yuv420p", macro_block_size=2,
-                                         quality=8, ffmpeg_log_level="error")
+    writer = imageio_ffmpeg.write_frames(
+        str(tmp),
+        (W, H),
+        fps=fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        macro_block_size=2,
+        quality=8,
+        ffmpeg_log_level="error",
+    )
     try:
         writer.send(None)
         for p in paths:

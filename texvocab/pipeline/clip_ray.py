@@ -6,6 +6,7 @@ writes every frame it receives to the same cache as a serial render (resume work
 Ray is an optional extra (``pip install 'texvocab[scale]'``); every node of a cluster
 needs texvocab installed in the same environment.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,14 +21,23 @@ def _ray():
     try:
         import ray
     except ImportError:
-        raise TexvocabError("--ray needs Ray: pip install 'texvocab[scale]' (or pip install "
-                            "ray)") from None
+        raise TexvocabError("--ray needs Ray: pip install 'texvocab[scale]' (or pip install ray)") from None
     return ray
 
 
-def render_frames_ray(model, march, scale: float, poses, trans, cameras, folder: Path,
-                      address: str | None = None, workers: int = 2, threads: int = 1,
-                      progress: bool = True) -> list[Path]:
+def render_frames_ray(
+    model,
+    march,
+    scale: float,
+    poses,
+    trans,
+    cameras,
+    folder: Path,
+    address: str | None = None,
+    workers: int = 2,
+    threads: int = 1,
+    progress: bool = True,
+) -> list[Path]:
     """Like :func:`texvocab.pipeline.clip.render_frames` with the renders on Ray actors.
 
     Args:
@@ -45,17 +55,22 @@ def render_frames_ray(model, march, scale: float, poses, trans, cameras, folder:
     started = not ray.is_initialized()
     if started:
         if address is None:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False,
-                     configure_logging=False)
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
         else:
             ray.init(address=address, log_to_driver=False, configure_logging=False)
     try:
         model_ref = ray.put(model)  # once, into the object store
         actor = ray.remote(num_cpus=1)(FrameWorker)
-        pool = ActorPool([actor.remote(model_ref, march, scale, threads)
-                          for _ in range(max(1, min(workers, len(todo))))])
-        bar = tqdm(total=len(paths), initial=len(paths) - len(todo), unit="frame",
-                   desc=f"render (ray, {workers} workers)", disable=not progress)
+        pool = ActorPool(
+            [actor.remote(model_ref, march, scale, threads) for _ in range(max(1, min(workers, len(todo))))]
+        )
+        bar = tqdm(
+            total=len(paths),
+            initial=len(paths) - len(todo),
+            unit="frame",
+            desc=f"render (ray, {workers} workers)",
+            disable=not progress,
+        )
         jobs = [(i, poses[i], trans[i], cameras[i]) for i in todo]
         for i, image in pool.map_unordered(lambda a, job: a.render.remote(*job), jobs):
             save_png(paths[i], image)

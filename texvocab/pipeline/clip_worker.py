@@ -2,6 +2,7 @@
 
 A plain class so that it pickles by reference for any process pool; Ray wraps it as an
 actor (:mod:`texvocab.pipeline.clip_ray`)."""
+
 from __future__ import annotations
 
 import numpy as np

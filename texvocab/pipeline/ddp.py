@@ -10,6 +10,7 @@ closures, not through one module ``forward`` per step, which the wrapper's reduc
 expects. Rank 0 holds the run folder's lock, shows progress and writes checkpoints; a
 time budget stops every process at the same step.
 """
+
 from __future__ import annotations
 
 import os
@@ -36,7 +37,7 @@ def attach(trainer) -> None:
         flat /= trainer.world
         start = 0
         for p, g in zip(params, grads, strict=True):
-            p.grad = flat[start:start + g.numel()].view_as(p).clone()
+            p.grad = flat[start : start + g.numel()].view_as(p).clone()
             start += g.numel()
 
     def agree(flag: bool) -> bool:
@@ -65,8 +66,7 @@ def run_process(job: dict) -> None:
     from texvocab.capture import open as open_capture
     from texvocab.pipeline.train import Trainer
 
-    cap = open_capture(job["capture"], body=load_body(job.get("smpl")),
-                       num_train=job.get("train_frames"))
+    cap = open_capture(job["capture"], body=load_body(job.get("smpl")), num_train=job.get("train_frames"))
     trainer = Trainer(cap, job["settings"], job["out"], progress=job.get("progress", True))
     attach(trainer)
     if job.get("resume"):
@@ -81,8 +81,7 @@ def spawn(world: int, job: dict) -> None:
     threads = max(1, torch.get_num_threads() // world)
     with tempfile.TemporaryDirectory() as tmp:
         init = Path(tmp, "rendezvous").as_uri()
-        mp.spawn(_worker, args=(world, init, {**job, "threads": threads}), nprocs=world,
-                 join=True)
+        mp.spawn(_worker, args=(world, init, {**job, "threads": threads}), nprocs=world, join=True)
 
 
 def under_torchrun() -> bool:

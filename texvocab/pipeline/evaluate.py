@@ -8,6 +8,7 @@ style) and on the full frame; LPIPS (VGG, on the box crop) when its weights exis
 when the Inception extractor exists. Every mean comes with its standard error and the
 image count; by default the sets are the whole test split (:func:`build_sets`).
 """
+
 from __future__ import annotations
 
 import json
@@ -55,13 +56,21 @@ def render_view_rgba(model, pose, trans, camera, march, scale: float = 1.0):
         ctx = model.pose_feature.context(pose, trans)
         shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
         cam = camera if scale == 1.0 else camera.scaled(scale)
-        out = render_image(model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march,
-                           shell=shell, index=ctx.index)
+        out = render_image(
+            model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march, shell=shell, index=ctx.index
+        )
         rgba = torch.cat([out.rgb, out.alpha[..., None]], -1)
         if scale != 1.0:
-            rgba = torch.nn.functional.interpolate(
-                rgba.permute(2, 0, 1)[None], size=(camera.height, camera.width), mode="bilinear",
-                align_corners=False)[0].permute(1, 2, 0).clamp(0, 1)
+            rgba = (
+                torch.nn.functional.interpolate(
+                    rgba.permute(2, 0, 1)[None],
+                    size=(camera.height, camera.width),
+                    mode="bilinear",
+                    align_corners=False,
+                )[0]
+                .permute(1, 2, 0)
+                .clamp(0, 1)
+            )
     out.stats.seconds = time.perf_counter() - t0  # incl. pose context and shell
     rgba = rgba.numpy().astype(np.float32)
     return rgba[..., :3], rgba[..., 3], out.stats
@@ -133,9 +142,15 @@ class _PairFeatures:
         return frechet.scores_from_features(f[0::2], f[1::2])
 
 
-def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=None,
-                  grid_rows: int = 4, scale: float = 1.0,
-                  progress: bool = True) -> tuple[dict[str, dict], list[dict], dict[str, list]]:
+def evaluate_sets(
+    model,
+    sets: dict[str, Sequence[Item]],
+    march,
+    lpips_model=None,
+    grid_rows: int = 4,
+    scale: float = 1.0,
+    progress: bool = True,
+) -> tuple[dict[str, dict], list[dict], dict[str, list]]:
     """Render and score every item of every set. ``sets``: name -> sequence of items
     (pose (24, 3), trans (3,), camera, gt (H, W, 3), mask (H, W)); renders at ``scale`` of
     each camera's size (see :func:`render_view`). ``progress``: a tqdm bar over all images
@@ -149,8 +164,7 @@ def evaluate_sets(model, sets: dict[str, Sequence[Item]], march, lpips_model=Non
     """
     extractor = frechet.inception_extractor() if any(len(v) >= 2 for v in sets.values()) else None
     table, records, grids = {}, [], {}
-    with tqdm(total=sum(len(v) for v in sets.values()), desc="eval", unit="img",
-              disable=not progress) as bar:
+    with tqdm(total=sum(len(v) for v in sets.values()), desc="eval", unit="img", disable=not progress) as bar:
         for name, items in sets.items():
             bar.set_postfix_str(name)
             pairs = getattr(items, "pairs", None)
@@ -198,25 +212,38 @@ def format_table(table: dict[str, dict], checkpoint: str = "", split: str = "") 
     """metrics.md: the header says what ± means (and ``split``, what is held out); one
     row per set with its image count, labelled with its views when they are not held out
     (``views``: "seen view" ...)."""
-    lines = [f"# texvocab eval: {checkpoint} (mean ± standard error of the mean, std/√n)", "",
-             "Each cell is the mean over the set's n images ± its standard error (sample std "
-             "with ddof 1 / √n; it treats the images as independent, but the views of one frame "
-             "and neighbouring frames are correlated, so it likely understates the spread). "
-             "PSNR (dB) / SSIM inside the mask bounding box (AniNeRF style) and on the full "
-             "frame; LPIPS (VGG, box crop) when its weights exist; FID (from "
-             f"{frechet.FID_MIN_IMAGES} images per set) and KID (unbiased, polynomial kernel, "
-             "from 2 images; sd = std over random subsets when the set is subsampled) between "
-             "the set's true and rendered images when the Inception extractor is installed, "
-             "else n/a; iou: the rendered silhouette (opacity > 0.5) against the mask; "
-             "seconds: mean render time per image.", "",
-             *([f"Split: {split}.", ""] if split else []),
-             "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | fid | kid "
-             "| iou | seconds |", "|---" * 11 + "|"]
+    lines = [
+        f"# texvocab eval: {checkpoint} (mean ± standard error of the mean, std/√n)",
+        "",
+        "Each cell is the mean over the set's n images ± its standard error (sample std "
+        "with ddof 1 / √n; it treats the images as independent, but the views of one frame "
+        "and neighbouring frames are correlated, so it likely understates the spread). "
+        "PSNR (dB) / SSIM inside the mask bounding box (AniNeRF style) and on the full "
+        "frame; LPIPS (VGG, box crop) when its weights exist; FID (from "
+        f"{frechet.FID_MIN_IMAGES} images per set) and KID (unbiased, polynomial kernel, "
+        "from 2 images; sd = std over random subsets when the set is subsampled) between "
+        "the set's true and rendered images when the Inception extractor is installed, "
+        "else n/a; iou: the rendered silhouette (opacity > 0.5) against the mask; "
+        "seconds: mean render time per image.",
+        "",
+        *([f"Split: {split}.", ""] if split else []),
+        "| set | images | psnr_bbox | ssim_bbox | psnr_full | ssim_full | lpips | fid | kid "
+        "| iou | seconds |",
+        "|---" * 11 + "|",
+    ]
     for name, row in table.items():
-        cells = [str(row.get("images", 0)), _cell(row, "psnr_bbox", 2), _cell(row, "ssim_bbox", 4),
-                 _cell(row, "psnr_full", 2), _cell(row, "ssim_full", 4), _cell(row, "lpips", 4),
-                 _score_cell(row, "fid", frechet.FID_MIN_IMAGES, 2), _score_cell(row, "kid", 2, 4),
-                 _cell(row, "iou", 3), _cell(row, "seconds", 2)]
+        cells = [
+            str(row.get("images", 0)),
+            _cell(row, "psnr_bbox", 2),
+            _cell(row, "ssim_bbox", 4),
+            _cell(row, "psnr_full", 2),
+            _cell(row, "ssim_full", 4),
+            _cell(row, "lpips", 4),
+            _score_cell(row, "fid", frechet.FID_MIN_IMAGES, 2),
+            _score_cell(row, "kid", 2, 4),
+            _cell(row, "iou", 3),
+            _cell(row, "seconds", 2),
+        ]
         shown = f"{name} ({row['views']})" if row.get("views") else name
         lines.append(f"| {shown} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -229,17 +256,22 @@ def write_report(out_dir: Path, table: dict, records: list, grids: dict, meta: d
     out_dir.mkdir(parents=True, exist_ok=True)
     md = format_table(table, str(meta.get("checkpoint", "")), str(meta.get("split", "")))
     paths = [atomic_write_bytes(out_dir / "metrics.md", lambda t: Path(t).write_text(md))]
-    protocol = {"sem": "std(ddof=1) / sqrt(images), in <metric>_sem",
-                "fid_min_images": frechet.FID_MIN_IMAGES,
-                "kid": "unbiased MMD^2, kernel (x.y/d + 1)^3; kid_std over random subsets of "
-                       f"{frechet.KID_SUBSET_SIZE} when a set is larger, else null"}
-    blob = json.dumps({"meta": meta, "protocol": protocol, "table": table, "images": records},
-                      indent=1)
+    protocol = {
+        "sem": "std(ddof=1) / sqrt(images), in <metric>_sem",
+        "fid_min_images": frechet.FID_MIN_IMAGES,
+        "kid": "unbiased MMD^2, kernel (x.y/d + 1)^3; kid_std over random subsets of "
+        f"{frechet.KID_SUBSET_SIZE} when a set is larger, else null",
+    }
+    blob = json.dumps({"meta": meta, "protocol": protocol, "table": table, "images": records}, indent=1)
     paths.append(atomic_write_bytes(out_dir / "metrics.json", lambda t: Path(t).write_text(blob)))
     for name, rows in grids.items():
         if rows:
-            paths.append(save_png(out_dir / f"grid_{name}.png",
-                                  contact_sheet(rows, col_labels=["truth", "render", "|error| x4"])))
+            paths.append(
+                save_png(
+                    out_dir / f"grid_{name}.png",
+                    contact_sheet(rows, col_labels=["truth", "render", "|error| x4"]),
+                )
+            )
     return paths
 
 
@@ -272,8 +304,9 @@ def spread(frames: Sequence[int], n: int) -> list[int]:
     return sorted({frames[int(i)] for i in np.linspace(0, len(frames) - 1, n)})
 
 
-def build_sets(capture, settings, per_set: int | None = None,
-               generated: tuple[str, ...] = GENERATED_POSES) -> dict[str, Sequence[Item]]:
+def build_sets(
+    capture, settings, per_set: int | None = None, generated: tuple[str, ...] = GENERATED_POSES
+) -> dict[str, Sequence[Item]]:
     """Evaluation sets of items (pose, trans, camera, gt (H, W, 3), mask (H, W)), each frame
     seen from every view of ``settings.data.eval_views`` (a one-camera capture: from its camera,
     the training poses labelled "seen view"; :mod:`texvocab.pipeline.split`):
@@ -290,26 +323,35 @@ def build_sets(capture, settings, per_set: int | None = None,
     if per_set is not None and per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {per_set}")
     views = scored_views(capture, settings.data.eval_views)
-    labels = ({"training_poses": "seen view", "novel_poses": "capture camera, held-out frames"}
-              if one_camera(capture) else {})
-    small = [v for v in views if min(capture.cameras[v].width, capture.cameras[v].height)
-             < SSIM_WINDOW]
+    labels = (
+        {"training_poses": "seen view", "novel_poses": "capture camera, held-out frames"}
+        if one_camera(capture)
+        else {}
+    )
+    small = [v for v in views if min(capture.cameras[v].width, capture.cameras[v].height) < SSIM_WINDOW]
     if small:
         cam = capture.cameras[small[0]]
-        raise TexvocabError(f"{capture.root}: view {small[0]} is {cam.width}x{cam.height} "
-                            f"pixels; SSIM needs at least {SSIM_WINDOW}x{SSIM_WINDOW}")
+        raise TexvocabError(
+            f"{capture.root}: view {small[0]} is {cam.width}x{cam.height} "
+            f"pixels; SSIM needs at least {SSIM_WINDOW}x{SSIM_WINDOW}"
+        )
     novel, train = list(capture.novel_frames), list(capture.train_frames)
     n_novel = len(novel) if per_set is None else min(per_set, len(novel))
     n_train = n_novel if novel else (len(train) if per_set is None else per_set)
     sets: dict[str, Sequence[Item]] = {}
-    for name, frames in (("training_poses", spread(train, n_train)),
-                         ("novel_poses", spread(novel, n_novel))):
+    for name, frames in (("training_poses", spread(train, n_train)), ("novel_poses", spread(novel, n_novel))):
         pairs = [(t, v) for t in frames for v in views]
         empty = [(t, v) for t, v in pairs if not capture.mask(v, t).any()]
         if empty:
-            log.warning("%s: %d of %d images have an empty mask (first: frame %d, view %d) "
-                        "and are left out: their metrics are undefined", name, len(empty),
-                        len(pairs), capture.frame_ids[empty[0][0]], empty[0][1])
+            log.warning(
+                "%s: %d of %d images have an empty mask (first: frame %d, view %d) "
+                "and are left out: their metrics are undefined",
+                name,
+                len(empty),
+                len(pairs),
+                capture.frame_ids[empty[0][0]],
+                empty[0][1],
+            )
             pairs = [p for p in pairs if p not in empty]
         if pairs:
             sets[name] = CaptureItems(capture, pairs, labels.get(name))
@@ -319,8 +361,7 @@ def build_sets(capture, settings, per_set: int | None = None,
         for name in generated:
             pose, trans = preset(name)
             truths = renderer.render(pose, trans, [cams[v] for v in views])
-            items += [(pose, trans, cams[v], rgb, mask)
-                      for v, (rgb, mask) in zip(views, truths, strict=True)]
+            items += [(pose, trans, cams[v], rgb, mask) for v, (rgb, mask) in zip(views, truths, strict=True)]
         renderer.close()
         sets["generated_novel_poses"] = items
     return sets

@@ -4,6 +4,7 @@ views, the texture maps back-projected from them (Eq. 2), the texture vocabulary
 loading a checkpoint (:mod:`texvocab.pipeline.avatar`) rebuilds it with the stored
 vocabulary before loading the weights.
 """
+
 from __future__ import annotations
 
 import torch
@@ -28,24 +29,29 @@ def train_views(capture, s: Settings) -> list[int]:
     last = capture.num_views - 1
     bad_eval = [v for v in data.eval_views if v > last]
     if bad_eval:
-        raise TexvocabError(f"setting data.eval_views={list(data.eval_views)}: {capture.root} "
-                            f"has views 0..{last}; choose held-out views that exist (--set "
-                            "data.eval_views=...)")
+        raise TexvocabError(
+            f"setting data.eval_views={list(data.eval_views)}: {capture.root} "
+            f"has views 0..{last}; choose held-out views that exist (--set "
+            "data.eval_views=...)"
+        )
     if data.train_views is not None:
         views = list(data.train_views)
     else:
         views = [v for v in range(capture.num_views) if v not in data.eval_views]
     bad = [v for v in views if not 0 <= v <= last]
     if bad or not views:
-        raise TexvocabError(f"setting data.train_views={views}: {capture.root} has views "
-                            f"0..{last} and eval_views {list(data.eval_views)} are held out")
+        raise TexvocabError(
+            f"setting data.train_views={views}: {capture.root} has views "
+            f"0..{last} and eval_views {list(data.eval_views)} are held out"
+        )
     return views
 
 
 def texmap_settings(capture, s: Settings) -> TexmapSettings:
     """Texture-map settings of a run: its texture size and its training views."""
-    return TexmapSettings(size=s.data.texture_size, views=tuple(train_views(capture, s)),
-                          view_weighting=s.data.view_weighting)
+    return TexmapSettings(
+        size=s.data.texture_size, views=tuple(train_views(capture, s)), view_weighting=s.data.view_weighting
+    )
 
 
 def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
@@ -58,14 +64,21 @@ def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
 def build_vocabulary(capture, s: Settings) -> Vocabulary:
     """The texture vocabulary of the capture's training poses (``vocab`` settings)."""
     v = s.vocab
-    return Vocabulary.build(capture.poses[: capture.num_train], v.strategy, v.num_keys, v.k,
-                            v.weighting, v.min_key_distance, v.pose_condition)
+    return Vocabulary.build(
+        capture.poses[: capture.num_train],
+        v.strategy,
+        v.num_keys,
+        v.k,
+        v.weighting,
+        v.min_key_distance,
+        v.pose_condition,
+    )
 
 
-def build_model(capture, s: Settings, textures: torch.Tensor, vocab: Vocabulary | None = None,
-                encoder_weights=None) -> AvatarField:
+def build_model(
+    capture, s: Settings, textures: torch.Tensor, vocab: Vocabulary | None = None, encoder_weights=None
+) -> AvatarField:
     """The avatar field for a capture's training frames (vocabulary built unless given)."""
     vocab = vocab or build_vocabulary(capture, s)
     encoder = build_encoder(s.vocab.encoder, weights=encoder_weights)
-    return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()),
-                       s.field)
+    return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()), s.field)

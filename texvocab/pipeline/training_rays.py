@@ -4,6 +4,7 @@ draws themselves — random rays, ``train.fg_fraction`` of them inside the mask,
 perceptual term's patch. Each cache is built once, on first use, and its build time is
 counted (``cache_seconds``; bench/train_speed.py reports steps with and without it).
 """
+
 from __future__ import annotations
 
 import time
@@ -60,9 +61,14 @@ class TrainingRays:
             pf = self.model.pose_feature
             ctx = pf.context(self.capture.poses[t], self.capture.trans[t])
             m = self.march
-            shell = ShellGeometry.build(ctx.vertices.detach(), self.capture.body.faces,
-                                        self.s.field.shell_width, m.shell_voxel, m.shell_exact,
-                                        index=ctx.index)
+            shell = ShellGeometry.build(
+                ctx.vertices.detach(),
+                self.capture.body.faces,
+                self.s.field.shell_width,
+                m.shell_voxel,
+                m.shell_exact,
+                index=ctx.index,
+            )
             self.frames[t] = FrameData(ctx, shell)
             self.cache_seconds += time.perf_counter() - t0
         return self.frames[t]
@@ -85,8 +91,9 @@ class TrainingRays:
             far = b.far.view(-1).clone()
             _, dirs = self.rays_of(v)
             delta = self.s.field.shell_width
-            plan = plan_surface(fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs,
-                                delta, delta, self.march.min_cos)
+            plan = plan_surface(
+                fd.ctx.vertices.detach(), self.capture.body.faces, cam, dirs, delta, delta, self.march.min_cos
+            )
             first = plan.hit
             far[first] = torch.minimum(far[first], plan.t_hit[first] + delta)
             raster = self.s.train.guide == "raster"
@@ -95,10 +102,10 @@ class TrainingRays:
             banded = first & (plan.cos >= self.march.min_cos) & mask & raster
             t_band = torch.where(banded, plan.t_hit, torch.inf)
             passing = plan.passby & raster & torch.where(mask, banded, ~first)
-            t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind],
-                                                                  1), torch.inf)
-            fd.views[v] = ViewData(img, mask, b.hit.view(-1), b.near.view(-1), far, t_band,
-                                   plan.cos.half(), t_passing)
+            t_passing = torch.where(passing[:, None], torch.stack([plan.t_pass, plan.t_behind], 1), torch.inf)
+            fd.views[v] = ViewData(
+                img, mask, b.hit.view(-1), b.near.view(-1), far, t_band, plan.cos.half(), t_passing
+            )
             self.cache_seconds += time.perf_counter() - t0
         return fd.views[v]
 
@@ -112,8 +119,17 @@ class TrainingRays:
         """The rays of pixels ``pix`` (n,) of view v: origins, dirs, near, far (given),
         colour, mask, band hit, cosine, passing probes."""
         o, d = self.rays_of(v)
-        return (o[pix], d[pix], vd.near[pix], far, vd.img[pix], vd.mask[pix].float(),
-                vd.t_band[pix], vd.cos[pix].float(), vd.t_passing[pix])
+        return (
+            o[pix],
+            d[pix],
+            vd.near[pix],
+            far,
+            vd.img[pix],
+            vd.mask[pix].float(),
+            vd.t_band[pix],
+            vd.cos[pix].float(),
+            vd.t_passing[pix],
+        )
 
     def patch(self, fd: FrameData, t: int, v: int, p: int, gen: torch.Generator):
         """Rays of a random ``p``×``p`` patch inside the mask's bounding box of view v
@@ -131,8 +147,7 @@ class TrainingRays:
             b = max(a, min(last - p + 1, size - p))
             corner.append(int(torch.randint(a, b + 1, (1,), generator=gen)))
         y0, x0 = corner
-        yy, xx = torch.meshgrid(torch.arange(y0, y0 + p), torch.arange(x0, x0 + p),
-                                indexing="ij")
+        yy, xx = torch.meshgrid(torch.arange(y0, y0 + p), torch.arange(x0, x0 + p), indexing="ij")
         pix = (yy * w + xx).reshape(-1)
         far_p = torch.where(vd.hit[pix], vd.far[pix], vd.near[pix])  # no shell: background only
         return self._batch(vd, v, pix, far_p)

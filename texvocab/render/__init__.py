@@ -14,6 +14,7 @@ pyproject.toml keeps it so):
   :mod:`.kernels` (compiled loops);
 * :mod:`.settings` (the knobs, grouped) and :mod:`.results` (what a render returns).
 """
+
 from texvocab.render.guided import GuidedImage, plan_surface, render_rays_banded
 from texvocab.render.guided.levels import level_owners
 from texvocab.render.paths import (
@@ -42,12 +43,47 @@ from texvocab.render.shell.march import render_rays
 from texvocab.render.volume.field import Field, evaluate_field
 from texvocab.render.volume.samples import RaySamples, composite, sample_pdf
 
-__all__ = ["GUIDES", "BandSettings", "ChunkSettings", "FallbackSettings", "Field",
-           "GuidedImage", "MarchSettings", "Marched", "RayKind", "RayResult", "RaySamples",
-           "RenderCancelled", "RenderPath", "RenderResult", "RenderStats", "ResidualSettings",
-           "ShellBounds", "ShellGeometry", "ShellPath", "ShellSettings", "coarse_pass",
-           "composite", "composite_reference", "evaluate_field", "level_owners",
-           "march_until_opaque", "mesh_bbox", "plan_surface", "prepare_shell",
-           "progressive_render", "progressive_shard", "ray_box", "register_path",
-           "render_image", "render_image_uniform", "render_path", "render_paths",
-           "render_rays", "render_rays_banded", "sample_pdf", "shell_bounds", "trace_path"]
+__all__ = [
+    "GUIDES",
+    "BandSettings",
+    "ChunkSettings",
+    "FallbackSettings",
+    "Field",
+    "GuidedImage",
+    "MarchSettings",
+    "Marched",
+    "RayKind",
+    "RayResult",
+    "RaySamples",
+    "RenderCancelled",
+    "RenderPath",
+    "RenderResult",
+    "RenderStats",
+    "ResidualSettings",
+    "ShellBounds",
+    "ShellGeometry",
+    "ShellPath",
+    "ShellSettings",
+    "coarse_pass",
+    "composite",
+    "composite_reference",
+    "evaluate_field",
+    "level_owners",
+    "march_until_opaque",
+    "mesh_bbox",
+    "plan_surface",
+    "prepare_shell",
+    "progressive_render",
+    "progressive_shard",
+    "ray_box",
+    "register_path",
+    "render_image",
+    "render_image_uniform",
+    "render_path",
+    "render_paths",
+    "render_rays",
+    "render_rays_banded",
+    "sample_pdf",
+    "shell_bounds",
+    "trace_path",
+]

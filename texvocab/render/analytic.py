@@ -3,6 +3,7 @@
 Both turn a signed distance into a VolSDF density (Yariv et al. 2021's Laplace CDF, as the
 avatar field does) and colour points by a smooth function of position.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -25,9 +26,12 @@ def volsdf_density(sdf: torch.Tensor, beta: torch.Tensor) -> torch.Tensor:
 def smooth_colour(points: torch.Tensor, albedo: torch.Tensor, freq: float) -> torch.Tensor:
     """(N, 3) in [0, 1]: albedo (3,) modulated by sinusoids of position (N, 3)."""
     phase = torch.tensor([0.0, 2.1, 4.2], dtype=points.dtype)
-    wave = torch.sin(freq * points @ torch.tensor([[1.0, 0.3, -0.5], [0.4, 1.0, 0.2],
-                                                    [-0.3, 0.5, 1.0]], dtype=points.dtype)
-                     + phase)
+    wave = torch.sin(
+        freq
+        * points
+        @ torch.tensor([[1.0, 0.3, -0.5], [0.4, 1.0, 0.2], [-0.3, 0.5, 1.0]], dtype=points.dtype)
+        + phase
+    )
     return (albedo * (0.6 + 0.4 * wave)).clamp(0, 1)
 
 
@@ -37,8 +41,7 @@ class _AnalyticField:
     ``field.sdf_rgb(points, dirs) -> (sdf, rgb)``."""
 
     def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
-        return volsdf_density(self.sdf(points), self.beta), \
-            smooth_colour(points, self.albedo, self.freq)
+        return volsdf_density(self.sdf(points), self.beta), smooth_colour(points, self.albedo, self.freq)
 
     def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
         """(sdf (N,), rgb (N, 3)): what the surface-guided marcher reads."""
@@ -49,8 +52,14 @@ class SphereField(_AnalyticField):
     """Sphere of ``radius`` at ``center``; ``beta`` and ``albedo`` are tensors that may
     require grad. Call: (points (N, 3), dirs (N, 3)) -> (density (N,), rgb (N, 3))."""
 
-    def __init__(self, center=(0.0, 0.0, 0.0), radius: float = 0.3, beta: float = 0.005,
-                 albedo=(0.8, 0.5, 0.3), freq: float = 0.0):
+    def __init__(
+        self,
+        center=(0.0, 0.0, 0.0),
+        radius: float = 0.3,
+        beta: float = 0.005,
+        albedo=(0.8, 0.5, 0.3),
+        freq: float = 0.0,
+    ):
         self.center = torch.tensor(center, dtype=torch.float32)
         self.radius = float(radius)
         self.beta = torch.tensor(float(beta))
@@ -79,8 +88,16 @@ class MeshSDFField(_AnalyticField):
         band: exact-distance band (default max(3 voxel, 12 beta) + voxel).
     """
 
-    def __init__(self, vertices, faces, beta: float = 0.004, voxel: float = 0.01,
-                 band: float | None = None, albedo=(0.9, 0.7, 0.5), freq: float = 12.0):
+    def __init__(
+        self,
+        vertices,
+        faces,
+        beta: float = 0.004,
+        voxel: float = 0.01,
+        band: float | None = None,
+        albedo=(0.9, 0.7, 0.5),
+        freq: float = 12.0,
+    ):
         v = np.asarray(torch.as_tensor(vertices).detach().cpu(), dtype=np.float64)
         index = SurfaceIndex(v, faces)
         if not index.closed:
@@ -108,8 +125,9 @@ class MeshSDFField(_AnalyticField):
     def sdf(self, points: torch.Tensor) -> torch.Tensor:
         """(N,) interpolated signed distance of points (N, 3); +1 m outside the grid."""
         x = (2 * (points.double() - self.lo) / (self.hi - self.lo) - 1).float()
-        out = F.grid_sample(self.grid, x.view(1, -1, 1, 1, 3), mode="bilinear",
-                            padding_mode="border", align_corners=True)
+        out = F.grid_sample(
+            self.grid, x.view(1, -1, 1, 1, 3), mode="bilinear", padding_mode="border", align_corners=True
+        )
         return out.view(-1).to(points.dtype)
 
 
@@ -125,9 +143,17 @@ class MeshResidualField(_AnalyticField):
         beta: VolSDF scale (metres). amplitude, wavenumber: the residual.
     """
 
-    def __init__(self, vertices, faces, beta: float = 0.003, amplitude: float = 0.002,
-                 wavenumber: float = 20.0, band: float = 0.06, albedo=(0.9, 0.7, 0.5),
-                 freq: float = 12.0):
+    def __init__(
+        self,
+        vertices,
+        faces,
+        beta: float = 0.003,
+        amplitude: float = 0.002,
+        wavenumber: float = 20.0,
+        band: float = 0.06,
+        albedo=(0.9, 0.7, 0.5),
+        freq: float = 12.0,
+    ):
         v = np.asarray(torch.as_tensor(vertices).detach().cpu(), dtype=np.float64)
         self.index = SurfaceIndex(v, faces)
         if not self.index.closed:
@@ -146,5 +172,8 @@ class MeshResidualField(_AnalyticField):
         """(N,) the mesh's signed distance plus the residual; ``band`` beyond band."""
         proj = self.index.project(points.detach().double().numpy(), max_distance=self.band)
         d = torch.from_numpy(np.where(proj.face >= 0, proj.distance, self.band))
-        return torch.where(d < self.band, d.to(points.dtype) + self.residual(points),
-                           torch.full_like(points[:, 0], self.band))
+        return torch.where(
+            d < self.band,
+            d.to(points.dtype) + self.residual(points),
+            torch.full_like(points[:, 0], self.band),
+        )

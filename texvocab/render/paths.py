@@ -4,6 +4,7 @@ shell) asks the registry instead of testing the name. Built in: "shell" (the she
 :mod:`texvocab.render.shell`) and "raster" (the surface-guided marcher,
 :mod:`texvocab.render.guided`); a new path is one :func:`register_path` call.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
@@ -69,10 +70,18 @@ register_path(RenderPath("raster", render_image_guided, guided_levels, wants_she
 GUIDES = render_paths()
 
 
-def render_image(field: Field, camera, vertices, faces, settings: MarchSettings | None = None,
-                 background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
-                 generator: torch.Generator | None = None,
-                 cancelled: Callable[[], bool] | None = None, index=None) -> RenderResult:
+def render_image(
+    field: Field,
+    camera,
+    vertices,
+    faces,
+    settings: MarchSettings | None = None,
+    background=(0.0, 0.0, 0.0),
+    shell: ShellGeometry | None = None,
+    generator: torch.Generator | None = None,
+    cancelled: Callable[[], bool] | None = None,
+    index=None,
+) -> RenderResult:
     """Render one image of the field around the posed mesh (vertices (V, 3), faces (F, 3))
     by the path ``settings.guide`` names.
 
@@ -85,8 +94,9 @@ def render_image(field: Field, camera, vertices, faces, settings: MarchSettings 
     deterministic). The shell marcher is differentiable w.r.t. the field's outputs.
     """
     s = settings or MarchSettings()
-    return render_path(s.guide).render(field, camera, vertices, faces, s, background, shell,
-                                       generator, cancelled, index)
+    return render_path(s.guide).render(
+        field, camera, vertices, faces, s, background, shell, generator, cancelled, index
+    )
 
 
 def prepare_shell(settings: MarchSettings, vertices, faces, index=None) -> ShellGeometry | None:

@@ -20,6 +20,7 @@ splitting it would make every shard build the pose's context and plan before any
 is shown). Each shard yields which pixels of the level it owns; the union over shards
 is the level. The shell marcher does not split: shard 0 renders the whole view.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
@@ -32,11 +33,18 @@ from texvocab.render.shell.geometry import ShellGeometry
 from texvocab.render.volume.field import Field
 
 
-def progressive_render(field: Field, camera, vertices, faces,
-                       settings: MarchSettings | None = None, levels=(8, 4, 2, 1),
-                       cancelled: Callable[[], bool] = lambda: False,
-                       background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
-                       index=None) -> Iterator[tuple[int, torch.Tensor, float]]:
+def progressive_render(
+    field: Field,
+    camera,
+    vertices,
+    faces,
+    settings: MarchSettings | None = None,
+    levels=(8, 4, 2, 1),
+    cancelled: Callable[[], bool] = lambda: False,
+    background=(0.0, 0.0, 0.0),
+    shell: ShellGeometry | None = None,
+    index=None,
+) -> Iterator[tuple[int, torch.Tensor, float]]:
     """Yield ``(level, image (H_l, W_l, 3), seconds)`` for each downscale ``level``
     without autograd: with ``settings.guide == "raster"`` the full image's pixels
     [::level, ::level] (H_l = ceil(H / level)), rendered once each across the levels
@@ -47,18 +55,25 @@ def progressive_render(field: Field, camera, vertices, faces,
     progress, as soon as ``cancelled()`` returns True. ``index``: the mesh's SurfaceIndex
     for the surface-guided marcher's residual rays (built when needed if not given).
     """
-    for level, rgb, seconds, _ in progressive_shard(field, camera, vertices, faces, settings,
-                                                     levels, cancelled, background, shell,
-                                                     index):
+    for level, rgb, seconds, _ in progressive_shard(
+        field, camera, vertices, faces, settings, levels, cancelled, background, shell, index
+    ):
         yield level, rgb, seconds
 
 
-def progressive_shard(field: Field, camera, vertices, faces,
-                      settings: MarchSettings | None = None, levels=(8, 4, 2, 1),
-                      cancelled: Callable[[], bool] = lambda: False,
-                      background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
-                      index=None, shard: tuple[int, int] = (0, 1)
-                      ) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
+def progressive_shard(
+    field: Field,
+    camera,
+    vertices,
+    faces,
+    settings: MarchSettings | None = None,
+    levels=(8, 4, 2, 1),
+    cancelled: Callable[[], bool] = lambda: False,
+    background=(0.0, 0.0, 0.0),
+    shell: ShellGeometry | None = None,
+    index=None,
+    shard: tuple[int, int] = (0, 1),
+) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
     """:func:`progressive_render`'s levels as shard ``k`` of ``n`` (``shard = (k, n)``)
     renders them: ``(level, image (H_l, W_l, 3), seconds, owned (H_l, W_l) bool)``, where
     ``owned`` marks the pixels of the level's image this shard rendered (at this level or
@@ -69,5 +84,6 @@ def progressive_shard(field: Field, camera, vertices, faces,
     if not 0 <= k < n:
         raise ValueError(f"shard {k} of {n}: expected 0 <= k < n")
     s = settings or MarchSettings()
-    yield from render_path(s.guide).levels(field, camera, vertices, faces, s, levels, cancelled,
-                                           background, shell, index, (k, n))
+    yield from render_path(s.guide).levels(
+        field, camera, vertices, faces, s, levels, cancelled, background, shell, index, (k, n)
+    )

@@ -1,6 +1,7 @@
 """What the render paths return: per batch of rays (:class:`RayResult`), per image
 (:class:`RenderResult` with its :class:`RenderStats`), and how each ray was rendered
 (:class:`RayKind`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -9,6 +9,7 @@ Other code and stored settings name the knobs flat (``shell_width``, ``band_newt
 :meth:`MarchSettings.replace` changes them, :meth:`MarchSettings.flat` lists them, and each
 flat name reads and writes its group's field as an attribute (``settings.coarse_samples``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -172,8 +173,7 @@ class MarchSettings:
             if key in top:
                 continue
             if key not in FLAT_NAMES:
-                raise TypeError(f"MarchSettings has no knob {key!r}; expected one of "
-                                f"{', '.join(FLAT_NAMES)}")
+                raise TypeError(f"MarchSettings has no knob {key!r}; expected one of {', '.join(FLAT_NAMES)}")
             group, name = FLAT_NAMES[key]
             per_group.setdefault(group, {})[name] = value
         new = dataclasses.replace(self, **top)
@@ -188,21 +188,32 @@ class MarchSettings:
 
 #: flat knob name -> (group, field) of :class:`MarchSettings` (``guide`` is its own field)
 FLAT_NAMES: dict[str, tuple[str, str]] = {
-    "shell_width": ("shell", "width"), "shell_voxel": ("shell", "voxel"),
-    "shell_exact": ("shell", "exact"), "skip_empty": ("shell", "skip_empty"),
-    "coarse_samples": ("shell", "coarse_samples"), "max_coarse": ("shell", "max_coarse"),
-    "fine_samples": ("shell", "fine_samples"), "dilate": ("shell", "dilate"),
-    "scout_threshold": ("shell", "scout_threshold"), "segment": ("shell", "segment"),
-    "early_stop_eps": ("shell", "early_stop_eps"), "empty_opacity": ("shell", "empty_opacity"),
-    "chunk_rays": ("chunks", "rays"), "chunk_points": ("chunks", "points"),
+    "shell_width": ("shell", "width"),
+    "shell_voxel": ("shell", "voxel"),
+    "shell_exact": ("shell", "exact"),
+    "skip_empty": ("shell", "skip_empty"),
+    "coarse_samples": ("shell", "coarse_samples"),
+    "max_coarse": ("shell", "max_coarse"),
+    "fine_samples": ("shell", "fine_samples"),
+    "dilate": ("shell", "dilate"),
+    "scout_threshold": ("shell", "scout_threshold"),
+    "segment": ("shell", "segment"),
+    "early_stop_eps": ("shell", "early_stop_eps"),
+    "empty_opacity": ("shell", "empty_opacity"),
+    "chunk_rays": ("chunks", "rays"),
+    "chunk_points": ("chunks", "points"),
     "guide": ("", "guide"),
-    "band_samples": ("band", "samples"), "band_spacing": ("band", "spacing"),
-    "band_leftover": ("band", "leftover"), "min_cos": ("band", "min_cos"),
+    "band_samples": ("band", "samples"),
+    "band_spacing": ("band", "spacing"),
+    "band_leftover": ("band", "leftover"),
+    "min_cos": ("band", "min_cos"),
     "miss_margin": ("band", "miss_margin"),
     "fallback_segment": ("fallback", "segment"),
     "fallback_scout": ("fallback", "scout_threshold"),
-    "residual_rays": ("residual", "enabled"), "residual_step": ("residual", "step"),
-    "residual_spread": ("residual", "spread"), "residual_tolerance": ("residual", "tolerance"),
+    "residual_rays": ("residual", "enabled"),
+    "residual_step": ("residual", "step"),
+    "residual_spread": ("residual", "spread"),
+    "residual_tolerance": ("residual", "tolerance"),
     "band_newton": ("band", "newton"),
 }
 

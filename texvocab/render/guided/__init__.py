@@ -38,10 +38,20 @@ and a few for the fallback rays, against tens for front-to-back marching of ever
 whose small calls pay the field's fixed per-call cost. Images are rendered in pixel
 subsets (:mod:`.image`), which the progressive levels use (:mod:`.levels`).
 """
+
 from texvocab.render.guided.image import GuidedImage, render_image_guided
 from texvocab.render.guided.levels import guided_levels, level_owners
 from texvocab.render.guided.plan import SurfacePlan, plan_surface
 from texvocab.render.guided.triage import GuidedRays, render_rays_banded, triage_rays
 
-__all__ = ["GuidedImage", "GuidedRays", "SurfacePlan", "guided_levels", "level_owners",
-           "plan_surface", "render_image_guided", "render_rays_banded", "triage_rays"]
+__all__ = [
+    "GuidedImage",
+    "GuidedRays",
+    "SurfacePlan",
+    "guided_levels",
+    "level_owners",
+    "plan_surface",
+    "render_image_guided",
+    "render_rays_banded",
+    "triage_rays",
+]

@@ -11,6 +11,7 @@ A ray whose samples do not bracket the surface (first SDF > 0 > last) or leave m
 passes it on). Differentiable w.r.t. the field's outputs and β; the sample places follow
 the probe but carry no gradient.
 """
+
 from __future__ import annotations
 
 import torch
@@ -38,9 +39,17 @@ def interpolate_knots(t: torch.Tensor, knots: torch.Tensor, values: torch.Tensor
     return torch.einsum("rmk,rkc->rmc", w, values)
 
 
-def sample_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Tensor,
-                cos: torch.Tensor, sdf0: torch.Tensor, rgb0: torch.Tensor, beta,
-                settings: MarchSettings):
+def sample_band(
+    field,
+    origin: torch.Tensor,
+    dirs: torch.Tensor,
+    t_hit: torch.Tensor,
+    cos: torch.Tensor,
+    sdf0: torch.Tensor,
+    rgb0: torch.Tensor,
+    beta,
+    settings: MarchSettings,
+):
     """Band rays (R,) from origin (3,) or origins (R, 3) along dirs (R, 3), from their
     probe at the mesh hit t_hit (R,) (cosine cos (R,), SDF sdf0 (R,), colour rgb0 (R, 3))
     and ``band.samples`` evaluations spaced ``band.spacing`` β / cos around the Newton
@@ -56,21 +65,32 @@ def sample_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     t_star = t_hit + step.clamp(-delta, delta)
     k = torch.arange(band.samples, dtype=torch.float32) - (band.samples - 1) / 2
     t_band = t_star[:, None] + k * (band.spacing * beta_value(beta)) / cos[:, None]  # (R, B)
-    sdf_b, rgb_b = evaluate_sdf(field, points_along(origin, dirs, t_band).reshape(-1, 3),
-                                dirs.repeat_interleave(band.samples, 0), settings.chunks.points)
+    sdf_b, rgb_b = evaluate_sdf(
+        field,
+        points_along(origin, dirs, t_band).reshape(-1, 3),
+        dirs.repeat_interleave(band.samples, 0),
+        settings.chunks.points,
+    )
     t_all, order = torch.cat([t_hit[:, None], t_band], 1).sort(1)
     sdf_all = torch.cat([sdf0[:, None], sdf_b.view(len(t_hit), -1)], 1).gather(1, order)
     rgb_all = torch.cat([rgb0[:, None], rgb_b.view(len(t_hit), -1, 3)], 1)
     rgb_all = rgb_all.gather(1, order[..., None].expand(-1, -1, 3))
     acc, color, depth, rest = composite_linear_sdf(t_all, sdf_all, rgb_all, beta)
-    ok = (step.abs() <= delta) & (sdf_all[:, 0] > 0) & (sdf_all[:, -1] < 0) & \
-        (rest <= band.leftover)
+    ok = (step.abs() <= delta) & (sdf_all[:, 0] > 0) & (sdf_all[:, -1] < 0) & (rest <= band.leftover)
     return acc, color, depth, ok.detach(), len(sdf_b)
 
 
-def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Tensor,
-                cos: torch.Tensor, sdf0: torch.Tensor, rgb0: torch.Tensor, beta,
-                settings: MarchSettings):
+def newton_band(
+    field,
+    origin: torch.Tensor,
+    dirs: torch.Tensor,
+    t_hit: torch.Tensor,
+    cos: torch.Tensor,
+    sdf0: torch.Tensor,
+    rgb0: torch.Tensor,
+    beta,
+    settings: MarchSettings,
+):
     """Band rays (R,) as :func:`sample_band` takes them, from their probe and two more
     evaluations: at the Newton point t* = t_hit + sdf0 / cos and ``band.spacing`` β / cos
     behind it, inside.
@@ -99,8 +119,12 @@ def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     t_star = t_hit + step.clamp(-cap, cap)
     inner = t_star + settings.band.spacing * b / cos
     tq = torch.stack([t_star, inner], 1)
-    sdfq, rgbq = evaluate_sdf(field, points_along(origin, dirs, tq).reshape(-1, 3),
-                              dirs.repeat_interleave(2, 0), settings.chunks.points)
+    sdfq, rgbq = evaluate_sdf(
+        field,
+        points_along(origin, dirs, tq).reshape(-1, 3),
+        dirs.repeat_interleave(2, 0),
+        settings.chunks.points,
+    )
     k = torch.arange(-3, 4, dtype=t_hit.dtype)
     t = t_star[:, None] + k * (settings.residual.step * b / cos)[:, None]
     t = torch.cat([t, t_hit[:, None]], 1).sort(1).values
@@ -115,7 +139,11 @@ def newton_band(field, origin: torch.Tensor, dirs: torch.Tensor, t_hit: torch.Te
     rgb = interpolate_knots(t, knots, colour)
     acc, color, depth, rest = composite_linear_sdf(t, sdf, rgb, beta)
     r = resid.detach()
-    ok = (step.abs() <= cap) & (sdf[:, 0] > 0) & (sdf[:, -1] < 0) & \
-        (rest <= settings.band.leftover) & \
-        (r.amax(1) - r.amin(1) <= settings.residual.tolerance * b)
+    ok = (
+        (step.abs() <= cap)
+        & (sdf[:, 0] > 0)
+        & (sdf[:, -1] < 0)
+        & (rest <= settings.band.leftover)
+        & (r.amax(1) - r.amin(1) <= settings.residual.tolerance * b)
+    )
     return acc, color, depth, ok.detach(), len(sdfq)

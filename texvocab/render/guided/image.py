@@ -1,6 +1,7 @@
 """One image of the surface-guided marcher: the surface plan of the camera's pixels, their
 rays triaged (:func:`~texvocab.render.guided.triage.triage_rays`) in any pixel subsets, and
 the shell and the mesh's SurfaceIndex built only when some ray needs them."""
+
 from __future__ import annotations
 
 import time
@@ -16,10 +17,18 @@ from texvocab.render.shell.geometry import ShellGeometry
 from texvocab.render.shell.march import march_chunks
 
 
-def render_image_guided(field, camera, vertices, faces, settings: MarchSettings | None = None,
-                        background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
-                        generator: torch.Generator | None = None, cancelled=None,
-                        index=None) -> RenderResult:
+def render_image_guided(
+    field,
+    camera,
+    vertices,
+    faces,
+    settings: MarchSettings | None = None,
+    background=(0.0, 0.0, 0.0),
+    shell: ShellGeometry | None = None,
+    generator: torch.Generator | None = None,
+    cancelled=None,
+    index=None,
+) -> RenderResult:
     """Render one image of ``field`` around the posed mesh (vertices (V, 3), faces (F, 3)).
 
     ``field`` is the marcher's ``(points, dirs) -> (density, rgb)`` callable that also
@@ -49,8 +58,17 @@ class GuidedImage:
     ``index``: the posed mesh's SurfaceIndex for the residual rays (None: built when
     first needed)."""
 
-    def __init__(self, field, camera, vertices, faces, settings: MarchSettings | None = None,
-                 background=(0.0, 0.0, 0.0), shell=None, index=None):
+    def __init__(
+        self,
+        field,
+        camera,
+        vertices,
+        faces,
+        settings: MarchSettings | None = None,
+        background=(0.0, 0.0, 0.0),
+        shell=None,
+        index=None,
+    ):
         s = self.settings = settings or MarchSettings()
         self.start = time.perf_counter()
         self.field, self.camera, self.shell, self.index = field, camera, shell, index
@@ -63,15 +81,13 @@ class GuidedImage:
         self.origins, self.dirs = camera.pixel_rays()
         # a surface farther than `reach` from a ray contributes < e^-miss_margin / 2β density
         reach = min(delta, s.band.miss_margin * self.beta)
-        self.plan = plan_surface(self.verts, self.faces, camera, self.dirs, delta, reach,
-                                 s.band.min_cos)
+        self.plan = plan_surface(self.verts, self.faces, camera, self.dirs, delta, reach, s.band.min_cos)
         self.rgb = self.bg.repeat(H * W, 1)
         self.alpha, self.depth = torch.zeros(H * W), torch.zeros(H * W)
         self.kind = torch.zeros(H * W, dtype=torch.uint8)  # RayKind per pixel
         self.evals = 0
 
-    def render(self, subset: torch.Tensor | None = None, cancelled=None,
-               preview: bool = False) -> None:
+    def render(self, subset: torch.Tensor | None = None, cancelled=None, preview: bool = False) -> None:
         """Render the rays of ``subset`` ((H·W,) bool; None: all) into the image.
         ``preview``: the rays that would be residual or marched rays are left at their
         probe's colour (hits) or the background (passing rays), kind NONE."""
@@ -80,16 +96,28 @@ class GuidedImage:
             return
         sub = torch.ones_like(plan.hit) if subset is None else subset.view(-1)
         pix = torch.nonzero((plan.hit | plan.passby) & sub).squeeze(1)
-        rays = GuidedRays(self.origins[0], self.dirs[pix], plan.t_hit[pix], plan.cos[pix],
-                          torch.stack([plan.t_pass[pix], plan.t_behind[pix]], 1))
+        rays = GuidedRays(
+            self.origins[0],
+            self.dirs[pix],
+            plan.t_hit[pix],
+            plan.cos[pix],
+            torch.stack([plan.t_pass[pix], plan.t_behind[pix]], 1),
+        )
 
         def march(idx: torch.Tensor) -> RayResult:
             return self._fallback(pix[idx], cancelled)
 
-        out = triage_rays(self.field, self.beta, rays, self.settings,
-                          march=None if preview else march,
-                          bounds=lambda idx: self._shell_interval(pix[idx]),
-                          index=self._index, background=self.bg, cancelled=cancelled)
+        out = triage_rays(
+            self.field,
+            self.beta,
+            rays,
+            self.settings,
+            march=None if preview else march,
+            bounds=lambda idx: self._shell_interval(pix[idx]),
+            index=self._index,
+            background=self.bg,
+            cancelled=cancelled,
+        )
         self.rgb[pix], self.alpha[pix], self.depth[pix] = out.rgb, out.opacity, out.depth
         self.kind[pix] = out.kind
         self.evals += out.field_evals
@@ -101,8 +129,9 @@ class GuidedImage:
         if callable(self.shell):
             self.shell = self.shell()
         if self.shell is None or (grid and not self.shell.has_grid):
-            self.shell = ShellGeometry.build(self.verts, self.faces, float(s.shell.width),
-                                             s.shell.voxel, s.shell.exact, self.index, grid)
+            self.shell = ShellGeometry.build(
+                self.verts, self.faces, float(s.shell.width), s.shell.voxel, s.shell.exact, self.index, grid
+            )
         if self._bounds is None:  # the balls, hence the bounds, do not depend on the grid
             self._bounds = self.shell.image_bounds(self.camera)
         return self.shell, self._bounds
@@ -125,14 +154,19 @@ class GuidedImage:
         shell, bounds = self._shell_bounds(grid=True)
         near, far = bounds.near.view(-1)[pix], bounds.far.view(-1)[pix]
         fs = s.replace(segment=s.fallback.segment, scout_threshold=s.fallback.scout_threshold)
-        return march_chunks(self.field, self.origins[pix], self.dirs[pix], near, far, fs, None,
-                            shell, self.bg, cancelled)
+        return march_chunks(
+            self.field, self.origins[pix], self.dirs[pix], near, far, fs, None, shell, self.bg, cancelled
+        )
 
     def result(self) -> RenderResult:
         H, W = self.H, self.W
         paths = count_kinds(self.kind)
-        stats = RenderStats(self.evals, paths["band"] + paths["residual"] + paths["fallback"],
-                            H * W, time.perf_counter() - self.start, paths=paths,
-                            kind=self.kind.view(H, W))
-        return RenderResult(self.rgb.view(H, W, 3), self.alpha.view(H, W),
-                            self.depth.view(H, W), stats)
+        stats = RenderStats(
+            self.evals,
+            paths["band"] + paths["residual"] + paths["fallback"],
+            H * W,
+            time.perf_counter() - self.start,
+            paths=paths,
+            kind=self.kind.view(H, W),
+        )
+        return RenderResult(self.rgb.view(H, W, 3), self.alpha.view(H, W), self.depth.view(H, W), stats)

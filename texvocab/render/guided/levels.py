@@ -4,6 +4,7 @@ is a preview with a plan of its own; after it, each level renders only the pixel
 coarser ones have not: those levels together cost one full-resolution render (its plan,
 the rasterisation, is made once), and the last level *is* that render. Shards split each
 level's new pixels round-robin in row-major order (:func:`level_owners`)."""
+
 from __future__ import annotations
 
 import time
@@ -16,8 +17,7 @@ from texvocab.render.results import RenderCancelled
 from texvocab.render.settings import MarchSettings
 
 
-def level_owners(height: int, width: int, levels=(8, 4, 2, 1), shards: int = 1
-                 ) -> Iterator[torch.Tensor]:
+def level_owners(height: int, width: int, levels=(8, 4, 2, 1), shards: int = 1) -> Iterator[torch.Tensor]:
     """For each of the guided marcher's ``levels``: (H, W) int8, the shard that renders
     each pixel of the full image at that level (-1: none). The first of several levels
     is a preview, shard 0's alone; its pixels are rendered again with the next level.
@@ -37,9 +37,19 @@ def level_owners(height: int, width: int, levels=(8, 4, 2, 1), shards: int = 1
         yield owner.view(height, width)
 
 
-def guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, cancelled,
-                  background, shell, index=None, shard=(0, 1)
-                  ) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
+def guided_levels(
+    field,
+    camera,
+    vertices,
+    faces,
+    s: MarchSettings,
+    levels,
+    cancelled,
+    background,
+    shell,
+    index=None,
+    shard=(0, 1),
+) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
     """The guided marcher's levels as shard ``shard = (k, n)`` renders them: ``(level,
     image (H_l, W_l, 3), seconds, owned (H_l, W_l) bool)``. The first of several levels is
     a preview of its own: the camera of every ``level``-th pixel (``Camera.every``: the
@@ -60,12 +70,21 @@ def guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, canc
         try:
             with torch.no_grad():  # not held across the yield: the caller keeps autograd
                 if preview:
-                    rgb = _preview(field, camera.every(level), vertices, faces, s, background,
-                                   shell, index, cancelled, k == 0)
+                    rgb = _preview(
+                        field,
+                        camera.every(level),
+                        vertices,
+                        faces,
+                        s,
+                        background,
+                        shell,
+                        index,
+                        cancelled,
+                        k == 0,
+                    )
                 else:
                     if image is None:
-                        image = GuidedImage(field, camera, vertices, faces, s, background,
-                                            shell, index)
+                        image = GuidedImage(field, camera, vertices, faces, s, background, shell, index)
                     todo = owner == k
                     if todo.any():
                         image.render(todo, cancelled)
@@ -78,13 +97,13 @@ def guided_levels(field, camera, vertices, faces, s: MarchSettings, levels, canc
         start = time.perf_counter()
 
 
-def _preview(field, camera, vertices, faces, s, background, shell, index, cancelled,
-             render: bool) -> torch.Tensor:
+def _preview(
+    field, camera, vertices, faces, s, background, shell, index, cancelled, render: bool
+) -> torch.Tensor:
     """The image (H, W, 3) of ``camera`` with the rays the band leaves at their probe's
     colour (the background when not ``render``: another shard's preview)."""
     if not render:
-        return torch.as_tensor(background, dtype=torch.float32).expand(
-            camera.height, camera.width, 3).clone()
+        return torch.as_tensor(background, dtype=torch.float32).expand(camera.height, camera.width, 3).clone()
     small = GuidedImage(field, camera, vertices, faces, s, background, shell, index)
     small.render(None, cancelled, preview=True)
     return small.rgb.view(camera.height, camera.width, 3).clone()

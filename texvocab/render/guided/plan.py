@@ -6,6 +6,7 @@ pass a surface nearer than their own (silhouette fringes, occlusion edges) and w
 come closest to it. The guided marcher triages its rays by the plan
 (:mod:`texvocab.render.guided.triage`), and training draws its band rays from it.
 """
+
 from __future__ import annotations
 
 import math
@@ -68,8 +69,15 @@ def _frontmost_pixel(t_map: torch.Tensor, radius: int, pix: torch.Tensor) -> tor
     return flat.gather(1, t.argmin(1, keepdim=True)).squeeze(1)
 
 
-def plan_surface(vertices: torch.Tensor, faces: torch.Tensor, camera, dirs: torch.Tensor,
-                 shell_width: float, reach: float, min_cos: float) -> SurfacePlan:
+def plan_surface(
+    vertices: torch.Tensor,
+    faces: torch.Tensor,
+    camera,
+    dirs: torch.Tensor,
+    shell_width: float,
+    reach: float,
+    min_cos: float,
+) -> SurfacePlan:
     """The :class:`SurfacePlan` of a posed mesh (V, 3), (F, 3) seen by ``camera`` with
     pixel ray directions dirs (H·W, 3). ``reach``: how far from a ray a passed surface can
     still show (metres; the renderer uses min(δ, miss_margin β), training δ)."""
@@ -87,8 +95,7 @@ def plan_surface(vertices: torch.Tensor, faces: torch.Tensor, camera, dirs: torc
     radius = max(min(int(math.ceil(reach * float(camera.K[0, 0]) / max(z_min, 1e-6))), 64), 1)
     front = _frontmost_neighbour(t_hit.view(H, W), radius)
     tri = vertices.detach().float()[faces]
-    normal = F.normalize(torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=1),
-                         dim=1)
+    normal = F.normalize(torch.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=1), dim=1)
     cos[hit] = (normal[raster.face.view(-1)[hit]] * dirs[hit]).sum(1).abs()
     # rays that pass a surface nearer than their own (or miss the mesh): a neighbour hit
     # nearer by more than δ plus what the hit face's own slope explains
@@ -101,8 +108,7 @@ def plan_surface(vertices: torch.Tensor, faces: torch.Tensor, camera, dirs: torc
     # the nearest hit pixel's surface point, a hit behind an occlusion edge near the
     # nearest surface point of its window. The silhouette's tangent point lies up to a
     # pixel footprint per pixel of distance behind that point, where a second probe looks.
-    gap, (iy, ix) = ndimage.distance_transform_edt(~hit.view(H, W).numpy(),
-                                                   return_indices=True)
+    gap, (iy, ix) = ndimage.distance_transform_edt(~hit.view(H, W).numpy(), return_indices=True)
     gap = torch.from_numpy(gap).float().view(-1)
     nearest = torch.from_numpy((iy * W + ix).reshape(-1)).long()
     gap = torch.where(hit, float(radius), gap)

@@ -30,6 +30,7 @@ A ray is left to the marcher (``ok`` False) when no part of it comes close enoug
 when the weights of the final SDF have their median outside the span of the three
 evaluations (the residual moved the surface away from where ŝ put it).
 """
+
 from __future__ import annotations
 
 import math
@@ -79,8 +80,9 @@ def _samples(index, origin, dirs, near, far, step: float, cap: float):
     return t, torch.where(inside, d, d.gather(1, last[:, None])), inside
 
 
-def _part_that_matters(t: torch.Tensor, s: torch.Tensor, inside: torch.Tensor, beta: float
-                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def _part_that_matters(
+    t: torch.Tensor, s: torch.Tensor, inside: torch.Tensor, beta: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """From coarse samples t, ŝ (R, M): the intervals where ŝ may be within _KEEP β of
     max(least, 0) ("low"), up to where the ray is opaque (optical depth _OPAQUE, from
     straight chords between the samples, which under-count a convex SDF's density: the
@@ -96,8 +98,7 @@ def _part_that_matters(t: torch.Tensor, s: torch.Tensor, inside: torch.Tensor, b
     first = torch.where(low, col, M).amin(1).clamp(max=M - 2)
     tau = interval_optical_depth(s[:, :-1], s[:, 1:], dt, beta)
     deep = (torch.cumsum(tau, 1) >= _OPAQUE) & inside[:, 1:] & (col >= first[:, None])
-    end = torch.minimum(torch.where(low, col, -1).amax(1).clamp(min=0),
-                        torch.where(deep, col, M).amin(1)) + 1
+    end = torch.minimum(torch.where(low, col, -1).amax(1).clamp(min=0), torch.where(deep, col, M).amin(1)) + 1
     low &= col < end[:, None]
     return low, first, end, found
 
@@ -150,9 +151,18 @@ def _column_weights(t: torch.Tensor, s: torch.Tensor, beta: float) -> torch.Tens
     return w
 
 
-def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
-                    near: torch.Tensor, far: torch.Tensor, t_probe: torch.Tensor,
-                    sdf_probe: torch.Tensor, beta, settings: MarchSettings):
+def render_residual(
+    field,
+    index,
+    origin: torch.Tensor,
+    dirs: torch.Tensor,
+    near: torch.Tensor,
+    far: torch.Tensor,
+    t_probe: torch.Tensor,
+    sdf_probe: torch.Tensor,
+    beta,
+    settings: MarchSettings,
+):
     """Residual rays (R,) from origin (3,) or origins (R, 3) along dirs (R, 3), in the
     shell over [near, far] (R,), with probes at t_probe (R, P) that read field SDF
     sdf_probe (R, P) (inf where a ray has fewer probes; every ray has one).
@@ -189,12 +199,17 @@ def render_residual(field, index, origin: torch.Tensor, dirs: torch.Tensor,
     spread = settings.residual.spread
     cols = _quantile_columns(_column_weights(t, s_hat, b), (spread, 0.5, 1 - spread))
     knots = t.gather(1, cols)
-    sdf3, rgb3 = evaluate_sdf(field, points_along(origin, dirs, knots).reshape(-1, 3),
-                              dirs.repeat_interleave(3, 0), settings.chunks.points)
+    sdf3, rgb3 = evaluate_sdf(
+        field,
+        points_along(origin, dirs, knots).reshape(-1, 3),
+        dirs.repeat_interleave(3, 0),
+        settings.chunks.points,
+    )
     resid = sdf3.view(R, 3) - d.gather(1, cols)
     sdf = torch.where(d < cap, d + interpolate_knots(t, knots, resid), cap)
-    acc, color, depth, _ = composite_linear_sdf(t, sdf, interpolate_knots(t, knots, rgb3.view(R, 3, 3)),
-                                                beta, front=False)
+    acc, color, depth, _ = composite_linear_sdf(
+        t, sdf, interpolate_knots(t, knots, rgb3.view(R, 3, 3)), beta, front=False
+    )
     median = _quantile_columns(_column_weights(t, sdf.detach(), b), (0.5,))[:, 0]
     faint = acc.detach() < 1e-4  # shows nothing: where its weight sits does not matter
     spread_r = torch.cat([resid.detach(), r0], 1)

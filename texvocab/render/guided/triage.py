@@ -24,6 +24,7 @@ rays found close included (the residual rays start from them). Training
 (``differentiable=True``) evaluates the passing probes first, without gradient, and then
 the hit probes of the rays that are not close, with gradient: the band composites them.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -76,8 +77,9 @@ class _Probes:
     evals: int
 
 
-def _probe(field, rays: GuidedRays, probed: torch.Tensor, s: MarchSettings, beta: float,
-           differentiable: bool) -> _Probes:
+def _probe(
+    field, rays: GuidedRays, probed: torch.Tensor, s: MarchSettings, beta: float, differentiable: bool
+) -> _Probes:
     """Step 1 of the module docstring."""
     R, dirs, chunk = len(rays.dirs), rays.dirs, s.chunks.points
     t_pass = rays.t_passing if rays.t_passing is not None else dirs.new_full((R, 2), torch.inf)
@@ -85,25 +87,28 @@ def _probe(field, rays: GuidedRays, probed: torch.Tensor, s: MarchSettings, beta
     close = torch.zeros(R, dtype=torch.bool)
     if differentiable:
         with torch.no_grad():
-            sdf_p, _ = evaluate_sdf(field, points_along(rays.origins_of(p_idx), dirs[p_idx],
-                                                        t_pass[p_idx]).reshape(-1, 3),
-                                    dirs[p_idx].repeat_interleave(2, 0), chunk)
+            sdf_p, _ = evaluate_sdf(
+                field,
+                points_along(rays.origins_of(p_idx), dirs[p_idx], t_pass[p_idx]).reshape(-1, 3),
+                dirs[p_idx].repeat_interleave(2, 0),
+                chunk,
+            )
         sdf_p = sdf_p.view(-1, 2)
         close[p_idx] = sdf_p.min(1).values <= s.band.miss_margin * beta
         h_idx = torch.nonzero(probed & ~close).squeeze(1)
-        sdf_h, rgb_h = evaluate_sdf(field, points_along(rays.origins_of(h_idx), dirs[h_idx],
-                                                        rays.t_hit[h_idx]), dirs[h_idx], chunk)
+        sdf_h, rgb_h = evaluate_sdf(
+            field, points_along(rays.origins_of(h_idx), dirs[h_idx], rays.t_hit[h_idx]), dirs[h_idx], chunk
+        )
         evals = 2 * len(p_idx) + len(h_idx)
     else:
         h_idx = torch.nonzero(probed).squeeze(1)
         idx = torch.cat([p_idx, p_idx, h_idx])
         t = torch.cat([t_pass[p_idx, 0], t_pass[p_idx, 1], rays.t_hit[h_idx]])
-        sdf, rgb = evaluate_sdf(field, points_along(rays.origins_of(idx), dirs[idx], t),
-                                dirs[idx], chunk)
+        sdf, rgb = evaluate_sdf(field, points_along(rays.origins_of(idx), dirs[idx], t), dirs[idx], chunk)
         n = len(p_idx)
-        sdf_p = torch.stack([sdf[:n], sdf[n:2 * n]], 1)
-        close[p_idx] = torch.minimum(sdf[:n], sdf[n:2 * n]) <= s.band.miss_margin * beta
-        sdf_h, rgb_h = sdf[2 * n:], rgb[2 * n:]
+        sdf_p = torch.stack([sdf[:n], sdf[n : 2 * n]], 1)
+        close[p_idx] = torch.minimum(sdf[:n], sdf[n : 2 * n]) <= s.band.miss_margin * beta
+        sdf_h, rgb_h = sdf[2 * n :], rgb[2 * n :]
         evals = len(idx)
     probe_t = dirs.new_full((R, 3), torch.inf)
     probe_sdf = dirs.new_full((R, 3), torch.inf)
@@ -112,12 +117,20 @@ def _probe(field, rays: GuidedRays, probed: torch.Tensor, s: MarchSettings, beta
     return _Probes(close, h_idx, sdf_h, rgb_h, probe_t, probe_sdf, evals)
 
 
-def triage_rays(field, beta, rays: GuidedRays, settings: MarchSettings, *,
-                march: Callable[[torch.Tensor], RayResult] | None,
-                bounds: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
-                index: Callable[[], SurfaceIndex] | None = None, background=(0.0, 0.0, 0.0),
-                differentiable: bool = False, residual_misses: bool = True,
-                cancelled: Callable[[], bool] | None = None) -> RayResult:
+def triage_rays(
+    field,
+    beta,
+    rays: GuidedRays,
+    settings: MarchSettings,
+    *,
+    march: Callable[[torch.Tensor], RayResult] | None,
+    bounds: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+    index: Callable[[], SurfaceIndex] | None = None,
+    background=(0.0, 0.0, 0.0),
+    differentiable: bool = False,
+    residual_misses: bool = True,
+    cancelled: Callable[[], bool] | None = None,
+) -> RayResult:
     """Render ``rays`` by the steps of the module docstring.
 
     ``field``: ``sdf_rgb(points, dirs) -> (sdf, rgb)`` (and the marcher's call for
@@ -144,8 +157,7 @@ def triage_rays(field, beta, rays: GuidedRays, settings: MarchSettings, *,
     bg = torch.as_tensor(background, dtype=rays.dirs.dtype)
     hit, cos = torch.isfinite(rays.t_hit), rays.cos
     check()
-    probes = _probe(field, rays, hit & ((cos >= s.band.min_cos) | s.residual.enabled), s, b,
-                    differentiable)
+    probes = _probe(field, rays, hit & ((cos >= s.band.min_cos) | s.residual.enabled), s, b, differentiable)
     evals = probes.evals
     kind = torch.zeros(R, dtype=torch.uint8)
     passing = torch.isfinite(probes.t[:, 0])
@@ -155,9 +167,17 @@ def triage_rays(field, beta, rays: GuidedRays, settings: MarchSettings, *,
         alone &= ~probes.close[probes.h_idx]
     b_idx = probes.h_idx[alone]
     band = newton_band if s.band.newton else sample_band
-    acc, color, depth, ok, n = band(field, rays.origins_of(b_idx), rays.dirs[b_idx],
-                                    rays.t_hit[b_idx], cos[b_idx], probes.sdf_h[alone],
-                                    probes.rgb_h[alone], beta, s)
+    acc, color, depth, ok, n = band(
+        field,
+        rays.origins_of(b_idx),
+        rays.dirs[b_idx],
+        rays.t_hit[b_idx],
+        cos[b_idx],
+        probes.sdf_h[alone],
+        probes.rgb_h[alone],
+        beta,
+        s,
+    )
     evals += n
     kind[b_idx[ok]] = RayKind.BAND
     out = _Rows(R, bg)
@@ -176,8 +196,17 @@ def triage_rays(field, beta, rays: GuidedRays, settings: MarchSettings, *,
         check()
         near, far = bounds(r_idx)
         acc, color, depth, ok, n = render_residual(
-            field, index(), rays.origins_of(r_idx), rays.dirs[r_idx], near, far,
-            probes.t[r_idx], probes.sdf[r_idx], beta, s)
+            field,
+            index(),
+            rays.origins_of(r_idx),
+            rays.dirs[r_idx],
+            near,
+            far,
+            probes.t[r_idx],
+            probes.sdf[r_idx],
+            beta,
+            s,
+        )
         evals += n
         kind[r_idx[ok]] = RayKind.RESIDUAL
         out.put(r_idx[ok], color[ok] + (1 - acc[ok])[:, None] * bg, acc[ok], depth[ok])
@@ -198,8 +227,7 @@ class _Rows:
     def __init__(self, R: int, bg: torch.Tensor):
         self.rgb, self.opacity, self.depth = bg.repeat(R, 1), bg.new_zeros(R), bg.new_zeros(R)
 
-    def put(self, rows: torch.Tensor, rgb: torch.Tensor, opacity: torch.Tensor,
-            depth: torch.Tensor) -> None:
+    def put(self, rows: torch.Tensor, rgb: torch.Tensor, opacity: torch.Tensor, depth: torch.Tensor) -> None:
         self.rgb = self.rgb.index_put((rows,), rgb)
         self.opacity = self.opacity.index_put((rows,), opacity)
         self.depth = self.depth.index_put((rows,), depth)
@@ -208,13 +236,23 @@ class _Rows:
         return RayResult(self.rgb, self.opacity, self.depth, evals, kind)
 
 
-def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
-                       near: torch.Tensor, far: torch.Tensor, t_hit: torch.Tensor,
-                       cos: torch.Tensor, settings: MarchSettings,
-                       generator: torch.Generator | None = None,
-                       shell: ShellGeometry | None = None, background=(0.0, 0.0, 0.0),
-                       t_passing: torch.Tensor | None = None, index: SurfaceIndex | None = None,
-                       residual_misses: bool = True) -> RayResult:
+def render_rays_banded(
+    field,
+    beta,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    near: torch.Tensor,
+    far: torch.Tensor,
+    t_hit: torch.Tensor,
+    cos: torch.Tensor,
+    settings: MarchSettings,
+    generator: torch.Generator | None = None,
+    shell: ShellGeometry | None = None,
+    background=(0.0, 0.0, 0.0),
+    t_passing: torch.Tensor | None = None,
+    index: SurfaceIndex | None = None,
+    residual_misses: bool = True,
+) -> RayResult:
     """Training's rays (R,): :func:`triage_rays`, differentiable, with the shell marcher
     (:func:`~texvocab.render.shell.march.render_rays` with ``settings``, ``generator`` and
     ``shell``) over [near, far] (R,) for the rays the band and the residual rays leave.
@@ -226,11 +264,19 @@ def render_rays_banded(field, beta, origins: torch.Tensor, dirs: torch.Tensor,
     marched). Returns a :class:`RayResult` (``banded``, ``residual``: rays of each kind)."""
 
     def march(idx: torch.Tensor) -> RayResult:
-        return render_rays(field, origins[idx], dirs[idx], near[idx], far[idx], settings,
-                           generator, shell, background)
+        return render_rays(
+            field, origins[idx], dirs[idx], near[idx], far[idx], settings, generator, shell, background
+        )
 
-    return triage_rays(field, beta, GuidedRays(origins, dirs, t_hit, cos, t_passing), settings,
-                       march=march, bounds=lambda idx: (near[idx], far[idx]),
-                       index=None if index is None else (lambda: index),
-                       background=background, differentiable=True,
-                       residual_misses=residual_misses)
+    return triage_rays(
+        field,
+        beta,
+        GuidedRays(origins, dirs, t_hit, cos, t_passing),
+        settings,
+        march=march,
+        bounds=lambda idx: (near[idx], far[idx]),
+        index=None if index is None else (lambda: index),
+        background=background,
+        differentiable=True,
+        residual_misses=residual_misses,
+    )

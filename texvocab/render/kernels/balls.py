@@ -2,6 +2,7 @@
 (:func:`texvocab.render.shell.balls.surface_balls`): every sub-triangle centroid of the
 surface sampling visited without materialising the samples (numba; ``cache`` keeps the
 machine code in ``__pycache__``)."""
+
 from __future__ import annotations
 
 import math

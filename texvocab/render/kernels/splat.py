@@ -3,6 +3,7 @@
 bounding ball's projected box gets the exact ray-sphere entry and exit distance,
 min/max-reduced per pixel) and the occupancy grid's bounded distance transform (numba;
 ``cache`` keeps the machine code in ``__pycache__``)."""
+
 from __future__ import annotations
 
 import math

@@ -5,6 +5,7 @@ the mean of its samples with radius δ + r0 + its farthest sample. :func:`boundi
 bins the samples in numpy (the reference); :func:`surface_balls`, which the build uses,
 computes the same balls with the compiled loops of :mod:`texvocab.render.kernels.balls`.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,8 +15,7 @@ from texvocab.render.kernels.balls import subdivisions, visit
 _MAX_CELLS = 1 << 22  # dense cube arrays up to 4M cells (100 MB)
 
 
-def surface_samples(vertices: np.ndarray, faces: np.ndarray,
-                    spacing: float) -> tuple[np.ndarray, float]:
+def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> tuple[np.ndarray, float]:
     """Points (P, 3) on the mesh and r0 such that every surface point is within r0 of
     one; r0 <= ``spacing`` unless a face is wider than 32 spacings (faces are cut into
     n² congruent sub-triangles whose centroids are the samples; r0 is the largest
@@ -28,23 +28,25 @@ def surface_samples(vertices: np.ndarray, faces: np.ndarray,
     for n in np.unique(n_sub):
         i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
         up, down = i + j <= n - 1, i + j <= n - 2
-        vw = np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], 1),
-                             np.stack([i[down] + 2 / 3, j[down] + 2 / 3], 1)]) / n
+        vw = (
+            np.concatenate(
+                [np.stack([i[up] + 1 / 3, j[up] + 1 / 3], 1), np.stack([i[down] + 2 / 3, j[down] + 2 / 3], 1)]
+            )
+            / n
+        )
         bary = np.column_stack([1 - vw.sum(1), vw])
         points.append(np.einsum("sk,fkd->fsd", bary, tri[n_sub == n]).reshape(-1, 3))
     return np.concatenate(points), float((radius / n_sub).max(initial=0.0))
 
 
-def bounding_balls(samples: np.ndarray, r0: float, width: float
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def bounding_balls(samples: np.ndarray, r0: float, width: float) -> tuple[np.ndarray, np.ndarray]:
     """Centres (B, 3) and radii (B,) of balls covering the δ-shell (``width``) of a
     surface sampled by ``samples`` (P, 3) to within r0: the samples binned into cubes of
     side δ, each bin's ball at its mean with radius δ + r0 + its farthest sample. (The
     reference for the compiled :func:`surface_balls`, which the build uses.)"""
     key = np.floor((samples - samples.min(0)) / width).astype(np.int64)
     span = key.max(0) + 1
-    _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2],
-                           return_inverse=True)
+    _, inverse = np.unique((key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2], return_inverse=True)
     count = np.bincount(inverse)
     centers = np.stack([np.bincount(inverse, samples[:, k]) for k in range(3)], 1)
     centers /= count[:, None]
@@ -53,8 +55,9 @@ def bounding_balls(samples: np.ndarray, r0: float, width: float
     return centers, spread + r0 + width
 
 
-def surface_balls(vertices: np.ndarray, faces: np.ndarray, spacing: float, width: float
-                  ) -> tuple[np.ndarray, np.ndarray, float]:
+def surface_balls(
+    vertices: np.ndarray, faces: np.ndarray, spacing: float, width: float
+) -> tuple[np.ndarray, np.ndarray, float]:
     """(centres (B, 3), radii (B,), r0): the bounding balls of the ``width``-shell of the
     mesh sampled as :func:`surface_samples` at ``spacing`` does,
     balls in the order of their cubes' flat index (as ``np.unique`` gives them)."""

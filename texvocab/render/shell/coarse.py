@@ -3,6 +3,7 @@ termination (:func:`march_until_opaque`, the one place that decides when a ray s
 and scouting (:func:`coarse_pass`: every other sample first, the ones between only
 where the scouts see density).
 """
+
 from __future__ import annotations
 
 import math
@@ -29,8 +30,15 @@ class Marched:
     evals: int
 
 
-def march_until_opaque(field: Field, samples: RaySamples, origins: torch.Tensor,
-                       dirs: torch.Tensor, eps: float, segment: int, chunk: int) -> Marched:
+def march_until_opaque(
+    field: Field,
+    samples: RaySamples,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    eps: float,
+    segment: int,
+    chunk: int,
+) -> Marched:
     """Early ray termination: evaluate samples front to back, ``segment`` per ray at a
     time, and drop a ray once its transmittance T = exp(-sum sigma_j delta_j) < ``eps``.
 
@@ -53,10 +61,9 @@ def march_until_opaque(field: Field, samples: RaySamples, origins: torch.Tensor,
         active = torch.nonzero((optical < limit) & valid[:, s0]).squeeze(1)
         if len(active) == 0:
             break
-        r, c = torch.nonzero(valid[active, s0:s0 + segment], as_tuple=True)
+        r, c = torch.nonzero(valid[active, s0 : s0 + segment], as_tuple=True)
         r, c = active[r], c + s0
-        sigma, rgb = evaluate_field(field, origins[r] + samples.t[r, c, None] * dirs[r],
-                                    dirs[r], chunk)
+        sigma, rgb = evaluate_field(field, origins[r] + samples.t[r, c, None] * dirs[r], dirs[r], chunk)
         optical.index_add_(0, r, sigma.detach() * deltas[r, c])
         last[r] = c  # pairs come in row-major order: each row's largest c is written last
         rows.append(r)
@@ -65,17 +72,22 @@ def march_until_opaque(field: Field, samples: RaySamples, origins: torch.Tensor,
         rgbs.append(rgb)
     stopped = optical >= limit
     if not rows:
-        return Marched(samples, deltas.new_zeros(R, S), deltas.new_zeros(R, S, 3), last,
-                       stopped, 0)
+        return Marched(samples, deltas.new_zeros(R, S), deltas.new_zeros(R, S, 3), last, stopped, 0)
     index = (torch.cat(rows), torch.cat(cols))
     sigma = torch.cat(sigmas)
-    return Marched(samples, sigma.new_zeros(R, S).index_put(index, sigma),
-                   sigma.new_zeros(R, S, 3).index_put(index, torch.cat(rgbs)), last, stopped,
-                   len(index[0]))
+    return Marched(
+        samples,
+        sigma.new_zeros(R, S).index_put(index, sigma),
+        sigma.new_zeros(R, S, 3).index_put(index, torch.cat(rgbs)),
+        last,
+        stopped,
+        len(index[0]),
+    )
 
 
-def absorb(marched: Marched, acc: torch.Tensor, color: torch.Tensor, depth_sum: torch.Tensor
-           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def absorb(
+    marched: Marched, acc: torch.Tensor, color: torch.Tensor, depth_sum: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Give each stopped ray's leftover transmittance 1 - acc (R,) to its last evaluated
     sample: returns opacity (R,), colour (R, 3), unnormalised depth sum(w t) (R,)."""
     rows = torch.nonzero(marched.stopped & (marched.last >= 0)).squeeze(1)
@@ -83,14 +95,24 @@ def absorb(marched: Marched, acc: torch.Tensor, color: torch.Tensor, depth_sum: 
         return acc, color, depth_sum
     rest = 1 - acc[rows]
     idx = marched.last[rows]
-    return (acc.index_put((rows,), acc[rows] + rest),
-            color.index_put((rows,), color[rows] + rest[:, None] * marched.rgb[rows, idx]),
-            depth_sum.index_put((rows,), depth_sum[rows] + rest * marched.samples.t[rows, idx]))
+    return (
+        acc.index_put((rows,), acc[rows] + rest),
+        color.index_put((rows,), color[rows] + rest[:, None] * marched.rgb[rows, idx]),
+        depth_sum.index_put((rows,), depth_sum[rows] + rest * marched.samples.t[rows, idx]),
+    )
 
 
-def coarse_pass(field: Field, samples: RaySamples, length: torch.Tensor, origins: torch.Tensor,
-                dirs: torch.Tensor, eps: float, segment: int, chunk: int,
-                scout_threshold: float | None) -> Marched:
+def coarse_pass(
+    field: Field,
+    samples: RaySamples,
+    length: torch.Tensor,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    eps: float,
+    segment: int,
+    chunk: int,
+    scout_threshold: float | None,
+) -> Marched:
     """Evaluate the coarse samples (R, S) of rays with in-shell path ``length`` (R,).
 
     With ``scout_threshold``, the even samples (scouts) are marched first
@@ -117,15 +139,12 @@ def coarse_pass(field: Field, samples: RaySamples, length: torch.Tensor, origins
     need = samples.valid[:, 1::2] & before_stop & (hot[:, :n_odd] | right)
     r, c = torch.nonzero(need, as_tuple=True)
     k = 2 * c + 1
-    sigma_o, rgb_o = evaluate_field(field, origins[r] + samples.t[r, k, None] * dirs[r],
-                                    dirs[r], chunk)
+    sigma_o, rgb_o = evaluate_field(field, origins[r] + samples.t[r, k, None] * dirs[r], dirs[r], chunk)
     n_even = len(even)
     rows = torch.cat([torch.arange(R).repeat_interleave(n_even), r])
     cols = torch.cat([even.repeat(R), k])
-    sigma = m.sigma.new_zeros(R, S).index_put((rows, cols), torch.cat([m.sigma.reshape(-1),
-                                                                       sigma_o]))
-    rgb = m.rgb.new_zeros(R, S, 3).index_put((rows, cols), torch.cat([m.rgb.reshape(-1, 3),
-                                                                      rgb_o]))
+    sigma = m.sigma.new_zeros(R, S).index_put((rows, cols), torch.cat([m.sigma.reshape(-1), sigma_o]))
+    rgb = m.rgb.new_zeros(R, S, 3).index_put((rows, cols), torch.cat([m.rgb.reshape(-1, 3), rgb_o]))
     evaluated = torch.zeros(R, S, dtype=torch.bool)
     evaluated[:, even] = torch.arange(n_even) <= m.last[:, None]
     evaluated[r, k] = True
@@ -137,6 +156,11 @@ def coarse_pass(field: Field, samples: RaySamples, length: torch.Tensor, origins
     kept = RaySamples(u, starts, ends, samples.t.gather(1, order))
     rank = order.argsort(1)  # old index -> new index
     last = torch.where(last >= 0, rank.gather(1, last.clamp(min=0)[:, None])[:, 0], last)
-    return Marched(kept, sigma.gather(1, order),
-                   rgb.gather(1, order[..., None].expand(-1, -1, 3)), last, m.stopped,
-                   m.evals + len(r))
+    return Marched(
+        kept,
+        sigma.gather(1, order),
+        rgb.gather(1, order[..., None].expand(-1, -1, 3)),
+        last,
+        m.stopped,
+        m.evals + len(r),
+    )

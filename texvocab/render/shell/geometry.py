@@ -26,6 +26,7 @@ within δ of the surface is ever skipped. Two structures, built once per posed m
   ``exact=False``. :func:`~texvocab.render.shell.path.trace_path` walks each ray from near to
   far and returns its *path*: the kept steps, gaps removed.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -71,9 +72,16 @@ class ShellGeometry:
         return self.occupied is not None
 
     @classmethod
-    def build(cls, vertices, faces, width: float = 0.04, voxel: float = 0.01,
-              exact: bool = True, index: SurfaceIndex | None = None,
-              grid: bool = True) -> "ShellGeometry":
+    def build(
+        cls,
+        vertices,
+        faces,
+        width: float = 0.04,
+        voxel: float = 0.01,
+        exact: bool = True,
+        index: SurfaceIndex | None = None,
+        grid: bool = True,
+    ) -> "ShellGeometry":
         """From posed vertices (V, 3) and faces (F, 3) (tensors or arrays), shell width δ
         and voxel size h (smaller is tighter but costs a bigger grid).
 
@@ -106,8 +114,9 @@ class ShellGeometry:
         out[inside] = self.occupied.view(-1)[flat[inside]]
         return out
 
-    def ray_bounds(self, origins: torch.Tensor, dirs: torch.Tensor,
-                   chunk: int = 1024) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def ray_bounds(
+        self, origins: torch.Tensor, dirs: torch.Tensor, chunk: int = 1024
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Brute force over all balls for arbitrary rays (training batches; the reference
         for :meth:`image_bounds`). origins, dirs (R, 3), dirs unit.
 
@@ -117,8 +126,8 @@ class ShellGeometry:
         r2 = torch.from_numpy(self.radii) ** 2
         near, far = [], []
         for s in range(0, len(origins), chunk):
-            rel = c[None] - origins[s:s + chunk, None].double()
-            m = (rel * dirs[s:s + chunk, None].double()).sum(-1)
+            rel = c[None] - origins[s : s + chunk, None].double()
+            m = (rel * dirs[s : s + chunk, None].double()).sum(-1)
             h2 = r2 - ((rel * rel).sum(-1) - m * m)
             root = h2.clamp(min=0).sqrt()
             ok = (h2 >= 0) & (m + root > 0)
@@ -144,22 +153,36 @@ class ShellGeometry:
         plane = np.flatnonzero(~front & (p[:, 2] >= -rho))
         full = [np.full(len(plane), v, np.int64) for v in (0, W - 1, 0, H - 1)]
         balls = np.concatenate([np.flatnonzero(front), plane])
-        splat_balls(np.ascontiguousarray(p[balls]), np.ascontiguousarray(rho[balls]),
-                    *(np.concatenate([a, b]) for a, b in zip(boxes, full, strict=True)),
-                    np.ascontiguousarray(d), W, near, far)
+        splat_balls(
+            np.ascontiguousarray(p[balls]),
+            np.ascontiguousarray(rho[balls]),
+            *(np.concatenate([a, b]) for a, b in zip(boxes, full, strict=True)),
+            np.ascontiguousarray(d),
+            W,
+            near,
+            far,
+        )
         # as _finish, in numpy: a few single-threaded passes (torch's OpenMP threads would
         # each have to wake for them)
         near = np.maximum(near, 0.0)
         hit = far > near
         n = np.where(hit, near, 0.0).astype(np.float32)
         f = np.where(hit, far, 0.0).astype(np.float32)
-        return ShellBounds(torch.from_numpy(hit).view(H, W), torch.from_numpy(n).view(H, W),
-                           torch.from_numpy(f).view(H, W))
+        return ShellBounds(
+            torch.from_numpy(hit).view(H, W), torch.from_numpy(n).view(H, W), torch.from_numpy(f).view(H, W)
+        )
 
 
-def _occupancy(v: np.ndarray, f: np.ndarray, samples: np.ndarray, r0: float, width: float,
-               h: float, exact: bool, index: SurfaceIndex | None
-               ) -> tuple[np.ndarray, np.ndarray]:
+def _occupancy(
+    v: np.ndarray,
+    f: np.ndarray,
+    samples: np.ndarray,
+    r0: float,
+    width: float,
+    h: float,
+    exact: bool,
+    index: SurfaceIndex | None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The occupancy grid of :class:`ShellGeometry` (module doc): its corner (3,) and the
     (X, Y, Z) bool voxels of side h."""
     step = h / 2
@@ -177,8 +200,7 @@ def _occupancy(v: np.ndarray, f: np.ndarray, samples: np.ndarray, r0: float, wid
     unsure = np.argwhere(~occupied & (near_voxel <= reach + slack + r0))
     if exact and len(unsure):
         index = index or SurfaceIndex(v, f)
-        dist = np.asarray(index.project(origin + (unsure + 0.5) * h,
-                                        max_distance=reach).distance)
+        dist = np.asarray(index.project(origin + (unsure + 0.5) * h, max_distance=reach).distance)
         keep = unsure[np.abs(dist) <= reach]
     else:
         keep = unsure
@@ -191,11 +213,12 @@ def _bounded_edt2(cells: np.ndarray, shape: tuple[int, int, int], radius: float)
     ``cells`` (U, 3), exact up to ``radius`` voxels and inf beyond."""
     r = int(np.floor(radius + 1e-9))
     grid = np.stack(np.meshgrid(*(np.arange(-r, r + 1),) * 3, indexing="ij"), -1).reshape(-1, 3)
-    d2 = (grid ** 2).sum(1)
+    d2 = (grid**2).sum(1)
     keep = d2 <= radius * radius * (1 + 1e-9)
     dist2 = np.full(shape, np.inf)
-    stamp_distance(np.ascontiguousarray(cells), np.ascontiguousarray(grid[keep]),
-                   d2[keep].astype(np.float64), dist2)
+    stamp_distance(
+        np.ascontiguousarray(cells), np.ascontiguousarray(grid[keep]), d2[keep].astype(np.float64), dist2
+    )
     return dist2
 
 
@@ -209,8 +232,7 @@ def _finish(near: torch.Tensor, far: torch.Tensor):
     """(hit, near clamped at 0, far) float32, zeros where not hit."""
     hit = far > near.clamp(min=0)
     zero = torch.zeros_like(near)
-    return (hit, torch.where(hit, near.clamp(min=0), zero).float(),
-            torch.where(hit, far, zero).float())
+    return (hit, torch.where(hit, near.clamp(min=0), zero).float(), torch.where(hit, far, zero).float())
 
 
 def _pixel_boxes(p: np.ndarray, rho: np.ndarray, K: np.ndarray, width: int, height: int):

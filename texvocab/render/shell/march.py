@@ -13,6 +13,7 @@ every other one only where the field shows density (:func:`coarse_pass`); then
 ``shell.fine_samples`` drawn by inverse-CDF sampling of the (dilated) coarse weights
 (:func:`sample_pdf`); the union of both composited over the background.
 """
+
 from __future__ import annotations
 
 import time
@@ -42,9 +43,18 @@ def _on_path(path: ShellPath, u: torch.Tensor) -> RaySamples:
     return RaySamples(u, starts, ends, path.to_t(torch.minimum(u, path.length[:, None])))
 
 
-def fine_pass(field: Field, path: ShellPath, coarse: RaySamples, sigma_c: torch.Tensor,
-              rgb_c: torch.Tensor, weights: torch.Tensor, o: torch.Tensor, d: torch.Tensor,
-              s: MarchSettings, generator: torch.Generator | None = None):
+def fine_pass(
+    field: Field,
+    path: ShellPath,
+    coarse: RaySamples,
+    sigma_c: torch.Tensor,
+    rgb_c: torch.Tensor,
+    weights: torch.Tensor,
+    o: torch.Tensor,
+    d: torch.Tensor,
+    s: MarchSettings,
+    generator: torch.Generator | None = None,
+):
     """The importance pass of rays whose coarse pass saw some opacity (F of them).
 
     ``shell.fine_samples`` positions by inverse CDF of the (dilated) coarse ``weights`` (F, N)
@@ -58,8 +68,9 @@ def fine_pass(field: Field, path: ShellPath, coarse: RaySamples, sigma_c: torch.
     u_f = sample_pdf(edges, weights, s.shell.fine_samples, generator)
     t_f = path.to_t(u_f)
     d_f = d[:, None].expand(-1, s.shell.fine_samples, -1).reshape(-1, 3)
-    sigma_f, rgb_f = evaluate_field(field, (o[:, None] + t_f[..., None] * d[:, None])
-                                    .reshape(-1, 3), d_f, s.chunks.points)
+    sigma_f, rgb_f = evaluate_field(
+        field, (o[:, None] + t_f[..., None] * d[:, None]).reshape(-1, 3), d_f, s.chunks.points
+    )
     u, order = torch.cat([coarse.u, u_f], 1).sort(1)
     both = _on_path(path, u)
     sigma = torch.cat([sigma_c, sigma_f.view(len(u), -1)], 1).gather(1, order)
@@ -69,10 +80,17 @@ def fine_pass(field: Field, path: ShellPath, coarse: RaySamples, sigma_c: torch.
     return acc, color, (w * both.t).sum(1), len(sigma_f)
 
 
-def render_rays(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: torch.Tensor,
-                far: torch.Tensor, settings: MarchSettings | None = None,
-                generator: torch.Generator | None = None, shell: ShellGeometry | None = None,
-                background=(0.0, 0.0, 0.0)) -> RayResult:
+def render_rays(
+    field: Field,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    near: torch.Tensor,
+    far: torch.Tensor,
+    settings: MarchSettings | None = None,
+    generator: torch.Generator | None = None,
+    shell: ShellGeometry | None = None,
+    background=(0.0, 0.0, 0.0),
+) -> RayResult:
     """Volume-render rays; differentiable w.r.t. the field's outputs.
 
     Steps: the in-shell path of each ray (:func:`trace_path`); coarse samples every
@@ -104,26 +122,46 @@ def render_rays(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: t
     step = 2 * (shell.width if shell is not None else s.shell.width) / s.shell.coarse_samples
     u_c, _ = stratified_positions(path.length, step, s.shell.max_coarse, generator)
     coarse = _on_path(path, u_c)
-    marched = coarse_pass(field, coarse, path.length, o, d, s.shell.early_stop_eps, s.shell.segment,
-                          s.chunks.points, s.shell.scout_threshold)
+    marched = coarse_pass(
+        field,
+        coarse,
+        path.length,
+        o,
+        d,
+        s.shell.early_stop_eps,
+        s.shell.segment,
+        s.chunks.points,
+        s.shell.scout_threshold,
+    )
     coarse, sigma_c, rgb_c, evals = marched.samples, marched.sigma, marched.rgb, marched.evals
     w_c, acc, color = composite(sigma_c, rgb_c, coarse.deltas)
     depth = (w_c * coarse.t).sum(1)
     fine = torch.nonzero(acc.detach() >= max(s.shell.empty_opacity, 1e-12)).squeeze(1)
     if s.shell.fine_samples > 0 and len(fine):
-        acc_f, color_f, depth_f, n = fine_pass(field, path.rows(fine), coarse.rows(fine),
-                                               sigma_c[fine], rgb_c[fine], w_c[fine].detach(),
-                                               o[fine], d[fine], s, generator)
+        acc_f, color_f, depth_f, n = fine_pass(
+            field,
+            path.rows(fine),
+            coarse.rows(fine),
+            sigma_c[fine],
+            rgb_c[fine],
+            w_c[fine].detach(),
+            o[fine],
+            d[fine],
+            s,
+            generator,
+        )
         evals += n
         acc = acc.index_put((fine,), acc_f)
         color = color.index_put((fine,), color_f)
         depth = depth.index_put((fine,), depth_f)
     acc, color, depth = absorb(marched, acc, color, depth)
     rgb_live = color + (1 - acc)[:, None] * bg
-    return RayResult(bg.repeat(R, 1).index_put((live,), rgb_live),
-                     origins.new_zeros(R).index_put((live,), acc),
-                     origins.new_zeros(R).index_put((live,), depth / acc.clamp(min=1e-6)),
-                     evals)
+    return RayResult(
+        bg.repeat(R, 1).index_put((live,), rgb_live),
+        origins.new_zeros(R).index_put((live,), acc),
+        origins.new_zeros(R).index_put((live,), depth / acc.clamp(min=1e-6)),
+        evals,
+    )
 
 
 def build_shell(settings: MarchSettings, vertices, faces, index=None) -> ShellGeometry:
@@ -133,10 +171,18 @@ def build_shell(settings: MarchSettings, vertices, faces, index=None) -> ShellGe
     return ShellGeometry.build(vertices, faces, s.width, s.voxel, s.exact, index=index)
 
 
-def march_chunks(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: torch.Tensor,
-                 far: torch.Tensor, settings: MarchSettings, generator: torch.Generator | None,
-                 shell: ShellGeometry | None, background,
-                 cancelled: Callable[[], bool] | None = None) -> RayResult:
+def march_chunks(
+    field: Field,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    near: torch.Tensor,
+    far: torch.Tensor,
+    settings: MarchSettings,
+    generator: torch.Generator | None,
+    shell: ShellGeometry | None,
+    background,
+    cancelled: Callable[[], bool] | None = None,
+) -> RayResult:
     """:func:`render_rays` over ``chunks.rays`` rays at a time (memory), checking
     ``cancelled`` before each chunk (:class:`RenderCancelled`)."""
     parts = []
@@ -144,19 +190,34 @@ def march_chunks(field: Field, origins: torch.Tensor, dirs: torch.Tensor, near: 
         if cancelled is not None and cancelled():
             raise RenderCancelled
         sl = slice(c, c + settings.chunks.rays)
-        parts.append(render_rays(field, origins[sl], dirs[sl], near[sl], far[sl], settings,
-                                 generator, shell, background))
+        parts.append(
+            render_rays(
+                field, origins[sl], dirs[sl], near[sl], far[sl], settings, generator, shell, background
+            )
+        )
     if not parts:
         z = origins.new_zeros(0)
         return RayResult(origins.new_zeros(0, 3), z, z.clone(), 0)
-    return RayResult(torch.cat([p.rgb for p in parts]), torch.cat([p.opacity for p in parts]),
-                     torch.cat([p.depth for p in parts]), sum(p.field_evals for p in parts))
+    return RayResult(
+        torch.cat([p.rgb for p in parts]),
+        torch.cat([p.opacity for p in parts]),
+        torch.cat([p.depth for p in parts]),
+        sum(p.field_evals for p in parts),
+    )
 
 
-def render_image_shell(field: Field, camera, vertices, faces, settings: MarchSettings | None = None,
-                       background=(0.0, 0.0, 0.0), shell: ShellGeometry | None = None,
-                       generator: torch.Generator | None = None,
-                       cancelled: Callable[[], bool] | None = None, index=None) -> RenderResult:
+def render_image_shell(
+    field: Field,
+    camera,
+    vertices,
+    faces,
+    settings: MarchSettings | None = None,
+    background=(0.0, 0.0, 0.0),
+    shell: ShellGeometry | None = None,
+    generator: torch.Generator | None = None,
+    cancelled: Callable[[], bool] | None = None,
+    index=None,
+) -> RenderResult:
     """Render one image of the field around the posed mesh (vertices (V, 3), faces (F, 3))
     with the shell marcher, ``chunks.rays`` rays at a time.
 
@@ -176,23 +237,30 @@ def render_image_shell(field: Field, camera, vertices, faces, settings: MarchSet
     pix = torch.nonzero(bounds.hit.view(-1)).squeeze(1)
     origins, dirs = camera.pixel_rays(torch.stack([pix % W, pix // W], 1).numpy())
     near, far = bounds.near.view(-1)[pix], bounds.far.view(-1)[pix]
-    out = march_chunks(field, origins, dirs, near, far, s, generator, shell, background,
-                       cancelled)
+    out = march_chunks(field, origins, dirs, near, far, s, generator, shell, background, cancelled)
     bg = torch.as_tensor(background, dtype=torch.float32)
     rgb, alpha, depth = bg.repeat(H * W, 1), torch.zeros(H * W), torch.zeros(H * W)
     if len(pix):
         rgb = rgb.index_put((pix,), out.rgb)
         alpha = alpha.index_put((pix,), out.opacity)
         depth = depth.index_put((pix,), out.depth)
-    stats = RenderStats(out.field_evals, len(pix), H * W, time.perf_counter() - start,
-                        shell_seconds)
+    stats = RenderStats(out.field_evals, len(pix), H * W, time.perf_counter() - start, shell_seconds)
     return RenderResult(rgb.reshape(H, W, 3), alpha.view(H, W), depth.view(H, W), stats)
 
 
-def shell_levels(field: Field, camera, vertices, faces, s: MarchSettings, levels,
-                 cancelled: Callable[[], bool], background, shell: ShellGeometry | None,
-                 index=None, shard=(0, 1)
-                 ) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
+def shell_levels(
+    field: Field,
+    camera,
+    vertices,
+    faces,
+    s: MarchSettings,
+    levels,
+    cancelled: Callable[[], bool],
+    background,
+    shell: ShellGeometry | None,
+    index=None,
+    shard=(0, 1),
+) -> Iterator[tuple[int, torch.Tensor, float, torch.Tensor]]:
     """The shell marcher's progressive levels (:mod:`texvocab.render.progressive`): each a
     render of ``camera.scaled(1 / level)``, the shell built once for all. Not split: shard
     0 renders the whole view, the others yield empty images that own no pixel."""
@@ -210,10 +278,22 @@ def shell_levels(field: Field, camera, vertices, faces, s: MarchSettings, levels
             return
         try:
             with torch.no_grad():  # not held across the yield: the caller keeps autograd
-                result = render_image_shell(field, camera.scaled(1.0 / level), vertices, faces,
-                                            s, background, shell=shell, cancelled=cancelled)
+                result = render_image_shell(
+                    field,
+                    camera.scaled(1.0 / level),
+                    vertices,
+                    faces,
+                    s,
+                    background,
+                    shell=shell,
+                    cancelled=cancelled,
+                )
         except RenderCancelled:
             return
-        yield (level, result.rgb, time.perf_counter() - start,
-               torch.ones(result.rgb.shape[:2], dtype=torch.bool))
+        yield (
+            level,
+            result.rgb,
+            time.perf_counter() - start,
+            torch.ones(result.rgb.shape[:2], dtype=torch.bool),
+        )
         start = time.perf_counter()

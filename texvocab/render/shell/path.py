@@ -2,6 +2,7 @@
 in steps of half a voxel and keeps the steps whose midpoint lies in the shell's occupancy
 grid (:class:`~texvocab.render.shell.geometry.ShellGeometry`); the samples of the shell
 marcher are then placed along the kept path, gaps removed (:class:`ShellPath`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -40,8 +41,13 @@ class ShellPath:
         return cell_end - (self.u_end.gather(1, j) - u)
 
 
-def trace_path(shell: ShellGeometry | None, origins: torch.Tensor, dirs: torch.Tensor,
-               near: torch.Tensor, far: torch.Tensor) -> ShellPath:
+def trace_path(
+    shell: ShellGeometry | None,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    near: torch.Tensor,
+    far: torch.Tensor,
+) -> ShellPath:
     """Walk rays (origins, dirs (R, 3)) from near to far (R,) and keep the steps inside
     the shell's occupancy grid. ``shell=None`` keeps all of [near, far] (one step)."""
     span = (far - near).clamp(min=0)

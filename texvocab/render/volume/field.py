@@ -2,6 +2,7 @@
 -> (density (N,) >= 0, rgb (N, 3) in [0, 1])`` (the surface-guided marcher also reads
 ``field.sdf_rgb(points, dirs) -> (sdf (N,), rgb (N, 3))`` and ``field.beta``), and know
 nothing of the network or the vocabulary."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -11,16 +12,19 @@ import torch
 Field = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 
 
-def evaluate_field(field: Field, points: torch.Tensor, dirs: torch.Tensor,
-                   chunk: int) -> tuple[torch.Tensor, torch.Tensor]:
+def evaluate_field(
+    field: Field, points: torch.Tensor, dirs: torch.Tensor, chunk: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Call ``field`` on points, dirs (N, 3) in chunks; returns density (N,), rgb (N, 3)."""
     sigmas, rgbs = [], []
     for s in range(0, len(points), chunk):
-        sigma, rgb = field(points[s:s + chunk], dirs[s:s + chunk])
-        n = len(points[s:s + chunk])
+        sigma, rgb = field(points[s : s + chunk], dirs[s : s + chunk])
+        n = len(points[s : s + chunk])
         if sigma.shape != (n,) or rgb.shape != (n, 3):
-            raise ValueError(f"field must return density ({n},) and rgb ({n}, 3), got "
-                             f"{tuple(sigma.shape)} and {tuple(rgb.shape)}")
+            raise ValueError(
+                f"field must return density ({n},) and rgb ({n}, 3), got "
+                f"{tuple(sigma.shape)} and {tuple(rgb.shape)}"
+            )
         sigmas.append(sigma)
         rgbs.append(rgb)
     if not sigmas:

@@ -7,6 +7,7 @@ the ray inside the shell, so gaps between limbs have zero length and cost nothin
 ``[start, end]`` of ``u`` (nerfacc's ``t_starts``/``t_ends``); its ``delta`` is the
 interval's length.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -43,9 +44,9 @@ class RaySamples:
         return RaySamples(self.u[idx], self.starts[idx], self.ends[idx], self.t[idx])
 
 
-def stratified_positions(length: torch.Tensor, step: float | None, count: int,
-                         generator: torch.Generator | None = None
-                         ) -> tuple[torch.Tensor, torch.Tensor]:
+def stratified_positions(
+    length: torch.Tensor, step: float | None, count: int, generator: torch.Generator | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Stratified samples on [0, length] for each ray: n = ceil(length / step) bins
     clamped to [1, count] (``step=None``: exactly ``count``).
 
@@ -86,8 +87,9 @@ def midpoint_intervals(u: torch.Tensor, length: torch.Tensor) -> tuple[torch.Ten
     return starts, ends
 
 
-def composite(sigma: torch.Tensor, rgb: torch.Tensor, deltas: torch.Tensor
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def composite(
+    sigma: torch.Tensor, rgb: torch.Tensor, deltas: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Alpha compositing (NeRF quadrature, Max 1995), front to back.
 
     Args:
@@ -115,8 +117,13 @@ def dilate_weights(weights: torch.Tensor) -> torch.Tensor:
     return 0.5 * (peak[:, :-1] + peak[:, 1:])
 
 
-def sample_pdf(edges: torch.Tensor, weights: torch.Tensor, n: int,
-               generator: torch.Generator | None = None, pad: float = 1e-5) -> torch.Tensor:
+def sample_pdf(
+    edges: torch.Tensor,
+    weights: torch.Tensor,
+    n: int,
+    generator: torch.Generator | None = None,
+    pad: float = 1e-5,
+) -> torch.Tensor:
     """Inverse-CDF (importance) sampling of a piecewise-constant pdf (NeRF hierarchical
     sampling).
 

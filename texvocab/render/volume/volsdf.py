@@ -6,6 +6,7 @@ a Riemann sum needs dozens for (β ≈ 2 mm). The surface band, the Newton band 
 residual rays composite with it (:func:`composite_linear_sdf`); differentiable w.r.t. the
 SDF, the colours and β.
 """
+
 from __future__ import annotations
 
 import torch
@@ -18,24 +19,24 @@ def laplace_antiderivative(s: torch.Tensor, beta) -> torch.Tensor:
     return torch.where(s >= 0, -0.5 * beta * e, s - 0.5 * beta * e)
 
 
-def interval_optical_depth(s_a: torch.Tensor, s_b: torch.Tensor, length: torch.Tensor,
-                           beta) -> torch.Tensor:
+def interval_optical_depth(s_a: torch.Tensor, s_b: torch.Tensor, length: torch.Tensor, beta) -> torch.Tensor:
     """∫ σ dt over an interval of ``length`` where the SDF runs linearly from s_a to s_b:
     length (F(s_a) - F(s_b)) / (β (s_a - s_b)); the density at the mean SDF times the
     length where |s_a - s_b| < 1e-4 β (where the quotient loses precision)."""
     ds = s_a - s_b
     flat = ds.abs() < 1e-4 * beta
-    exact = (laplace_antiderivative(s_a, beta) - laplace_antiderivative(s_b, beta)) / \
-        torch.where(flat, torch.ones_like(ds), ds)
+    exact = (laplace_antiderivative(s_a, beta) - laplace_antiderivative(s_b, beta)) / torch.where(
+        flat, torch.ones_like(ds), ds
+    )
     mid = 0.5 * (s_a + s_b)
     e = torch.exp(-mid.abs() / beta)  # never overflows (nor does its gradient, where unused)
     density = torch.where(mid >= 0, 0.5 * e, 1 - 0.5 * e)
     return length * torch.where(flat, density, exact) / beta
 
 
-def composite_linear_sdf(t: torch.Tensor, sdf: torch.Tensor, rgb: torch.Tensor, beta,
-                         front: bool = True
-                         ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def composite_linear_sdf(
+    t: torch.Tensor, sdf: torch.Tensor, rgb: torch.Tensor, beta, front: bool = True
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Volume-render rays from sorted samples (R, S) of a piecewise-linear SDF.
 
     Intervals between samples get their closed-form optical depth and the mean of their
@@ -58,8 +59,9 @@ def composite_linear_sdf(t: torch.Tensor, sdf: torch.Tensor, rgb: torch.Tensor, 
     return acc, color, depth, rest
 
 
-def linear_sdf_weights(t: torch.Tensor, sdf: torch.Tensor, beta, front: bool = True
-                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def linear_sdf_weights(
+    t: torch.Tensor, sdf: torch.Tensor, beta, front: bool = True
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The quadrature of :func:`composite_linear_sdf`: weights (R, S) of the part in
     front of the first sample (zero when not ``front``) and of each interval between
     samples (t, sdf (R, S)), the weight ``ends`` (R,) the last sample absorbs (the ray
