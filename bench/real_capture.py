@@ -38,9 +38,22 @@ import numpy as np
 from texvocab.capture import open as open_capture
 from texvocab.capture.silhouette import shell_coverage, silhouette_fit
 from texvocab.io.checkpoint import load_checkpoint
+from texvocab.method.pose_refinement import refined_poses
 
 DELTAS = (0.02, 0.04, 0.06, 0.08, 0.10)
 TEXVOCAB = [sys.executable, "-m", "texvocab.cli.main"]
+
+
+def _iou_row(res, frames: list[int]) -> dict:
+    iou = np.asarray(res.iou)
+    return {
+        "frames": len(frames),
+        "iou_mean": float(iou.mean()),
+        "iou_std": float(iou.std(ddof=1)) if len(iou) > 1 else 0.0,
+        "iou_min": float(iou.min()),
+        "precision": float(np.mean(res.precision)),
+        "recall": float(np.mean(res.recall)),
+    }
 
 
 def body_against_masks(capture: Path, every: int, coverage_every: int) -> dict:
@@ -58,15 +71,7 @@ def body_against_masks(capture: Path, every: int, coverage_every: int) -> dict:
             (cap.mask(0, t) for t in frames),
             cap.shape(),
         )
-        iou = np.asarray(res.iou)
-        out[name] = {
-            "frames": len(frames),
-            "iou_mean": float(iou.mean()),
-            "iou_std": float(iou.std(ddof=1)),
-            "iou_min": float(iou.min()),
-            "precision": float(np.mean(res.precision)),
-            "recall": float(np.mean(res.recall)),
-        }
+        out[name] = _iou_row(res, frames)
         if fit:
             cf = list(range(0, cap.num_frames, coverage_every))
             cov = shell_coverage(
@@ -83,6 +88,25 @@ def body_against_masks(capture: Path, every: int, coverage_every: int) -> dict:
                 **{f"{d:g}": float(c) for d, c in zip(DELTAS, cov.mean(0), strict=True)},
                 "worst_4cm": float(cov[:, 1].min()),
             }
+    return out
+
+
+def refined_against_masks(capture: Path, ck: dict, every: int) -> dict | None:
+    """Silhouette IoU of the fitted body on every ``every``-th training frame, with the
+    recorded poses and with the run's refined ones (None when it refined none)."""
+    state = ck.get("pose_refinement")
+    if state is None:
+        return None
+    cap = open_capture(capture)
+    frames = list(range(0, len(state["trans"]), every))
+    poses, trans = refined_poses(state, cap.poses, cap.trans)
+    out = {}
+    for name, (p, t) in (
+        ("recorded", (cap.poses[frames], cap.trans[frames])),
+        ("refined", (poses[frames], trans[frames])),
+    ):
+        res = silhouette_fit(cap.body, p, t, cap.cameras[0], (cap.mask(0, f) for f in frames), cap.shape())
+        out[name] = _iou_row(res, frames)
     return out
 
 
@@ -152,7 +176,9 @@ def main(argv: list[str] | None = None) -> int:
             log,
         )
         result["train_seconds"] = time.perf_counter() - t0
-    result["steps"] = int(load_checkpoint(ckpt)["step"])
+    ck = load_checkpoint(ckpt)
+    result["steps"] = int(ck["step"])
+    result["refined"] = refined_against_masks(args.capture, ck, args.fit_every)
     per_set = [] if args.per_set is None else ["--per-set", str(args.per_set)]
     t0 = time.perf_counter()
     run([*TEXVOCAB, "eval", str(ckpt), str(args.capture), *per_set], log)
@@ -198,6 +224,11 @@ def format_report(r: dict) -> str:
         lines.append(
             f"| {name} | {x['frames']} | {x['iou_mean']:.3f} ± {x['iou_std']:.3f} "
             f"({x['iou_min']:.3f}) | {x['precision']:.3f} | {x['recall']:.3f} |"
+        )
+    for name, x in (r.get("refined") or {}).items():
+        lines.append(
+            f"| training frames, {name} poses | {x['frames']} | {x['iou_mean']:.3f} ± "
+            f"{x['iou_std']:.3f} ({x['iou_min']:.3f}) | {x['precision']:.3f} | {x['recall']:.3f} |"
         )
     cov = b["coverage"]
     lines += [

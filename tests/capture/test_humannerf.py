@@ -283,3 +283,15 @@ def test_the_body_is_fitted_to_the_subjects_rest_joints(tmp_path, body, truth):
         )
     s = TexmapSettings()
     assert cache_dir(fitted, s) != cache_dir(plain, s)
+
+
+def test_contact_sheet_of_a_real_capture_leaves_its_folder_alone(standin, tmp_path, monkeypatch, capsys):
+    from disk_snapshot import snapshot
+
+    root = copy_of(standin, tmp_path)
+    before = snapshot(root)
+    monkeypatch.chdir(tmp_path)
+    assert main(["contact-sheet", str(root)]) == 0
+    assert snapshot(root) == before
+    assert (tmp_path / "contact_sheet_subject.png").is_file()
+    capsys.readouterr()

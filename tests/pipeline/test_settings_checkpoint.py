@@ -13,7 +13,9 @@ from texvocab.errors import AssetError, TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.method.encoder import ENCODER_NAMES
 from texvocab.method.field import FieldSettings
+from texvocab.method.pose_refinement import POSE_REFINEMENTS
 from texvocab.method.texmap import VIEW_WEIGHTINGS
+from texvocab.method.unseen_texels import UNSEEN_TEXELS
 from texvocab.method.vocab import WEIGHTINGS
 from texvocab.pipeline.settings import (
     FLAT_NAMES,
@@ -21,10 +23,12 @@ from texvocab.pipeline.settings import (
     DataSettings,
     Encoder,
     Guide,
+    PoseRefinementMode,
     RenderSettings,
     Settings,
     Strategy,
     TrainSettings,
+    UnseenTexels,
     ViewWeighting,
     VocabSettings,
     Weighting,
@@ -118,6 +122,8 @@ def test_flat_checkpoint_settings_read_as_the_groups():
 def test_choices_are_the_methods_own_and_every_knob_says_what_it_does():
     for hint, names in (
         (ViewWeighting, VIEW_WEIGHTINGS),
+        (UnseenTexels, UNSEEN_TEXELS),
+        (PoseRefinementMode, POSE_REFINEMENTS),
         (Strategy, STRATEGIES),
         (Weighting, WEIGHTINGS),
         (Encoder, ENCODER_NAMES),

@@ -5,6 +5,7 @@ any pose."""
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from texvocab.body import load_body
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META, Capture, read_synth_meta
 from texvocab.capture.humannerf import is_humannerf, read_humannerf
-from texvocab.capture.subject import fit_subject_body
+from texvocab.capture.subject import fit_subject_body, smplx_subject
 from texvocab.capture.thuman import is_thuman, read_thuman
 from texvocab.capture.zju import is_zju, read_zju
 from texvocab.errors import AssetError, PoseError
@@ -59,6 +60,7 @@ def open(
     num_train: int | None = None,  # noqa: A001
     image_scale: float | None = None,
     fit_body: bool = True,
+    smplx: str | Path | None = None,
 ) -> Capture:
     """Open a capture folder, choosing the reader from its layout.
 
@@ -71,6 +73,9 @@ def open(
             frames are the held-out set).
         fit_body: fit the body to the subject's rest joints when the capture gives them
             (:func:`~texvocab.capture.subject.fit_subject_body`).
+        smplx: the user's SMPL-X model file, for a capture whose fits are SMPL-X
+            (THUman4.0): the body is fitted to its betas' rest joints; default
+            ``$TEXVOCAB_SMPLX`` (none: the body keeps its shape, one log line says so).
         image_scale: resize images, masks and cameras by this factor on load
             (:meth:`Capture.scaled`); default :func:`auto_image_scale` (1024² -> 512²).
     """
@@ -88,7 +93,7 @@ def open(
     except PoseError as e:
         raise AssetError(f"{root}: its SMPL parameters: {e}") from None
     if fit_body:
-        cap = fit_subject_body(cap)
+        cap = fit_subject_body(smplx_subject(cap, smplx or os.environ.get("TEXVOCAB_SMPLX") or None))
     if meta is None:  # a real capture: its background is not the avatar's
         cap = dataclasses.replace(cap, masked=True)
     scale = auto_image_scale(cap.cameras) if image_scale is None else float(image_scale)

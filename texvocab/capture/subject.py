@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from texvocab.body.fit import betas_from_rest_joints, fit_rest_joints
+from texvocab.body.smplx_joints import read_smplx_model, smplx_rest_joints
 from texvocab.capture.capture import Capture
 
 log = logging.getLogger(__name__)
@@ -58,3 +59,24 @@ def fit_subject_body(cap: Capture) -> Capture:
     digest = hashlib.sha1(np.ascontiguousarray(rest, np.float64).tobytes()).hexdigest()[:8]
     trans = (cap.trans + (j0_before - j0_after)).astype(cap.trans.dtype)
     return dataclasses.replace(fitted, trans=trans, meta={**cap.meta, "body_fit": f"{how}-{digest}"})
+
+
+def smplx_subject(cap: Capture, smplx) -> Capture:
+    """A capture with SMPL-X betas (THUman4.0, ``meta["smplx_betas"]``): with the user's
+    SMPL-X model file ``smplx``, its rest joints from them (for :func:`fit_subject_body`,
+    the root translation pre-shifted so that the fit's re-basing leaves SMPL-X's ``transl``
+    in place); without one, unchanged. One log line says which."""
+    betas = cap.meta.get("smplx_betas")
+    if betas is None:
+        return cap
+    if smplx is None:
+        log.info(
+            "body: %s has SMPL-X betas but no SMPL-X model file was given (TEXVOCAB_SMPLX): "
+            "the body keeps its own shape",
+            cap.root,
+        )
+        return cap
+    rest = smplx_rest_joints(read_smplx_model(smplx), betas, cap.body.rest_joints.double().numpy())
+    log.info("body: fitted to the rest joints of %s's SMPL-X betas (model %s)", cap.root, smplx)
+    shift = rest[0] - cap.body.rest_joints[0].double().numpy()
+    return dataclasses.replace(cap, rest_joints=rest, trans=(cap.trans + shift).astype(cap.trans.dtype))

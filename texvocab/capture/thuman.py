@@ -8,7 +8,9 @@ SMPL-X and SMPL share body joints 0–21, so global_orient → joint 0 and body_
 joints 1–21. SMPL's joints 22–23 (left/right hand) have no SMPL-X body_pose entry: the
 SMPL-X hand poses drive finger joints SMPL does not have, so 22–23 are set to zero.
 Like SMPL-X, the root rotates about the pelvis and ``transl`` is added afterwards, which
-is the project's convention: trans = transl.
+is the project's convention: trans = transl. The SMPL-X ``betas`` are not fed into the
+body's shape space (another body's): with the user's SMPL-X model file they give the
+subject's rest joints, which the body is fitted to (:mod:`texvocab.body.smplx_joints`).
 """
 
 from __future__ import annotations
@@ -103,6 +105,7 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
     idx = np.asarray(frames)
     poses[:, 0] = p["global_orient"][idx]
     poses[:, 1:22] = p["body_pose"][idx].reshape(n, 21, 3)
+    # SMPL-X betas are not SMPL's: kept aside for the body fit (texvocab.capture.subject)
     betas = p["betas"].reshape(-1, p["betas"].shape[-1])[0] if "betas" in p else None
     return Capture(
         root=root,
@@ -115,7 +118,7 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
         frame_ids=frames,
         num_train=default_num_train(n, len(cameras)) if num_train is None else num_train,
         body=body,
-        betas=betas,
+        meta={} if betas is None else {"smplx_betas": np.asarray(betas, np.float64)},
     )
 
 

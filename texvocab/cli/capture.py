@@ -140,7 +140,12 @@ def add_sheet_parser(sub) -> None:
         description="Tile a capture's images (rows: views, columns: frames) into one PNG to look at.",
     )
     p.add_argument("capture", help="capture folder (ZJU-MoCap, THUman4.0 or HumanNeRF layout)")
-    p.add_argument("--out", default=None, help="PNG path (default: CAPTURE/contact_sheet.png)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="PNG path (default: CAPTURE/contact_sheet.png for a synthetic capture, "
+        "./contact_sheet_NAME.png for a real one, whose folder is left as it is)",
+    )
     p.add_argument(
         "--frames", default=None, help="comma-separated frame indices (default: 8 spread over the sequence)"
     )
@@ -169,7 +174,9 @@ def cmd_sheet(args: argparse.Namespace) -> int:
     get = (lambda v, t: cap.mask(v, t).astype(np.float32)) if args.masks else cap.image
     rows = [[get(v, t) for t in frames] for v in range(cap.num_views)]
     labels = [f"{'train' if t < cap.num_train else 'novel'} {t}" for t in frames]
-    out = Path(args.out) if args.out else Path(args.capture) / "contact_sheet.png"
+    # a real capture's folder is the user's: nothing but texvocab's cache is written there
+    real = Path(f"contact_sheet_{Path(args.capture).resolve().name}.png")
+    out = Path(args.out) if args.out else real if cap.masked else Path(args.capture) / "contact_sheet.png"
     save_png(out, contact_sheet(rows, [c.name for c in cap.cameras], labels))
     print(f"contact sheet ({cap.num_views} views x {len(frames)} frames): {out.resolve()}")
     return 0

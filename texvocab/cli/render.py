@@ -67,6 +67,14 @@ def add_render_parser(sub, add_smpl) -> None:
         help="the file's up axis (auto: Z for AMASS SMPL-H/SMPL-X, else Y)",
     )
     p.add_argument(
+        "--place",
+        choices=["auto", "capture", "keep"],
+        default="auto",
+        help="capture: turn the motion into the capture's world (its up axis, the first "
+        "frame facing the camera, standing where the capture's subject stands); keep: as "
+        "the file has it; auto: capture when the capture's up axis is not +Y (ZJU-MoCap)",
+    )
+    p.add_argument(
         "--frames", default=None, metavar="A:B", help="only frames A..B-1 of the (resampled) sequence"
     )
     p.add_argument(
@@ -133,6 +141,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         render_frames,
         write_mp4,
     )
+    from texvocab.pipeline.clip_placement import needs_placing, place_in_capture
     from texvocab.pipeline.clip_worker import FrameWorker
     from texvocab.pipeline.settings import RENDER_KNOBS, march_settings, render_overrides
 
@@ -185,6 +194,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=args.root, pelvis=pelvis)
     keep = _frame_range(args.frames, len(seq))
     poses, trans = seq.poses[keep.start : keep.stop], seq.trans[keep.start : keep.stop]
+    placed = needs_placing(cap, args.place)
+    if placed:  # the motion into the capture's world (its up axis, facing the camera)
+        poses, trans = place_in_capture(poses, trans, pelvis, cap, cap.cameras[args.camera])
     fps = seq.fps or args.fps
     knobs = {k: getattr(settings.render, k) for k in RENDER_KNOBS}
     spec = ClipSpec.make(
@@ -195,7 +207,14 @@ def cmd_render(args: argparse.Namespace) -> int:
         args.follow,
         fps,
         settings.render.image_scale,
-        {**knobs, "frames": [keep.start, keep.stop], "up": args.up, "root": args.root, "panels": panels},
+        {
+            **knobs,
+            "frames": [keep.start, keep.stop],
+            "up": args.up,
+            "root": args.root,
+            "panels": panels,
+            **({"placed": True} if placed else {}),
+        },
     )
     folder = frames_dir(out)
     cached = prepare_frames_dir(folder, spec, args.overwrite)

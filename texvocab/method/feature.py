@@ -46,6 +46,8 @@ class PoseContext:
     # rows of its cache's table, shared by every pose: never copied per pose)
     pose_condition: str = "global"
     stats: dict = field(default_factory=dict)
+    # training with pose refinement: the frame's point warp x -> x' (PointWarp), else None
+    warp: object | None = None
 
     @property
     def condition(self) -> torch.Tensor:

@@ -163,12 +163,15 @@ class AvatarField(nn.Module):
         grad_dir = torch.where(norm > 1e-9, diff / norm.clamp(min=1e-9), torch.zeros_like(diff))
         grad_dir = grad_dir * torch.sign(out.distance)[:, None]
         d_body = torch.where(valid, out.distance, torch.full_like(out.distance, s.shell_width))
-        d_body = d_body + ((points - points.detach()) * grad_dir.detach()).sum(-1)
-        x_c = self.canonicalize(ctx, points, out.skin_weights)
+        # pose refinement (training): the field at the corrected pose is the field at the
+        # warped point (texvocab.method.pose_refinement); x = points without it
+        x, d = (points, dirs) if ctx.warp is None else ctx.warp(points, dirs, out.skin_weights)
+        d_body = d_body + ((x - points.detach()) * grad_dir.detach()).sum(-1)
+        x_c = self.canonicalize(ctx, x, out.skin_weights)
         feat = self.feature_proj(out.features.to(points.dtype))
         h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat], -1))
         sdf = d_body + h[:, 0] * valid
-        color_in = torch.cat([h[:, 1:], positional_encoding(dirs, s.dir_freqs), feat], -1)
+        color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs), feat], -1)
         rgb = torch.sigmoid(self.color_net(color_in))
         return sdf, rgb, valid
 

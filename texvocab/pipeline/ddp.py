@@ -31,12 +31,17 @@ def attach(trainer) -> None:
     params = [p for p in trainer.model.parameters() if p.requires_grad]
 
     def sync() -> None:
-        grads = [p.grad if p.grad is not None else torch.zeros_like(p) for p in params]
+        # pose corrections: the step's frame's, the same on every process (one shared draw)
+        drawn = (
+            [] if trainer.refine is None else [p for p in trainer.refine.parameters() if p.grad is not None]
+        )
+        mine = params + drawn
+        grads = [p.grad if p.grad is not None else torch.zeros_like(p) for p in mine]
         flat = torch.cat([g.reshape(-1) for g in grads])
         dist.all_reduce(flat, op=dist.ReduceOp.SUM)
         flat /= trainer.world
         start = 0
-        for p, g in zip(params, grads, strict=True):
+        for p, g in zip(mine, grads, strict=True):
             p.grad = flat[start : start + g.numel()].view_as(p).clone()
             start += g.numel()
 

@@ -14,6 +14,7 @@ from texvocab.method.encoder import build_encoder
 from texvocab.method.feature import PoseFeature
 from texvocab.method.field import AvatarField
 from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
+from texvocab.method.unseen_texels import fill_unseen_texels
 from texvocab.method.vocab import Vocabulary
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.split import one_camera, one_camera_train_views
@@ -56,9 +57,13 @@ def texmap_settings(capture, s: Settings) -> TexmapSettings:
 
 def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
     """(T, 3, S, S) texture maps of the training frames, back-projected from the training
-    views only (prepared and cached if needed)."""
+    views only (prepared and cached if needed), their unseen texels filled as
+    ``data.unseen_texels`` says (:mod:`texvocab.method.unseen_texels`)."""
     paths = prepare_texture_maps(capture, texmap_settings(capture, s), progress=progress)
-    return torch.stack([torch.from_numpy(load_texture_map(p)[0]).permute(2, 0, 1) for p in paths])
+    maps = [load_texture_map(p) for p in paths]
+    textures = torch.stack([torch.from_numpy(t).permute(2, 0, 1) for t, _ in maps])
+    coverage = torch.stack([torch.from_numpy(c) for _, c in maps])
+    return fill_unseen_texels(textures, coverage, s.data.unseen_texels)
 
 
 def build_vocabulary(capture, s: Settings) -> Vocabulary:

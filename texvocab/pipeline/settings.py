@@ -27,12 +27,14 @@ from texvocab.render import MarchSettings
 
 # choices (each the Literal of a tuple the method defines; tests/pipeline keep them equal)
 ViewWeighting = Literal["mean", "cosine"]  # method.texmap.VIEW_WEIGHTINGS
+UnseenTexels = Literal["mean", "nearest"]  # method.unseen_texels.UNSEEN_TEXELS
 Strategy = Literal["part", "joint", "global", "none"]  # body.parts.STRATEGIES
 Weighting = Literal["paper", "inverse"]  # method.vocab.WEIGHTINGS
 Encoder = Literal["auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid"]
 Guide = Literal["raster", "shell"]  # render.GUIDES
 TrainResidual = Literal["hits", "all", "off"]
 Perceptual = Literal["auto", "lpips-vgg", "inception", "off"]
+PoseRefinementMode = Literal["off", "root", "joints"]  # method.pose_refinement.POSE_REFINEMENTS
 PoseCondition = Literal["root-relative", "global"]  # body.pose_condition.POSE_CONDITIONS
 
 
@@ -65,6 +67,11 @@ class DataSettings:
         doc="texture maps: mean (Eq. 2) | cosine "
         "(by viewing angle; +0.11 dB on novel poses, not "
         "resolved over 3 seeds)",
+    )
+    unseen_texels: UnseenTexels = knob(
+        "mean",
+        doc="texels no view of a frame saw: mean (the training frames' coverage-weighted "
+        "mean there) | nearest (the map's nearest seen texel)",
     )
 
     def __post_init__(self) -> None:
@@ -215,6 +222,17 @@ class TrainSettings:
         at_least(MIN_PATCH),
         doc="(S/A) side of the square patch each step renders for the perceptual term",
     )
+    pose_refinement: PoseRefinementMode = knob(
+        "off",
+        doc="per-frame corrections of the recorded poses, trained with the avatar: off | root "
+        "(root rotation and translation) | joints (every joint and the translation)",
+    )
+    pose_lr: float = knob(
+        5e-3, within(0, 1, open_low=True), doc="Adam's learning rate of the pose corrections"
+    )
+    lambda_pose: float = knob(
+        0.01, at_least(0), doc="weight of the corrections' prior Σδθ² + (δT / 10 cm)² (per step, its frame's)"
+    )
     checkpoint_every: int = knob(250, at_least(1), doc="steps between checkpoints")
     max_minutes: float | None = knob(
         None, above(0), doc="stop (with a checkpoint) after this much training time"
@@ -302,6 +320,7 @@ FLAT_NAMES: dict[str, str] = {
 # setting existed) meant then; its default today may differ.
 LEGACY: dict[str, object] = {
     "data.view_weighting": "mean",
+    "data.unseen_texels": "nearest",
     "train.perceptual": "off",
     "vocab.min_key_distance": 0.0,
     "train.guide": "shell",

@@ -20,6 +20,7 @@ ends with the same weights as an uninterrupted one.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from pathlib import Path
@@ -29,6 +30,7 @@ from tqdm import tqdm
 
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
+from texvocab.method.pose_refinement import PoseRefinement
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.model import build_model, load_textures, train_views
@@ -85,9 +87,14 @@ class Trainer:
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
             torch.manual_seed(settings.train.seed)
             self.model = build_model(capture, settings, self.textures)
-        self.optim = torch.optim.Adam(
-            [p for p in self.model.parameters() if p.requires_grad], lr=settings.train.lr
-        )
+        groups = [{"params": [p for p in self.model.parameters() if p.requires_grad]}]
+        self.refine = None  # per-frame pose corrections (train.pose_refinement)
+        if settings.train.pose_refinement != "off":
+            self.refine = PoseRefinement(
+                capture.num_train, capture.body.num_joints, settings.train.pose_refinement
+            )
+            groups.append({"params": list(self.refine.parameters()), "lr": settings.train.pose_lr})
+        self.optim = torch.optim.Adam(groups, lr=settings.train.lr)
         self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
         self.march = march_settings(settings, training=True)
@@ -112,14 +119,14 @@ class Trainer:
     def checkpoint_path(self) -> Path:
         return self.out / "checkpoint.pt"
 
-    def _eikonal(self, fd: FrameData, n: int, evaluate: bool = True) -> torch.Tensor:
+    def _eikonal(self, fd: FrameData, ctx, n: int, evaluate: bool = True) -> torch.Tensor:
         verts = fd.ctx.vertices.detach()
         idx = torch.randint(len(verts), (n,), generator=self.gen)
         noise = torch.randn(n, 3, generator=self.gen) * (self.s.field.shell_width / 2)
         if not evaluate:  # the points are drawn (the stream stays shared), not used
             return torch.zeros(())
         pts = (verts[idx] + noise).requires_grad_(True)
-        sdf, _, valid = self.model.sdf_and_color(fd.ctx, pts, torch.nn.functional.normalize(noise, dim=-1))
+        sdf, _, valid = self.model.sdf_and_color(ctx, pts, torch.nn.functional.normalize(noise, dim=-1))
         (grad,) = torch.autograd.grad(sdf.sum(), pts, create_graph=True)
         return ((grad[valid].norm(dim=-1) - 1) ** 2).mean() if valid.any() else sdf.sum() * 0
 
@@ -133,6 +140,11 @@ class Trainer:
         fd = self.rays.frame(t)
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             fd.ctx.features = self.model.pose_feature.feature_maps(fd.ctx.frames)
+        ctx, prior = fd.ctx, torch.zeros(())
+        if self.refine is not None:  # the frame's corrected pose, as a warp of the field's points
+            cap = self.capture
+            warp = self.refine.warp(t, cap.body, cap.poses[t], cap.trans[t], cap.shape())
+            ctx, prior = dataclasses.replace(fd.ctx, warp=warp), self.refine.prior(t)
         vs = [self.views[int(i)] for i in torch.randint(len(self.views), (2,), generator=self.gen)]
         half = s.rays_per_batch // 2
         batch, p = [], 0
@@ -155,7 +167,7 @@ class Trainer:
             gen = torch.Generator().manual_seed(s.seed * 1_000_003 + self.step * 64 + self.rank)
         share = self.world * len(o) / total
         out = render_rays_banded(
-            self.model.for_pose(fd.ctx),
+            self.model.for_pose(ctx),
             self.model.beta,
             o,
             d,
@@ -170,7 +182,7 @@ class Trainer:
             index=fd.ctx.index,
             residual_misses=s.residual == "all",
         )
-        eikonal = self._eikonal(fd, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
+        eikonal = self._eikonal(fd, ctx, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {
             "color": ((out.rgb - gt) ** 2).mean(),
             "mask": (out.opacity - m).abs().mean(),
@@ -180,10 +192,15 @@ class Trainer:
         if self.perceptual is not None and lead:
             patch, truth = (x[: p * p].T.reshape(1, 3, p, p) for x in (out.rgb, gt))
             terms["perceptual"] = self.perceptual(patch, truth).mean()
+        terms["pose_prior"] = prior if lead else torch.zeros(())
         terms["loss"] = share * (
             s.lambda_color * terms["color"] + s.lambda_mask * terms["mask"]
-        ) + self.world * (s.lambda_eikonal * terms["eikonal"] + s.lambda_perceptual * terms["perceptual"])
-        for name in ("loss", "color", "mask", "eikonal", "perceptual"):
+        ) + self.world * (
+            s.lambda_eikonal * terms["eikonal"]
+            + s.lambda_perceptual * terms["perceptual"]
+            + s.lambda_pose * terms["pose_prior"]
+        )
+        for name in ("loss", "color", "mask", "eikonal", "perceptual", "pose_prior"):
             if not torch.isfinite(terms[name]):
                 ck = (
                     f"the last checkpoint {self.checkpoint_path} is intact"
@@ -234,6 +251,7 @@ class Trainer:
             "optimizer": self.optim.state_dict(),
             "vocab": self.model.pose_feature.vocab.to_dict(),
             "rng": {"torch": self.gen.get_state()},
+            **({} if self.refine is None else {"pose_refinement": self.refine.state()}),
         }
 
     def save(self) -> Path:
@@ -270,6 +288,8 @@ class Trainer:
                 f"{ck['step']} to extend it"
             )
         self.model.load_state_dict(ck["model"])
+        if self.refine is not None:
+            self.refine.load(ck["pose_refinement"])
         self.optim.load_state_dict(ck["optimizer"])
         self.gen.set_state(ck["rng"]["torch"])
         self.step = int(ck["step"])

@@ -1,0 +1,61 @@
+"""A pose file's motion placed in a capture whose world is not Y up (ZJU-MoCap is −Z up):
+upright in that world, its first frame facing the camera, standing where the capture's
+subject stands, its own path kept; a Y-up capture plays it as it is."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from texvocab.body.poses import preset
+from texvocab.capture import open as open_capture
+from texvocab.capture.camera import Camera
+from texvocab.geometry.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+from texvocab.pipeline.clip_placement import capture_up, needs_placing, place_in_capture
+
+Y_TO_MINUS_Z = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # +Y -> -Z
+
+
+def turned(cap, R):
+    """``cap`` with its whole world turned by R (poses' roots, translations, cameras)."""
+    j0 = cap.body.rest_joints[0].double().numpy()
+    roots = rotvec_to_rotmat(torch.as_tensor(cap.poses[:, 0], dtype=torch.float64)).numpy()
+    poses = cap.poses.copy()
+    poses[:, 0] = rotmat_to_rotvec(torch.as_tensor(R[None] @ roots)).numpy()
+    trans = ((cap.trans + j0) @ R.T - j0).astype(cap.trans.dtype)
+    cams = [Camera(c.K, c.R @ R.T, c.t, c.width, c.height, c.dist, c.name) for c in cap.cameras]
+    return dataclasses.replace(cap, poses=poses, trans=trans, cameras=cams)
+
+
+@pytest.fixture(scope="module")
+def zju_like(capture):
+    return turned(open_capture(capture), Y_TO_MINUS_Z)
+
+
+def test_up_axis_and_when_to_place(capture, zju_like):
+    assert np.dot(capture_up(zju_like), [0, 0, -1]) > 0.95
+    assert needs_placing(zju_like, "auto") and not needs_placing(open_capture(capture), "auto")
+    assert needs_placing(open_capture(capture), "capture") and not needs_placing(zju_like, "keep")
+
+
+def test_the_walk_stands_up_faces_the_camera_and_keeps_its_path(zju_like):
+    walk, _ = preset("walk")
+    n = 5
+    poses = np.repeat(np.asarray(walk, np.float64)[None], n, 0)
+    trans = np.stack([np.array([0.0, 0.0, 0.3 * i]) for i in range(n)])  # walks 30 cm a frame
+    body, cam = zju_like.body, zju_like.cameras[0]
+    j0 = body.rest_joints[0].double().numpy()
+    p, t = place_in_capture(poses, trans, j0, zju_like, cam)
+    joints = body.forward(torch.as_tensor(p), torch.as_tensor(t)).joints.double().numpy()
+    up = capture_up(zju_like)
+    spine = joints[0, 9] - joints[0, 0]
+    assert np.dot(spine / np.linalg.norm(spine), up) > 0.95
+    stand = zju_like.trans[: zju_like.num_train].mean(0) + j0
+    np.testing.assert_allclose(joints[0, 0], stand, atol=1e-6)
+    facing = rotvec_to_rotmat(torch.as_tensor(p[0, 0])).numpy() @ [0, 0, 1.0]
+    want = cam.center - stand
+    flat = [x - np.dot(x, up) * up for x in (facing, want)]
+    assert np.dot(*(x / np.linalg.norm(x) for x in flat)) > 0.99
+    steps = np.linalg.norm(np.diff(joints[:, 0], axis=0), axis=1)
+    np.testing.assert_allclose(steps, 0.3, atol=1e-6)
