@@ -89,3 +89,13 @@ def test_old_checkpoint_resumes_one_step_as_then(old_run):
         "train.iterations": 3,
     }
     assert not torch.equal(new["model"]["log_beta"], ck["model"]["log_beta"])
+
+
+def test_old_stored_maps_load_back_and_new_checkpoints_leave_them_out(old_run, tmp_path):
+    """Checkpoints no longer carry the texture maps (rebuilt from the capture's cache); one
+    that stored them renders with those very maps."""
+    ck = load_checkpoint(old_run / "run" / "checkpoint.pt")
+    stored = ck["model"]["pose_feature.textures"]
+    avatar = load_avatar(old_run / "run" / "checkpoint.pt", open_capture(old_run / "capture"), progress=False)
+    assert torch.equal(avatar.model.pose_feature.textures, stored)
+    assert "pose_feature.textures" not in avatar.model.state_dict()

@@ -88,7 +88,10 @@ class PoseFeature(nn.Module):
         self.betas = None if betas is None else torch.as_tensor(betas).reshape(1, -1)
         self.vocab = vocab
         self.encoder = encoder
-        self.register_buffer("textures", torch.as_tensor(textures, dtype=torch.float32))
+        # not in the state dict: a checkpoint's maps are rebuilt from the capture's cache
+        # (432 maps of 256² are 340 MB of float32); older checkpoints that stored them
+        # load them back (texvocab.pipeline.avatar.load_stored_textures)
+        self.register_buffer("textures", torch.as_tensor(textures, dtype=torch.float32), persistent=False)
         self.register_buffer("membership", part_membership(vocab.part_joints, body.num_joints))
         self._frozen_table: FeatureMaps | None = None  # frozen encoder: all frames' maps
         self._frozen_filled: set[int] = set()

@@ -19,7 +19,7 @@ from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint
 from texvocab.method.field import AvatarField
 from texvocab.method.vocab import Vocabulary
-from texvocab.pipeline.model import build_model, load_textures
+from texvocab.pipeline.model import build_model, load_stored_textures, load_textures
 from texvocab.pipeline.settings import Settings
 
 
@@ -96,8 +96,9 @@ def load_avatar(
         raise TexvocabError(
             f"{checkpoint}: 'model' holds {type(ck['model']).__name__}, expected the weights (a state dict)"
         )
+    weights = load_stored_textures(model, ck["model"], checkpoint)
     try:
-        missing, unexpected = model.load_state_dict(ck["model"], strict=False)
+        missing, unexpected = model.load_state_dict(weights, strict=False)
     except RuntimeError as e:
         first = next(
             (ln.strip() for ln in str(e).splitlines() if "size mismatch" in ln), str(e).splitlines()[0]
@@ -105,7 +106,7 @@ def load_avatar(
         raise TexvocabError(
             f"{checkpoint}: weights do not fit the model its settings describe ({first})"
         ) from None
-    if unexpected or [k for k in missing if not k.startswith("pose_feature.textures")]:
+    if unexpected or missing:
         raise TexvocabError(
             f"{checkpoint}: weights do not fit this model (missing "
             f"{missing[:3]}, unexpected {unexpected[:3]})"

@@ -87,3 +87,24 @@ def build_model(
     vocab = vocab or build_vocabulary(capture, s)
     encoder = build_encoder(s.vocab.encoder, weights=encoder_weights)
     return AvatarField(PoseFeature(capture.body, vocab, textures, encoder, capture.shape()), s.field)
+
+
+TEXTURES_KEY = "pose_feature.textures"
+
+
+def load_stored_textures(model, weights: dict, source) -> dict:
+    """The texture maps a checkpoint stored (written before they were left out of it) put
+    into ``model``, so it renders with the very maps it trained with; returns the other
+    weights. A stored stack of another shape is an error naming ``source``."""
+    if TEXTURES_KEY not in weights:
+        return weights
+    rest = {k: v for k, v in weights.items() if k != TEXTURES_KEY}
+    stored, ours = weights[TEXTURES_KEY], model.pose_feature.textures
+    if tuple(stored.shape) != tuple(ours.shape):
+        raise TexvocabError(
+            f"{source}: its texture maps are {tuple(stored.shape)}, the capture's "
+            f"{tuple(ours.shape)} (another capture, split or texture size?)"
+        )
+    with torch.no_grad():
+        ours.copy_(stored)
+    return rest

@@ -33,7 +33,7 @@ from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.method.pose_refinement import PoseRefinement
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
-from texvocab.pipeline.model import build_model, load_textures, train_views
+from texvocab.pipeline.model import build_model, load_stored_textures, load_textures, train_views
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
@@ -287,7 +287,7 @@ class Trainer:
                 f"train.iterations={self.s.train.iterations}; pass --iterations N > "
                 f"{ck['step']} to extend it"
             )
-        self.model.load_state_dict(ck["model"])
+        self.model.load_state_dict(load_stored_textures(self.model, ck["model"], self.checkpoint_path))
         if self.refine is not None:
             self.refine.load(ck["pose_refinement"])
         self.optim.load_state_dict(ck["optimizer"])
