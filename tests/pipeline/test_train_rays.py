@@ -238,3 +238,31 @@ def test_train_shell_voxel_sets_the_training_shells_grid(capture, tmp_path):
     assert Settings.from_dict(old).train.shell_voxel == 0.01  # runs before the setting
     with pytest.raises(TexvocabError, match="train.shell_voxel"):
         TrainSettings(shell_voxel=0.0)
+
+
+def test_views_keep_per_hit_arrays_and_give_every_pixels_rays(capture, tmp_path):
+    """A view's cache stores its ray bounds and band per shell hit only, yet every pixel's
+    rays are what the per-pixel arrays gave: the misses an empty interval, no band, no
+    passing places; colours to 8-bit precision (the images are 8-bit PNGs)."""
+    from texvocab.render import plan_surface
+
+    cap = open_capture(capture)
+    trainer = Trainer(cap, tiny_settings(), tmp_path / "run", progress=False)
+    fd = trainer.rays.frame(0)
+    vd = trainer.rays.view(fd, 0, 0)
+    n = len(vd.mask)
+    assert 0 < len(vd.near) == int(vd.hit.sum()) < n
+    near, far, t_band, cos, t_passing = vd.rays(torch.arange(n))
+    b = fd.shell.image_bounds(cap.cameras[0])
+    miss = ~b.hit.view(-1)
+    assert torch.equal(near, b.near.view(-1)) and (far[miss] == 0).all()
+    assert torch.isinf(t_band[miss]).all() and torch.isinf(t_passing[miss]).all()
+    _, dirs = trainer.rays.rays_of(0)
+    delta = trainer.s.field.shell_width
+    plan = plan_surface(
+        fd.ctx.vertices.detach(), cap.body.faces, cap.cameras[0], dirs, delta, delta, trainer.march.min_cos
+    )
+    hit = b.hit.view(-1)
+    assert torch.equal(cos[hit], plan.cos.half().float()[hit])
+    truth = torch.from_numpy(cap.image(0, 0)).view(-1, 3)
+    assert (vd.colours(torch.arange(n)) - truth).abs().max() < 0.5 / 255 + 1e-6

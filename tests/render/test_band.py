@@ -167,11 +167,12 @@ def test_training_takes_the_band_only_with_train_guide_raster(capture, tmp_path,
     assert any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
     for fd in trainer.frames.values():
         for vd in fd.views.values():  # rays outside the mask never take the band
-            assert not (torch.isfinite(vd.t_band) & ~vd.mask).any()
+            _, _, t_band, _, t_passing = vd.rays(torch.arange(len(vd.mask)))
+            assert not (torch.isfinite(t_band) & ~vd.mask).any()
             # inside the mask only band rays (behind an occlusion edge) get passing probes
-            assert not (torch.isfinite(vd.t_passing[:, 0]) & vd.mask & ~torch.isfinite(vd.t_band)).any()
+            assert not (torch.isfinite(t_passing[:, 0]) & vd.mask & ~torch.isfinite(t_band)).any()
             if guide == "shell":
-                assert not torch.isfinite(vd.t_band).any()
+                assert not torch.isfinite(t_band).any()
 
 
 def test_train_guide_is_checked_and_old_checkpoints_trained_with_the_shell():
