@@ -94,6 +94,18 @@ def _wrong_shape(ck):
     ck["model"][key] = torch.zeros(3, 3)
 
 
+def _still_poses(world):
+    path = world / "bad" / "still.npz"
+    path.parent.mkdir(exist_ok=True)
+    np.savez(path, poses=np.zeros((2, 72)))
+    return str(path)
+
+
+def _nan_weight(ck):
+    key = next(k for k, v in ck["model"].items() if v.ndim == 2)
+    ck["model"][key] = ck["model"][key].clone().fill_(float("nan"))
+
+
 def _settings_str(ck):
     ck["settings"] = "fast"
 
@@ -261,6 +273,23 @@ CASES = [
         "eval-wrong-tensor-shape",
         lambda w: ["eval", _ckpt_with(w, "shape", _wrong_shape), str(w / "cap")],
         "weights do not fit",
+    ),
+    (
+        "eval-nan-weights",
+        lambda w: ["eval", _ckpt_with(w, "nan", _nan_weight), str(w / "cap")],
+        "holds NaN or inf",
+    ),
+    (
+        "render-nan-weights",
+        lambda w: [
+            "render",
+            _ckpt_with(w, "nan", _nan_weight),
+            "--poses",
+            _still_poses(w),
+            "--out",
+            str(w / "bad" / "nan.mp4"),
+        ],
+        "holds NaN or inf",
     ),
     ("eval-text-checkpoint", lambda w: ["eval", _file(w, "text.pt", b"hello"), str(w / "cap")], "text.pt"),
     (

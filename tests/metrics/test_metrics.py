@@ -63,6 +63,14 @@ def test_psnr_is_finite_and_capped_for_identical_images():
     assert psnr(x.astype(np.float32), x) == PSNR_MAX_DB
 
 
+def test_psnr_of_a_nan_or_inf_image_is_nan_not_the_cap():
+    x = np.random.default_rng(0).random((6, 7, 3))
+    for bad in (np.nan, np.inf):
+        y = x.copy()
+        y[0, 0, 0] = bad
+        assert np.isnan(psnr(y, x)) and np.isnan(psnr(x, y))
+
+
 def test_psnr_rejects_bad_input():
     x = np.zeros((4, 4, 3))
     with pytest.raises(ValueError, match="no pixels"):

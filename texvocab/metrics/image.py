@@ -62,7 +62,7 @@ def psnr(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike | None = None) -> float
     """Peak signal-to-noise ratio in dB for images ``(H, W, 3)`` in [0, 1] (data range 1):
     ``10 log10(1 / mse)`` with the mse over all pixels and channels, or over the pixels
     where the boolean ``mask`` ``(H, W)`` is true. Capped at :data:`PSNR_MAX_DB` (100 dB),
-    which identical images get, so the value is always finite."""
+    which identical images get; NaN when either image holds a NaN or inf."""
     p, g = _image_pair(pred, gt)
     sq = (p - g) ** 2
     if mask is not None:
@@ -71,6 +71,8 @@ def psnr(pred: ArrayLike, gt: ArrayLike, mask: ArrayLike | None = None) -> float
             raise ValueError("psnr: mask selects no pixels")
         sq = sq[m]
     mse = float(sq.mean())
+    if not math.isfinite(mse):  # a NaN or inf image scores NaN, never the cap
+        return math.nan
     return PSNR_MAX_DB if mse <= 1e-10 else min(PSNR_MAX_DB, -10.0 * math.log10(mse))
 
 

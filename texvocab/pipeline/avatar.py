@@ -13,6 +13,8 @@ import copy
 from dataclasses import dataclass
 from pathlib import Path
 
+import torch
+
 from texvocab.body import load_body
 from texvocab.capture import open as open_capture
 from texvocab.errors import TexvocabError
@@ -95,6 +97,19 @@ def load_avatar(
     if not isinstance(ck["model"], dict):
         raise TexvocabError(
             f"{checkpoint}: 'model' holds {type(ck['model']).__name__}, expected the weights (a state dict)"
+        )
+    bad = next(
+        (
+            k
+            for k, v in ck["model"].items()
+            if torch.is_tensor(v) and v.is_floating_point() and not torch.isfinite(v).all()
+        ),
+        None,
+    )
+    if bad is not None:
+        raise TexvocabError(
+            f"{checkpoint}: weight {bad} holds NaN or inf (the run diverged); train again, "
+            "or resume from an earlier checkpoint"
         )
     weights = load_stored_textures(model, ck["model"], checkpoint)
     try:
