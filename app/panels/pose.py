@@ -19,7 +19,14 @@ import numpy as np
 from imgui_bundle import imgui
 
 from texvocab.errors import TexvocabError
-from texvocab.pipeline import BODY_PARTS, JOINT_LIMITS_DEG, JOINT_NAMES, read_pose_sequence
+from texvocab.pipeline import (
+    BODY_PARTS,
+    JOINT_LIMITS_DEG,
+    JOINT_NAMES,
+    needs_placing,
+    place_in_capture,
+    read_pose_sequence,
+)
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 from texvocab_viewer.dialogs import POSE_FILTERS
 
@@ -43,11 +50,18 @@ class PoseSequence:
         self._clock = 0.0
 
     @classmethod
-    def load(cls, path: str) -> PoseSequence:
-        seq = read_pose_sequence(path, fps=None)  # every frame, at the file's rate
+    def load(cls, path: str, capture=None) -> PoseSequence:
+        """The pose file at ``path``; with a ``capture`` whose world is not Y up (ZJU-MoCap),
+        its motion turned into that world facing camera 0, as ``texvocab render --place
+        auto`` does (:mod:`texvocab.pipeline.clip_placement`)."""
+        pelvis = None if capture is None else capture.body.rest_joints[0].double().numpy()
+        seq = read_pose_sequence(path, fps=None, pelvis=pelvis)  # every frame, at its rate
         if len(seq.poses) == 0:
             raise TexvocabError(f"{path}: 'poses' holds no frames")
-        return cls(path, seq.poses, seq.trans, seq.source_fps)
+        poses, trans = seq.poses, seq.trans
+        if capture is not None and needs_placing(capture, "auto"):
+            poses, trans = place_in_capture(poses, trans, pelvis, capture, capture.cameras[0])
+        return cls(path, poses, trans, seq.source_fps)
 
     def advance(self, now: float) -> bool:
         """While playing, step frames by wall time at ``fps``; True if the frame changed."""
@@ -134,7 +148,7 @@ def load_sequence(viewer, path: str) -> None:
     panel instead when it cannot be read)."""
     viewer.sequence_path = path
     try:
-        viewer.sequence = PoseSequence.load(path.strip())
+        viewer.sequence = PoseSequence.load(path.strip(), viewer.data.capture)
         viewer.sequence_error = ""
         _show_frame(viewer)
     except (TexvocabError, OSError, ValueError) as exc:

@@ -59,3 +59,17 @@ def test_the_walk_stands_up_faces_the_camera_and_keeps_its_path(zju_like):
     assert np.dot(*(x / np.linalg.norm(x) for x in flat)) > 0.99
     steps = np.linalg.norm(np.diff(joints[:, 0], axis=0), axis=1)
     np.testing.assert_allclose(steps, 0.3, atol=1e-6)
+
+
+def test_the_viewer_timeline_places_a_pose_file_as_render_does(zju_like, capture, tmp_path):
+    from pose_file_cases import amass_file
+    from texvocab_viewer.panels.pose import PoseSequence
+
+    amass_file(tmp_path / "walk.npz", frames=5)
+    placed = PoseSequence.load(str(tmp_path / "walk.npz"), zju_like)
+    plain = PoseSequence.load(str(tmp_path / "walk.npz"), open_capture(capture))
+    body = zju_like.body
+    for seq, up in ((placed, capture_up(zju_like)), (plain, np.array([0.0, 1.0, 0.0]))):
+        j = body.forward(torch.as_tensor(seq.poses[:1]), torch.as_tensor(seq.trans[:1])).joints[0]
+        spine = (j[9] - j[0]).double().numpy()
+        assert np.dot(spine / np.linalg.norm(spine), up) > 0.95

@@ -59,6 +59,8 @@ _API: dict[str, tuple[str, str]] = {
     "FrameWorker": ("texvocab.pipeline.clip_worker", "FrameWorker"),
     "write_mp4": ("texvocab.pipeline.clip", "write_mp4"),
     "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
+    "needs_placing": ("texvocab.pipeline.clip_placement", "needs_placing"),
+    "place_in_capture": ("texvocab.pipeline.clip_placement", "place_in_capture"),
     # threads
     "budget_blas_threads": ("texvocab.blas", "budget_blas_threads"),
     "blas_threads": ("texvocab.blas", "blas_threads"),
