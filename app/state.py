@@ -21,7 +21,9 @@ from texvocab.pipeline import (
     load_avatar,
     load_body,
     load_textures,
+    needs_placing,
     open_capture,
+    place_in_capture,
     quat_to_rotvec,
 )
 from texvocab.pipeline import POSE_PRESETS as PRESETS
@@ -127,9 +129,20 @@ class ViewerState:
     def __init__(self, data: ViewerData, pose=None, trans=None):
         self.data = data
         self.rest_trans = np.zeros(3)
-        if data.capture is not None and len(data.capture.trans):
-            self.rest_trans = np.asarray(data.capture.trans[0], dtype=np.float64).copy()
-        self.pose = np.zeros((24, 3)) if pose is None else np.array(pose, np.float64).reshape(24, 3)
+        self.rest_root = np.zeros(3)  # the rest pose's root orientation (axis-angle)
+        cap = data.capture
+        if cap is not None and len(cap.trans):
+            self.rest_trans = np.asarray(cap.trans[0], dtype=np.float64).copy()
+            if needs_placing(cap, "auto"):  # a world not Y up: stand up, face camera 0
+                pelvis = cap.body.rest_joints[0].double().numpy()
+                zero = (np.zeros((1, 24, 3)), np.zeros((1, 3)))
+                root, stand = place_in_capture(*zero, pelvis, cap, cap.cameras[0])
+                self.rest_root, self.rest_trans = root[0, 0].copy(), stand[0].copy()
+        if pose is None:
+            self.pose = np.zeros((24, 3))
+            self.pose[0] = self.rest_root
+        else:
+            self.pose = np.array(pose, np.float64).reshape(24, 3)
         self.trans = self.rest_trans.copy() if trans is None else np.array(trans, np.float64)
         self.version = 0
         self.change = "rest pose"
@@ -195,8 +208,11 @@ class ViewerState:
         return self._changed(pose, change=f"{name.replace('_', ' ')} reset")
 
     def reset_all(self) -> bool:
-        """Rest pose (T-pose, zero root orientation) at the rest translation."""
-        return self._changed(np.zeros((24, 3)), self.rest_trans, "rest pose")
+        """Rest pose (T-pose; the root upright: zero orientation in a Y-up world) at the rest
+        translation."""
+        pose = np.zeros((24, 3))
+        pose[0] = self.rest_root
+        return self._changed(pose, self.rest_trans, "rest pose")
 
     def apply_preset(self, name: str) -> bool:
         """A named preset (texvocab.body.poses): joints 1..23 from the preset, the root

@@ -19,7 +19,7 @@ from texvocab.pipeline import follow_camera, march_settings
 from texvocab_viewer.arguments import NEURAL_NICE
 from texvocab_viewer.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
 from texvocab_viewer.export.job import Export
-from texvocab_viewer.gl.camera import CaptureViewCamera, OrbitCamera
+from texvocab_viewer.gl.camera import CaptureViewCamera, OrbitCamera, orbit_for
 from texvocab_viewer.gl.colors import heat_color
 from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer
 from texvocab_viewer.gl.view_blit import (
@@ -57,7 +57,7 @@ class Viewer:
     ):
         self.data, self.size = data, size
         self.state = ViewerState(data)
-        self.camera = OrbitCamera()
+        self.camera = self.new_orbit()
         self.follow = False  # the camera moves with the body's root
         self._follow_ref = np.zeros(3)
         self.view_size = (max(size[0] // 3, 16), max(size[1] - 60, 16))
@@ -291,15 +291,20 @@ class Viewer:
         return self.state.change
 
     # -- helpers for the panels ---------------------------------------------------------
+    def new_orbit(self) -> OrbitCamera:
+        """An orbit camera about the world's up axis (:func:`orbit_for`)."""
+        return orbit_for(self.data.capture)
+
     def reset_camera(self, aspect: float | None = None) -> None:
         """Frame the body of the current pose from the front, in a view of width / height
         ``aspect`` (default: the 3D view's)."""
         if isinstance(self.camera, CaptureViewCamera):
-            self.camera = OrbitCamera()
+            self.camera = self.new_orbit()
         aspect = self.view_aspect() if aspect is None else aspect
         verts, _ = self.state.posed()
-        lo, hi = verts.min(0), verts.max(0)
-        self.camera.target = (lo + hi) / 2.0
+        local = verts @ self.camera.basis.T  # right, up, front (x, y, z when +y is up)
+        lo, hi = local.min(0), local.max(0)
+        self.camera.target = ((lo + hi) / 2.0) @ self.camera.basis
         self.camera.yaw, self.camera.pitch = 0.0, 0.0
         half = np.tan(np.radians(self.camera.fov) / 2)
         need = max((hi[1] - lo[1]) / (2 * half), (hi[0] - lo[0]) / (2 * half * aspect))

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from texvocab.pipeline import Camera, look_at
+from texvocab.pipeline import Camera, capture_up, look_at, needs_placing
 
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV camera axes -> GL camera axes
 DEFAULT_TARGET = (0.0, -0.3, 0.0)  # the default body's centre (its synthetic captures aim here)
@@ -52,6 +52,8 @@ class OrbitCamera:
         yaw: degrees about +y; 0 looks at the body's front (camera on +z).
         pitch: degrees above the horizontal, in (-89, 89).
         distance: metres from the target; fov: vertical field of view, degrees.
+        up: (3,) the world's up axis (+y; a capture's own, ZJU-MoCap's −z); front: (3,)
+            where yaw 0 puts the camera, normal to ``up`` (+z).
     """
 
     target: np.ndarray = field(default_factory=lambda: np.array(DEFAULT_TARGET))
@@ -61,16 +63,28 @@ class OrbitCamera:
     fov: float = 40.0
     near: float = 0.05
     far: float = 100.0
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    front: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
 
     def __post_init__(self):
         self.target = np.asarray(self.target, dtype=np.float64).reshape(3)
+        self.up = np.asarray(self.up, dtype=np.float64).reshape(3)
+        self.up = self.up / np.linalg.norm(self.up)
+        f = np.asarray(self.front, dtype=np.float64).reshape(3)
+        f = f - np.dot(f, self.up) * self.up
+        self.front = f / np.linalg.norm(f)
+
+    @property
+    def basis(self) -> np.ndarray:
+        """(3, 3) rows: the world's right, up and front axes of the orbit (x, y, z for +y up)."""
+        return np.stack([np.cross(self.up, self.front), self.up, self.front])
 
     @property
     def eye(self) -> np.ndarray:
         """(3,) camera centre in world coordinates."""
         yaw, pitch = np.radians(self.yaw), np.radians(self.pitch)
         offset = np.array([np.cos(pitch) * np.sin(yaw), np.sin(pitch), np.cos(pitch) * np.cos(yaw)])
-        return self.target + self.distance * offset
+        return self.target + self.distance * offset @ self.basis
 
     def orbit(self, dx: float, dy: float) -> None:
         """Turn by ``dx`` degrees of yaw and ``dy`` degrees of pitch (clamped to ±89°)."""
@@ -84,13 +98,13 @@ class OrbitCamera:
     def pan(self, dx: float, dy: float) -> None:
         """Move the target in the image plane by fractions of the view height (dx right,
         dy up), so a drag across the view moves the scene about as far."""
-        R, _ = look_at(self.eye, self.target)
+        R, _ = look_at(self.eye, self.target, self.up)
         scale = 2.0 * self.distance * np.tan(np.radians(self.fov) / 2)
         self.target = self.target + scale * (dx * R[0] - dy * R[1])
 
     def view_matrix(self) -> np.ndarray:
         """(4, 4) world -> GL camera (looks down -z, +y up)."""
-        R, t = look_at(self.eye, self.target)
+        R, t = look_at(self.eye, self.target, self.up)
         extr = np.eye(4)
         extr[:3, :3], extr[:3, 3] = R, t
         return CV_TO_GL @ extr
@@ -115,7 +129,7 @@ class OrbitCamera:
 
     def to_texvocab_camera(self, width: int, height: int) -> Camera:
         """The same view as an OpenCV :class:`Camera` of ``width`` × ``height`` pixels."""
-        R, t = look_at(self.eye, self.target)
+        R, t = look_at(self.eye, self.target, self.up)
         return Camera(self.intrinsics(width, height), R, t, width, height, name="orbit")
 
     @classmethod
@@ -184,3 +198,14 @@ def fit_aspect(width: int, height: int, aspect: float) -> tuple[int, int]:
     if width / max(height, 1) > aspect:
         return max(1, round(height * aspect)), max(1, height)
     return max(1, width), max(1, round(width / aspect))
+
+
+def orbit_for(capture) -> OrbitCamera:
+    """An orbit camera about the world's up axis: +y, or a capture's own when it is not
+    (ZJU-MoCap's −z; :mod:`texvocab.pipeline.clip_placement`), yaw 0 towards its camera 0."""
+    if capture is None or not needs_placing(capture, "auto"):
+        return OrbitCamera()
+    up = capture_up(capture)
+    stand = np.asarray(capture.trans[: max(capture.num_train, 1)], np.float64).mean(0)
+    front = capture.cameras[0].center - (stand + capture.body.rest_joints[0].double().numpy())
+    return OrbitCamera(up=up, front=front - np.dot(front, up) * up)

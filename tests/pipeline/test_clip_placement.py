@@ -63,6 +63,7 @@ def test_the_walk_stands_up_faces_the_camera_and_keeps_its_path(zju_like):
 
 def test_the_viewer_timeline_places_a_pose_file_as_render_does(zju_like, capture, tmp_path):
     from pose_file_cases import amass_file
+
     from texvocab_viewer.panels.pose import PoseSequence
 
     amass_file(tmp_path / "walk.npz", frames=5)
@@ -73,3 +74,25 @@ def test_the_viewer_timeline_places_a_pose_file_as_render_does(zju_like, capture
         j = body.forward(torch.as_tensor(seq.poses[:1]), torch.as_tensor(seq.trans[:1])).joints[0]
         spine = (j[9] - j[0]).double().numpy()
         assert np.dot(spine / np.linalg.norm(spine), up) > 0.95
+
+
+def test_the_viewer_orbits_about_the_captures_up_axis(zju_like, capture):
+    from texvocab_viewer.gl.camera import OrbitCamera, orbit_for
+
+    plain = OrbitCamera(target=np.zeros(3), distance=2.0)
+    np.testing.assert_allclose(plain.eye, [0, 0, 2.0])  # +y up, yaw 0 on +z: as before
+    assert orbit_for(None).up @ [0, 1, 0] == 1 and orbit_for(open_capture(capture)).up @ [0, 1, 0] == 1
+    cam = orbit_for(zju_like)
+    up = capture_up(zju_like)
+    np.testing.assert_allclose(cam.up, up)
+    for yaw, pitch in ((0, 0), (70, 20), (-120, -40)):
+        cam.yaw, cam.pitch = yaw, pitch
+        R = cam.to_texvocab_camera(64, 48).R
+        # the image's down axis stays in the plane of -up and the view axis: no roll
+        assert abs(np.dot(R[0], up)) < 1e-9
+        elevation = np.degrees(np.arcsin(np.dot((cam.eye - cam.target) / cam.distance, up)))
+        assert elevation == pytest.approx(pitch, abs=1e-6)
+    cam.yaw, cam.pitch = 0, 0
+    to_camera = zju_like.cameras[0].center - cam.target
+    flat = to_camera - np.dot(to_camera, up) * up
+    assert np.dot(cam.front, flat / np.linalg.norm(flat)) > 0.999

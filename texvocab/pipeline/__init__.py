@@ -60,6 +60,7 @@ _API: dict[str, tuple[str, str]] = {
     "write_mp4": ("texvocab.pipeline.clip", "write_mp4"),
     "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
     "needs_placing": ("texvocab.pipeline.clip_placement", "needs_placing"),
+    "capture_up": ("texvocab.pipeline.clip_placement", "capture_up"),
     "place_in_capture": ("texvocab.pipeline.clip_placement", "place_in_capture"),
     # threads
     "budget_blas_threads": ("texvocab.blas", "budget_blas_threads"),
