@@ -10,8 +10,8 @@ Groups (each varies one knob from the common base; the first variant is its refe
 ``strategies`` (part/joint/global/none, Table 4 of the paper), ``encoders`` (pyramid,
 small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
-``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: nearest,
-mean), ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
+``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: mean,
+nearest), ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The
 base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
 weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none
@@ -76,9 +76,9 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "perceptual": {"off": [], "inception": ["perceptual=inception"], "lpips-vgg": ["perceptual=lpips-vgg"]},
     "weighting": {"paper": [], "inverse": ["weighting=inverse"]},
     "views": {"mean": [], "cosine": ["view_weighting=cosine"]},
-    # texels a frame's views did not see (one-camera captures): the earlier nearest-seen
-    # colour of the same map, the reference, against the training frames' mean
-    "unseen": {"nearest": ["unseen_texels=nearest"], "mean": ["unseen_texels=mean"]},
+    # texels a frame's views did not see (one-camera captures): the training frames' mean
+    # (the default, the reference) against the earlier nearest-seen colour of the same map
+    "unseen": {"mean": [], "nearest": ["unseen_texels=nearest"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with
