@@ -144,15 +144,17 @@ def _root(viewer) -> None:
 
 
 def load_sequence(viewer, path: str) -> None:
-    """Load a pose file into the timeline and show its first frame (an error line in the
-    panel instead when it cannot be read)."""
+    """Load a pose file into the timeline and show its first frame. When it cannot be
+    read, the timeline keeps the sequence loaded before (if any) and the panel shows the
+    error line, until a later load succeeds."""
     viewer.sequence_path = path
     try:
-        viewer.sequence = PoseSequence.load(path.strip(), viewer.data.capture)
-        viewer.sequence_error = ""
-        _show_frame(viewer)
+        sequence = PoseSequence.load(path.strip(), viewer.data.capture)
     except (TexvocabError, OSError, ValueError) as exc:
-        viewer.sequence, viewer.sequence_error = None, str(exc)
+        viewer.sequence_error = str(exc)
+        return
+    viewer.sequence, viewer.sequence_error = sequence, ""
+    _show_frame(viewer)
 
 
 def _sequence(viewer) -> None:
