@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from texvocab.pipeline import Camera, capture_up, look_at, needs_placing
+from texvocab.pipeline import Camera, capture_up, look_at, needs_placing, stand_point, toward
 
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV camera axes -> GL camera axes
 DEFAULT_TARGET = (0.0, -0.3, 0.0)  # the default body's centre (its synthetic captures aim here)
@@ -206,6 +206,4 @@ def orbit_for(capture) -> OrbitCamera:
     if capture is None or not needs_placing(capture, "auto"):
         return OrbitCamera()
     up = capture_up(capture)
-    stand = np.asarray(capture.trans[: max(capture.num_train, 1)], np.float64).mean(0)
-    front = capture.cameras[0].center - (stand + capture.body.rest_joints[0].double().numpy())
-    return OrbitCamera(up=up, front=front - np.dot(front, up) * up)
+    return OrbitCamera(up=up, front=toward(capture.cameras[0], stand_point(capture), up))

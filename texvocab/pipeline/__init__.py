@@ -61,6 +61,8 @@ _API: dict[str, tuple[str, str]] = {
     "follow_camera": ("texvocab.pipeline.clip", "follow_camera"),
     "needs_placing": ("texvocab.pipeline.clip_placement", "needs_placing"),
     "capture_up": ("texvocab.pipeline.clip_placement", "capture_up"),
+    "stand_point": ("texvocab.pipeline.clip_placement", "stand_point"),
+    "toward": ("texvocab.pipeline.clip_placement", "toward"),
     "place_in_capture": ("texvocab.pipeline.clip_placement", "place_in_capture"),
     # threads
     "budget_blas_threads": ("texvocab.blas", "budget_blas_threads"),

@@ -92,8 +92,6 @@ def load_avatar(
             f"{checkpoint}: its vocabulary is not readable ({type(e).__name__}: "
             f"{str(e).splitlines()[0] if str(e) else ''})"
         ) from None
-    textures = load_textures(capture, settings, progress)
-    model = build_model(capture, settings, textures, vocab)
     if not isinstance(ck["model"], dict):
         raise TexvocabError(
             f"{checkpoint}: 'model' holds {type(ck['model']).__name__}, expected the weights (a state dict)"
@@ -111,6 +109,8 @@ def load_avatar(
             f"{checkpoint}: weight {bad} holds NaN or inf (the run diverged); train again, "
             "or resume from an earlier checkpoint"
         )
+    textures = load_textures(capture, settings, progress)
+    model = build_model(capture, settings, textures, vocab)
     weights = load_stored_textures(model, ck["model"], checkpoint)
     try:
         missing, unexpected = model.load_state_dict(weights, strict=False)

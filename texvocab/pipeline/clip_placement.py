@@ -34,15 +34,27 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def capture_up(cap, every: int = 10) -> np.ndarray:
     """(3,) the capture's up axis: the mean pelvis-to-spine3 direction of every ``every``-th
-    training pose."""
+    training pose (the poses are posed in one batch)."""
     frames = list(range(0, max(cap.num_train, 1), every))
-    ups = []
-    for t in frames:
-        j = cap.posed_body(t).joints[0].double().numpy()
-        d = j[SPINE3] - j[0]
-        ups.append(d / max(np.linalg.norm(d), 1e-12))
-    up = np.mean(ups, 0)
+    betas = cap.shape()
+    betas = None if betas is None else betas.expand(len(frames), -1)
+    j = cap.body.forward(torch.as_tensor(cap.poses[frames]), None, betas).joints.double().numpy()
+    d = j[:, SPINE3] - j[:, 0]
+    up = (d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)).mean(0)
     return up / max(np.linalg.norm(up), 1e-12)
+
+
+def stand_point(cap) -> np.ndarray:
+    """(3,) where the capture's subject stands: the mean pelvis of its training poses."""
+    j0 = cap.body.rest_joints[0].double().numpy()
+    return np.asarray(cap.trans[: max(cap.num_train, 1)], np.float64).mean(0) + j0
+
+
+def toward(camera, point: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(3,) the horizontal (normal to ``up``) direction from ``point`` to ``camera``'s
+    centre, not normalised (zero when the camera is straight above or below)."""
+    want = np.asarray(camera.center, np.float64) - point
+    return want - np.dot(want, up) * up
 
 
 def needs_placing(cap, how: str) -> bool:
@@ -62,11 +74,10 @@ def place_in_capture(poses: np.ndarray, trans: np.ndarray, pelvis: np.ndarray, c
     up = capture_up(cap)
     turn_up = _rotation_between(np.array([0.0, 1.0, 0.0]), up)
     roots = rotvec_to_rotmat(torch.as_tensor(poses[:, 0], dtype=torch.float64)).numpy()
-    stand = np.asarray(cap.trans[: max(cap.num_train, 1)], np.float64).mean(0) + j0
+    stand = stand_point(cap)
     # heading: the first frame's facing (the body's +Z), turned up, towards the camera
     face = turn_up @ roots[0] @ np.array([0.0, 0.0, 1.0])
-    want = np.asarray(camera.center, np.float64) - stand
-    flat = [x - np.dot(x, up) * up for x in (face, want)]
+    flat = [face - np.dot(face, up) * up, toward(camera, stand, up)]
     if min(np.linalg.norm(x) for x in flat) > 1e-9:
         a, b = (x / np.linalg.norm(x) for x in flat)
         # a and b are normal to up: the turn is about up (half a turn when opposite)
