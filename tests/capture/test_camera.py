@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from texvocab.capture.calibration_checks import CameraFields, check_camera
 from texvocab.capture.camera import Camera
 from texvocab.capture.mesh_renderer import intrinsics, look_at
 from texvocab.errors import AssetError
@@ -81,5 +82,6 @@ def test_undistort_recovers_the_ideal_image(cam):
 @pytest.mark.parametrize("field", ["K", "R", "t"])
 def test_non_finite_calibration_is_named(cam, field):
     getattr(cam, field).flat[0] = np.nan
-    with pytest.raises(AssetError, match=rf"calib\.json: camera 'c0' has non-finite {field}"):
-        cam.validate("calib.json")
+    fields = CameraFields.keyed("", "K", "R", "t", "dist", "size")
+    with pytest.raises(AssetError, match=rf"calib\.json: camera 'c0' {field}: holds NaN or inf"):
+        check_camera(cam, "calib.json", fields)

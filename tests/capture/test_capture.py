@@ -148,7 +148,7 @@ def test_non_finite_calibration(captures, tmp_path, body):
     calib = json.loads((root / "calibration.json").read_text())
     calib["cam01"]["T"][2] = float("nan")
     (root / "calibration.json").write_text(json.dumps(calib))
-    with pytest.raises(AssetError, match=r"calibration\.json: camera 'cam01' has non-finite t"):
+    with pytest.raises(AssetError, match=r"calibration\.json: camera 'cam01' 'T': holds NaN or inf"):
         open_capture(root, body=body)
 
 

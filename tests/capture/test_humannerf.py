@@ -179,13 +179,13 @@ BAD_FIELDS = [  # (file, frame, key, value, what the error says)
         np.array([0, np.nan, 0.0]),
         r"frame_000001: 'Th' contains non-finite",
     ),
-    ("cameras.pkl", "frame_000000", "intrinsics", np.eye(3) * 2, r"frame_000000 'intrinsics' last row"),
+    ("cameras.pkl", "frame_000000", "intrinsics", np.eye(3) * 2, r"frame_000000 'intrinsics': last row"),
     (
         "cameras.pkl",
         "frame_000000",
         "extrinsics",
         np.diag([1.0, 1.0, 2.0, 1.0]),
-        r"'extrinsics' \[:3, :3\] is not a rotation",
+        r"'extrinsics'\[:3, :3\]: is not a rotation",
     ),
     (
         "cameras.pkl",

@@ -34,6 +34,11 @@ LAYOUTS = {72: "smpl", 156: "smplh", 165: "smplx"}  # values per frame -> layout
 RATE_KEYS = ("mocap_framerate", "mocap_frame_rate", "fps", "frame_rate")
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # -90° about X: z -> y
 ACCEPTED = "(T, 24, 3) or (T, 72) SMPL, (T, 156) AMASS SMPL-H or (T, 165) SMPL-X"
+#: Highest frame rate a file may state or a sequence be resampled to (frames per second).
+MAX_FPS = 1000.0
+#: Most frames a resampled sequence may have (20 minutes at 30 fps); counted before any
+#: frame is allocated, so a tiny stated frame rate cannot ask for gigabytes.
+MAX_FRAMES = 36_000
 
 
 @dataclass
@@ -95,6 +100,12 @@ def read_pose_sequence(
     _check_values(path, poses, trans)
     rate = _frame_rate(path, data)
     if rate is not None and fps is not None and len(poses) > 1 and abs(rate - fps) > 1e-6:
+        count = resampled_count(len(poses), rate, fps)
+        if count > MAX_FRAMES:
+            raise AssetError(
+                f"{path}: {len(poses)} frames at {rate:g} fps resampled to {fps:g} fps would be "
+                f"{count:.4g} frames; expected at most {MAX_FRAMES} (is the frame rate right?)"
+            )
         poses, trans = _resample(poses, trans, rate, fps)
     if root == "zero":
         poses[:, 0] = 0.0
@@ -115,9 +126,12 @@ def _frame_rate(path: Path, data: dict) -> float | None:
     for key in RATE_KEYS:
         if key in data:
             value = np.asarray(data[key]).reshape(-1)
-            if value.size != 1 or not np.isfinite(value[0]) or not value[0] > 0:
+            numeric = value.dtype.kind in "iuf"
+            if value.size != 1 or not numeric or not np.isfinite(value[0]) or not 0 < value[0] <= MAX_FPS:
+                shown = value[:4].tolist() if value.size else "empty"
                 raise AssetError(
-                    f"{path}: '{key}' is {value.tolist()}; expected one frame rate > 0 (frames per second)"
+                    f"{path}: '{key}' is {shown!r}; expected one frame rate in (0, {MAX_FPS:g}] "
+                    "(frames per second)"
                 )
             return float(value[0])
     return None
@@ -143,11 +157,16 @@ def _check_values(path: Path, poses: np.ndarray, trans: np.ndarray) -> None:
         )
 
 
+def resampled_count(frames: int, rate: float, fps: float) -> float:
+    """Frames of a ``frames``-long sequence at ``rate`` resampled to ``fps`` (a float: it may
+    be astronomically large, and is compared before anything is allocated)."""
+    return np.floor((frames - 1) / rate * fps + 1e-9) + 1
+
+
 def _resample(poses: np.ndarray, trans: np.ndarray, rate: float, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """(T', 24, 3), (T', 3) at ``fps`` from ``rate``: frame k at time k / fps, quaternion
     nlerp (shortest arc) between the two source frames around it."""
-    duration = (len(poses) - 1) / rate
-    times = np.arange(int(np.floor(duration * fps + 1e-9)) + 1) / fps
+    times = np.arange(int(resampled_count(len(poses), rate, fps))) / fps
     src = np.minimum(times * rate, len(poses) - 1)
     i0 = np.floor(src).astype(int)
     i1 = np.minimum(i0 + 1, len(poses) - 1)

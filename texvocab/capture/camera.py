@@ -8,8 +8,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from texvocab.errors import AssetError
-
 
 @dataclass
 class Camera:
@@ -37,20 +35,6 @@ class Camera:
         d = np.asarray(self.dist, dtype=np.float64).reshape(-1)
         self.dist = np.concatenate([d, np.zeros(5 - len(d))]) if len(d) < 5 else d[:5]
         self.width, self.height = int(self.width), int(self.height)
-
-    def validate(self, source: str) -> "Camera":
-        """Raise :class:`AssetError` naming ``source`` if the calibration is unusable."""
-        for key in ("K", "R", "t", "dist"):
-            if not np.isfinite(getattr(self, key)).all():
-                raise AssetError(f"{source}: camera {self.name!r} has non-finite {key}")
-        if abs(np.linalg.det(self.R) - 1) > 1e-3 or np.abs(self.R @ self.R.T - np.eye(3)).max() > 1e-3:
-            raise AssetError(f"{source}: camera {self.name!r} R is not a rotation matrix")
-        if self.K[0, 0] <= 0 or self.K[1, 1] <= 0 or self.width <= 0 or self.height <= 0:
-            raise AssetError(
-                f"{source}: camera {self.name!r} needs positive focal lengths and "
-                f"image size, got K={self.K.tolist()}, size={self.width}x{self.height}"
-            )
-        return self
 
     @property
     def center(self) -> np.ndarray:

@@ -18,6 +18,7 @@ import torch
 from PIL import Image
 
 from texvocab.capture.camera import Camera
+from texvocab.capture.image_reader import image_size, read_image, read_mask, verify_image
 from texvocab.errors import AssetError
 
 SYNTH_META = "texvocab_synth.json"
@@ -28,28 +29,6 @@ def default_num_train(num_frames: int, num_views: int) -> int:
     or ⌊0.8·T⌋ with one camera (the last 20 % are its novel poses); at least 1."""
     share = 0.8 if num_views == 1 else 0.7
     return max(1, int(share * num_frames))
-
-
-def read_image(path: Path) -> np.ndarray:
-    """float32 RGB (H, W, 3) in [0, 1]."""
-    try:
-        with Image.open(path) as im:
-            return np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
-    except FileNotFoundError:
-        raise AssetError(f"image not found: {path}") from None
-    except OSError as exc:
-        raise AssetError(f"{path}: not a readable image ({exc})") from None
-
-
-def read_mask(path: Path) -> np.ndarray:
-    """bool (H, W): foreground where the (possibly JPEG-compressed) mask is > 0.5."""
-    try:
-        with Image.open(path) as im:
-            return np.asarray(im.convert("L"), dtype=np.uint8) > 127
-    except FileNotFoundError:
-        raise AssetError(f"mask not found: {path}") from None
-    except OSError as exc:
-        raise AssetError(f"{path}: not a readable mask ({exc})") from None
 
 
 @dataclass
@@ -161,7 +140,7 @@ class Capture:
         """(H, W, 3) float32 RGB, undistorted (black outside the mask when ``masked``;
         resized to ``image_scale`` after both)."""
         img = read_image(self.image_paths[frame][view])
-        self._check_size(self.image_paths[frame][view], img.shape, view)
+        self.check_size(self.image_paths[frame][view], img.shape, view)
         img = self._source(view).undistort_image(img)
         if self.masked:
             img = img * self._source_mask(view, frame)[..., None]
@@ -170,7 +149,7 @@ class Capture:
     def _source_mask(self, view: int, frame: int) -> np.ndarray:
         """(H, W) bool foreground at the size on disk, undistorted."""
         m = read_mask(self.mask_paths[frame][view])
-        self._check_size(self.mask_paths[frame][view], m.shape, view)
+        self.check_size(self.mask_paths[frame][view], m.shape, view)
         return self._source(view).undistort_image(m.astype(np.uint8), nearest=True) > 0
 
     def mask(self, view: int, frame: int) -> np.ndarray:
@@ -180,7 +159,8 @@ class Capture:
             return m
         return self._resized(m.astype(np.float32), view) > 0.5
 
-    def _check_size(self, path: Path, shape: tuple, view: int) -> None:
+    def check_size(self, path: Path, shape: tuple, view: int) -> None:
+        """AssetError naming ``path`` when ``shape`` (H, W[, C]) is not ``view``'s size on disk."""
         cam = self._source(view)
         if tuple(shape[:2]) != (cam.height, cam.width):
             raise AssetError(
@@ -188,21 +168,36 @@ class Capture:
                 f"calibration (and its other images) say {cam.width}x{cam.height}"
             )
 
+    def image_problems(self, frames=None, views=None, decode: bool = False, masks: bool = True) -> list[str]:
+        """One line per image (and mask, with ``masks``) of ``frames`` x ``views`` (default
+        all) that is missing, unreadable, over the pixel limit or not its view's size, each
+        naming the file (:mod:`texvocab.capture.image_reader`); with ``decode`` every file
+        is decoded too, which finds truncated and damaged ones. Empty: all are well."""
+        frames = range(self.num_frames) if frames is None else frames
+        views = range(self.num_views) if views is None else views
+        problems = []
+        for t in frames:
+            for v in views:
+                files = [(self.image_paths[t][v], "image")] + masks * [(self.mask_paths[t][v], "mask")]
+                for path, what in files:
+                    try:
+                        w, h = image_size(path, what)
+                        self.check_size(path, (h, w), v)
+                        if decode:
+                            verify_image(path, what)
+                    except AssetError as e:
+                        problems.append(str(e))
+        return problems
+
     def check_image_sizes(self, frames=None, views=None) -> None:
         """Read the header of every image and mask of ``frames`` x ``views`` (default
         all) and raise AssetError naming the first that is unreadable or not its view's
-        size: a cheap check before long work (no pixels are decoded)."""
-        frames = range(self.num_frames) if frames is None else frames
-        views = range(self.num_views) if views is None else views
-        for t in frames:
-            for v in views:
-                for path in (self.image_paths[t][v], self.mask_paths[t][v]):
-                    try:
-                        with Image.open(path) as im:
-                            size = im.size
-                    except (OSError, ValueError) as e:
-                        raise AssetError(f"{path}: not a readable image ({type(e).__name__})") from None
-                    self._check_size(path, (size[1], size[0]), v)
+        size (and how many more are): a cheap check before long work (no pixels are
+        decoded)."""
+        problems = self.image_problems(frames, views)
+        if problems:
+            more = f" (and {len(problems) - 1} more bad image files)" if len(problems) > 1 else ""
+            raise AssetError(problems[0] + more)
 
     def shape(self) -> torch.Tensor | None:
         """(1, S) the subject's shape coefficients as the body takes them (the first

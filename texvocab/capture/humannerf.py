@@ -29,10 +29,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
+from texvocab.capture.calibration_checks import CameraFields, check_camera, check_views_see_subject
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture, default_num_train
+from texvocab.capture.image_reader import first_size
+from texvocab.capture.mask_checks import check_mask_content
 from texvocab.errors import AssetError
 from texvocab.geometry.rotations import quat_multiply, quat_to_rotvec, rotvec_to_quat, rotvec_to_rotmat
 from texvocab.io.safe_pickle import read_pickle
@@ -78,17 +80,11 @@ def _camera(cams: dict[str, dict], path: Path, size: tuple[int, int]) -> Camera:
     """The one camera of every frame; AssetError naming the field or the frame that is not."""
     first, entry = next(iter(cams.items()))
     K, E = entry["intrinsics"].astype(np.float64), entry["extrinsics"].astype(np.float64)
-    if np.abs(K[2] - (0, 0, 1)).max() > 1e-6:
-        raise AssetError(f"{path}: {first} 'intrinsics' last row is {K[2].tolist()}; expected (0, 0, 1)")
     if np.abs(E[3] - (0, 0, 0, 1)).max() > 1e-6:
         raise AssetError(f"{path}: {first} 'extrinsics' last row is {E[3].tolist()}; expected (0, 0, 0, 1)")
-    R = E[:3, :3]
-    if abs(np.linalg.det(R) - 1) > 1e-3 or np.abs(R @ R.T - np.eye(3)).max() > 1e-3:
-        raise AssetError(
-            f"{path}: {first} 'extrinsics' [:3, :3] is not a rotation (det "
-            f"{np.linalg.det(R):.4f}); expected world->camera [R | T]"
-        )
     zeros = np.zeros(5)
+    cam = Camera(K, E[:3, :3], E[:3, 3], size[0], size[1], entry.get("distortions", zeros), name="camera")
+    check_camera(cam, str(path), _fields(first))
     for key in CAMERA_KEYS:
         ref = entry.get(key, zeros)
         stack = np.stack([c.get(key, zeros) for c in cams.values()]).astype(np.float64)
@@ -101,8 +97,19 @@ def _camera(cams: dict[str, dict], path: Path, size: tuple[int, int]) -> Camera:
                 "camera (one image per frame: per-frame cameras would be a moving "
                 "camera); see assets_spec/captures.md"
             )
-    cam = Camera(K, R, E[:3, 3], size[0], size[1], entry.get("distortions", zeros), name="camera")
-    return cam.validate(f"{path}: {first}")
+    return cam
+
+
+def _fields(frame: str) -> CameraFields:
+    """How ``cameras.pkl`` names the camera's fields (those of its first frame)."""
+    return CameraFields.keyed(
+        f"{frame} ",
+        "'intrinsics'",
+        "'extrinsics'[:3, :3]",
+        "'extrinsics'[:3, 3]",
+        "'distortions'",
+        "image size",
+    )
 
 
 def _files(folder: Path) -> dict[str, Path]:
@@ -110,14 +117,6 @@ def _files(folder: Path) -> dict[str, Path]:
     if not folder.is_dir():
         raise AssetError(f"{folder}: missing (a HumanNeRF folder has images/ and masks/)")
     return {p.stem: p for p in sorted(folder.iterdir()) if p.suffix.lower() in IMAGE_SUFFIXES}
-
-
-def _image_size(path: Path) -> tuple[int, int]:
-    try:
-        with Image.open(path) as im:
-            return im.size
-    except (OSError, ValueError) as e:
-        raise AssetError(f"{path}: not a readable image ({type(e).__name__})") from None
 
 
 def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
@@ -153,7 +152,7 @@ def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
             f"{root}: none of the {len(infos)} frames of mesh_infos.pkl has both "
             "an image in images/ and a mask in masks/"
         )
-    camera = _camera(cams, root / "cameras.pkl", _image_size(images[names[0]]))
+    camera = _camera(cams, root / "cameras.pkl", first_size([images[n] for n in names]))
     info = [infos[n] for n in names]
     rest = np.stack([m["tpose_joints"] for m in info]).astype(np.float64)
     spread = np.abs(rest - rest[0]).max()
@@ -171,7 +170,7 @@ def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
     poses[:, 0] = quat_to_rotvec(q).numpy()
     j0_subject, j0_body = rest[0, 0], body.rest_joints[0].double().numpy()
     trans = th + rotvec_to_rotmat(rh).numpy() @ j0_subject - j0_body
-    return Capture(
+    capture = Capture(
         root=root,
         layout="humannerf",
         cameras=[camera],
@@ -184,3 +183,6 @@ def read_humannerf(root: Path, body, num_train: int | None = None) -> Capture:
         body=body,
         rest_joints=rest[0],
     )
+    check_views_see_subject(capture, str(root / "cameras.pkl"), [_fields(next(iter(cams)))])
+    check_mask_content(capture)
+    return capture

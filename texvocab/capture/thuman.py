@@ -21,8 +21,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from texvocab.capture.calibration_checks import CameraFields, check_camera, check_views_see_subject
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture, default_num_train
+from texvocab.capture.mask_checks import check_mask_content
 from texvocab.errors import AssetError
 from texvocab.io.images import atomic_write_bytes, to_uint8
 from texvocab.io.safe_pickle import read_npz
@@ -36,16 +38,49 @@ def is_thuman(root: Path) -> bool:
 
 
 def _frames_of(folder: Path) -> list[Path]:
-    return sorted(f for f in folder.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+    """The images of a view folder by frame number; AssetError when it has none or a name
+    that is not a frame number."""
+    files = [f for f in folder.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES]
+    if not files:
+        raise AssetError(
+            f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}); expected one per frame, %08d.jpg"
+        )
+    for f in files:
+        if not (f.stem.isascii() and f.stem.isdigit()):
+            raise AssetError(f"{f}: name {f.stem!r} is not a frame number; expected %08d.jpg")
+    return sorted(files, key=lambda f: int(f.stem))
+
+
+def _fields(name: str) -> CameraFields:
+    """How ``calibration.json`` names camera ``name``'s fields."""
+    return CameraFields.keyed("", "'K'", "'R'", "'T'", "'D'", "'imgSize'")
+
+
+def _calibration(path: Path) -> dict[str, dict]:
+    """``calibration.json``: {camera name: {K, R, T, imgSize[, D]}}, or AssetError."""
+    try:
+        calib = json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise AssetError(
+            f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); expected JSON"
+        ) from None
+    except json.JSONDecodeError as exc:
+        raise AssetError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(calib, dict) or not calib:
+        raise AssetError(
+            f"{path}: holds {type(calib).__name__}{' (empty)' if not calib else ''}; expected a "
+            "JSON object {camera name: {K, R, T, imgSize}}"
+        )
+    for name, entry in calib.items():
+        if not isinstance(entry, dict):
+            raise AssetError(f"{path}: camera {name!r} holds {type(entry).__name__}; expected an object")
+    return calib
 
 
 def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
     """Open a THUman4.0-style capture folder."""
     calib_path = root / "calibration.json"
-    try:
-        calib = json.loads(calib_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise AssetError(f"{calib_path}: not valid JSON ({exc})") from None
+    calib = _calibration(calib_path)
     names = sorted(calib)
     image_dirs = (
         sorted(d.name for d in (root / "images").iterdir() if d.is_dir())
@@ -85,12 +120,12 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
                 c.get("D", np.zeros(5)),
                 name=name,
             )
-        except (KeyError, ValueError, TypeError) as exc:
+        except (KeyError, ValueError, TypeError, OverflowError) as exc:
             raise AssetError(
                 f"{calib_path}: camera {name} needs K (9), R (9), T (3), "
                 f"imgSize [W, H] ({type(exc).__name__}: {exc})"
             ) from None
-        cameras.append(cam.validate(str(calib_path)))
+        cameras.append(check_camera(cam, str(calib_path), _fields(name)))
         image_paths.append(imgs)
         mask_paths.append(masks)
     params_path = root / "smpl_params.npz"
@@ -107,7 +142,7 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
     poses[:, 1:22] = p["body_pose"][idx].reshape(n, 21, 3)
     # SMPL-X betas are not SMPL's: kept aside for the body fit (texvocab.capture.subject)
     betas = p["betas"].reshape(-1, p["betas"].shape[-1])[0] if "betas" in p else None
-    return Capture(
+    capture = Capture(
         root=root,
         layout="thuman",
         cameras=cameras,
@@ -120,6 +155,9 @@ def read_thuman(root: Path, body, num_train: int | None = None) -> Capture:
         body=body,
         meta={} if betas is None else {"smplx_betas": np.asarray(betas, np.float64)},
     )
+    check_views_see_subject(capture, str(calib_path), [_fields(name) for name in names])
+    check_mask_content(capture)
+    return capture
 
 
 class ThumanWriter:

@@ -16,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
+from texvocab.capture.calibration_checks import CameraFields, check_camera, check_views_see_subject
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import Capture, default_num_train
+from texvocab.capture.image_reader import first_size
+from texvocab.capture.mask_checks import check_mask_content
 from texvocab.errors import AssetError
 from texvocab.geometry.rotations import quat_multiply, quat_to_rotvec, rotvec_to_quat, rotvec_to_rotmat
 from texvocab.io.images import save_png
@@ -75,8 +77,19 @@ def _cameras(annots: dict, path: Path, num_views: int, size: tuple[int, int]) ->
             arrays[key] = a.reshape(shape) if shape is not None else a.reshape(-1)
         dist = arrays.get("D", np.zeros(5))
         cam = Camera(arrays["K"], arrays["R"], arrays["T"] / 1000.0, size[0], size[1], dist, name=f"view{v}")
-        out.append(cam.validate(str(path)))
+        out.append(check_camera(cam, str(path), _fields(v)))
     return out
+
+
+def _fields(v: int) -> CameraFields:
+    """How ``annots.npy`` names view ``v``'s calibration."""
+    return CameraFields(
+        f"cams['K'][{v}]",
+        f"cams['R'][{v}]",
+        f"cams['T'][{v}]",
+        f"cams['D'][{v}]",
+        f"the size of view {v}'s images",
+    )
 
 
 def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
@@ -116,8 +129,7 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
                 f"{d}: {found} images but {annots_path.name} lists {len(ims)} frames "
                 "(frame count mismatch between views)"
             )
-    with Image.open(root / ims[0][0]) as im:
-        size = im.size
+    size = first_size([root / row[0] for row in ims])
     cameras = _cameras(annots, annots_path, num_views, size)
     mask_dir = next((root / m for m in MASK_DIRS if (root / m).is_dir()), None)
     if mask_dir is None:
@@ -146,7 +158,7 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
         trans.append(th + rotvec_to_rotmat(torch.as_tensor(rh)).numpy() @ j0 - j0)
         poses.append(pose)
     masks = [[mask_dir / Path(p).with_suffix(".png") for p in row] for row in ims]
-    return Capture(
+    capture = Capture(
         root=root,
         layout="zju",
         cameras=cameras,
@@ -159,6 +171,9 @@ def read_zju(root: Path, body, num_train: int | None = None) -> Capture:
         body=body,
         betas=betas,
     )
+    check_views_see_subject(capture, str(annots_path), [_fields(v) for v in range(num_views)])
+    check_mask_content(capture)
+    return capture
 
 
 class ZjuWriter:

@@ -11,9 +11,12 @@ import torch
 from texvocab.body import smpl_io
 from texvocab.capture import detect_layout
 from texvocab.capture import open as open_capture
+from texvocab.capture.mask_checks import survey_masks
 from texvocab.errors import AssetError, PoseError
 from texvocab.io.spec import check_arrays, load_spec, name_is_accepted, spec_ref
 from texvocab.pipeline.settings import Settings
+
+MAX_LINES = 100  # bad files listed by name; more are counted
 
 
 def check_path(path: str | Path) -> list[str]:
@@ -55,20 +58,12 @@ def _is_capture(path: Path) -> bool:
 
 def _check_content(cap) -> list[str]:
     """What training and evaluation rely on beyond the files: poses finite and within the
-    stated bounds, every mask non-empty, the default held-out views present."""
+    stated bounds, the default held-out views present."""
     lines = []
     try:
         cap.body.check_pose(torch.as_tensor(np.asarray(cap.poses)), torch.as_tensor(np.asarray(cap.trans)))
     except PoseError as exc:
         lines.append(f"FAIL {cap.root}: {exc}")
-    empty = [(t, v) for t in range(cap.num_frames) for v in range(cap.num_views) if not cap.mask(v, t).any()]
-    if empty:
-        t, v = empty[0]
-        lines.append(
-            f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(empty)} of "
-            f"{cap.num_frames * cap.num_views} masks are empty); training and "
-            "evaluation need the person in every view"
-        )
     held_out = [v for v in Settings().data.eval_views if v >= cap.num_views]
     novel = cap.num_frames - cap.num_train
     if cap.num_views == 1:
@@ -91,24 +86,45 @@ def _check_content(cap) -> list[str]:
     return lines
 
 
+def _frames_of(cap, where: list[tuple[int, int]]) -> str:
+    shown = ", ".join(f"{cap.frame_ids[t]} (view {v})" for t, v in where[: MAX_LINES // 10])
+    return shown + (f" and {len(where) - MAX_LINES // 10} more" if len(where) > MAX_LINES // 10 else "")
+
+
+def _file_lines(cap) -> list[str]:
+    """Every image and mask decoded once: a FAIL line per bad file (at most ``MAX_LINES``,
+    then a count), a FAIL line for empty masks, a note for full ones."""
+    survey = survey_masks(cap)
+    problems = cap.image_problems(decode=True, masks=False) + survey.problems
+    lines = [f"FAIL {p}" for p in problems[:MAX_LINES]]
+    if len(problems) > MAX_LINES:
+        lines.append(f"FAIL ... and {len(problems) - MAX_LINES} more bad image or mask files")
+    total = cap.num_frames * cap.num_views
+    if survey.empty:
+        t, v = survey.empty[0]
+        lines.append(
+            f"FAIL {cap.mask_paths[t][v]}: empty mask ({len(survey.empty)} of {total} masks are "
+            f"empty: frames {_frames_of(cap, survey.empty)}); training and evaluation need the "
+            "person in every view"
+        )
+    if survey.full:
+        lines.append(
+            f"note {cap.root}: {len(survey.full)} of {total} masks are full (every pixel "
+            f"foreground): frames {_frames_of(cap, survey.full)}; a mask should be the "
+            "person's silhouette"
+        )
+    return lines
+
+
 def check_capture(path: Path) -> list[str]:
-    """Open a capture folder and stat every image and mask it lists."""
+    """Open a capture folder and decode every image and mask it lists, reporting every bad
+    one in one pass."""
     try:
         cap = open_capture(path)
     except AssetError as exc:
         return [f"FAIL {exc}"]
-    missing = [
-        p for rows in (cap.image_paths, cap.mask_paths) for row in rows for p in row if not p.is_file()
-    ]
-    lines = [f"FAIL {p}: listed by the capture but missing" for p in missing[:10]]
-    if len(missing) > 10:
-        lines.append(f"FAIL ... and {len(missing) - 10} more missing files")
-    if not missing:
-        try:
-            cap.check_image_sizes()
-        except AssetError as exc:
-            lines.append(f"FAIL {exc}")
-    if not lines:
+    lines = _file_lines(cap)
+    if not [ln for ln in lines if ln.startswith("FAIL")]:
         lines += _check_content(cap)
     if not [ln for ln in lines if ln.startswith("FAIL")]:
         lines.append(

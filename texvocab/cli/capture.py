@@ -69,6 +69,10 @@ def add_synth_parser(sub, add_smpl) -> None:
     p.set_defaults(func=cmd_synth)
 
 
+#: Largest image and garment texture sides ``synth`` renders (pixels per side).
+SYNTH_LIMITS = {"size": 4096, "texture_size": 4096}
+
+
 def cmd_synth(args: argparse.Namespace) -> int:
     # late: torch; `texvocab --help` stays light (module docstring)
     from texvocab.body import load_body
@@ -77,8 +81,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     for name in ("frames", "ring_views", "size", "texture_size"):
         value = getattr(args, name, None)
-        if value is not None and value < 1:
-            raise TexvocabError(f"--{name.replace('_', '-')} {value}: expected at least 1")
+        if value is not None and not 1 <= value <= SYNTH_LIMITS.get(name, value):
+            top = f" and at most {SYNTH_LIMITS[name]}" if name in SYNTH_LIMITS else ""
+            raise TexvocabError(f"--{name.replace('_', '-')} {value}: expected at least 1{top}")
     if args.raised_views < 0 or (args.train_frames is not None and args.train_frames < 0):
         raise TexvocabError("--raised-views and --train-frames must not be negative")
     body = load_body(args.smpl)

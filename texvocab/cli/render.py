@@ -131,7 +131,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     # late: torch (module docstring of texvocab.cli.main)
     import numpy as np
 
-    from texvocab.body.pose_files import read_pose_sequence
+    from texvocab.body.pose_files import MAX_FPS, read_pose_sequence
     from texvocab.pipeline.avatar import load_avatar
     from texvocab.pipeline.clip import (
         ClipSpec,
@@ -146,8 +146,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from texvocab.pipeline.settings import RENDER_KNOBS, march_settings, render_overrides
 
     out = Path(args.out)
-    if not args.fps > 0:
-        raise TexvocabError(f"--fps {args.fps}: expected a frame rate > 0")
+    if not 0 < args.fps <= MAX_FPS:
+        raise TexvocabError(f"--fps {args.fps:g}: expected a frame rate in (0, {MAX_FPS:g}]")
     if args.workers < 1:
         raise TexvocabError(f"--workers {args.workers}: expected at least 1")
     panels = [p.strip() for p in args.panels.split(",") if p.strip()]

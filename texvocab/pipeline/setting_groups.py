@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
-from texvocab.knobs import Check, above, at_least, check_group, knob, within
+from texvocab.knobs import Check, above, at_least, check_group, count_in, knob, within
 from texvocab.metrics.inception_perceptual import MIN_PATCH
 
 # choices (each the Literal of a tuple the method defines; tests/pipeline keep them equal)
@@ -36,7 +36,9 @@ class DataSettings:
     GROUP: ClassVar[str] = "data"
 
     texture_size: int = knob(
-        256, at_least(8), doc="(S/A) texels per side of U_t; the encoder's cost grows with its square"
+        256,
+        count_in(8, 4096),
+        doc="(S/A) texels per side of U_t; the encoder's cost grows with its square",
     )
     train_views: tuple[int, ...] | None = knob(
         None,
