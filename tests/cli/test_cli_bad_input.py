@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from bad_capture_cases import CAPTURE_CASES
 from disk_snapshot import snapshot
 from train_cases import tiny_settings
 
@@ -377,7 +378,7 @@ CASES = [
     ),
     ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
     ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
-]
+] + CAPTURE_CASES
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
