@@ -11,8 +11,9 @@ Groups (each varies one knob from the common base; the first variant is its refe
 small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: mean,
-nearest), ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
-raster; its report adds the training PSNR curve per 100 steps, paired by seed). The
+nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``refinement`` (pose
+refinement: off, root, joints), ``training`` (train_guide: shell, raster; its report adds
+the training PSNR curve per 100 steps, paired by seed). The
 base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
 weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none
 train_residual=off train_band_newton=false train_shell_voxel=0.01``: the project before
@@ -79,6 +80,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # texels a frame's views did not see (one-camera captures): the training frames' mean
     # (the default, the reference) against the earlier nearest-seen colour of the same map
     "unseen": {"mean": [], "nearest": ["unseen_texels=nearest"]},
+    "view_frame": {"world": [], "body": ["field.view_frame=body"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with

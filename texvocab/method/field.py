@@ -27,6 +27,8 @@ from texvocab.geometry.rotations import rotvec_to_quat
 from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
 
+VIEW_FRAMES = ("world", "body")
+
 
 @dataclass
 class FieldSettings:
@@ -52,6 +54,12 @@ class FieldSettings:
         0.04,
         within(0, 1, open_low=True, unit=" m"),
         doc="points farther from the body count as empty space (m)",
+    )
+    view_frame: str = knob(
+        "world",
+        Check(lambda v, g: v in VIEW_FRAMES, "one of " + ", ".join(VIEW_FRAMES)),
+        doc="γ(d) reads the viewing direction in the world, or in the body's frame at the point "
+        "(d_c = R⁻¹d, R the blended bone rotation): how the body faces the camera and lights",
     )
 
     def __post_init__(self) -> None:
@@ -127,13 +135,21 @@ class AvatarField(nn.Module):
     def beta(self) -> torch.Tensor:
         return self.log_beta.exp().clamp(min=self.settings.beta_min)
 
-    def canonicalize(self, ctx: PoseContext, points: torch.Tensor, skin: torch.Tensor) -> torch.Tensor:
-        """x_c = (Σ_j ω_j A_j)^-1 x with ω the closest surface point's weights: (N, 3)."""
+    def canonicalize(
+        self, ctx: PoseContext, points: torch.Tensor, skin: torch.Tensor, dirs: torch.Tensor | None = None
+    ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+        """x_c = (Σ_j ω_j A_j)^-1 x with ω the closest surface point's weights: (N, 3);
+        with ``dirs`` (N, 3) also d_c = R⁻¹d (R the blend's linear part), renormalised:
+        ``(x_c, d_c)`` from one solve."""
         blended = torch.einsum("nj,jrc->nrc", skin, ctx.transforms.to(skin))  # (N, 4, 4)
         rot, tr = blended[:, :3, :3], blended[:, :3, 3]
         eye = torch.eye(3, dtype=skin.dtype).expand_as(rot)
         rot = torch.where(skin.sum(-1, keepdim=True)[..., None] > 0, rot, eye)
-        return torch.linalg.solve(rot, (points - tr).unsqueeze(-1)).squeeze(-1)
+        if dirs is None:
+            return torch.linalg.solve(rot, (points - tr).unsqueeze(-1)).squeeze(-1)
+        both = torch.linalg.solve(rot, torch.stack([points - tr, dirs.to(points)], -1))  # (N, 3, 2)
+        d_c = both[..., 1]
+        return both[..., 0], d_c / d_c.norm(dim=-1, keepdim=True).clamp(min=1e-9)
 
     def _sdf_hidden(self, ctx: PoseContext, x: torch.Tensor) -> torch.Tensor:
         """sdf_net([x, q(Θ)]) for per-point inputs x (N, D) and the pose's quaternions q
@@ -167,7 +183,10 @@ class AvatarField(nn.Module):
         # warped point (texvocab.method.pose_refinement); x = points without it
         x, d = (points, dirs) if ctx.warp is None else ctx.warp(points, dirs, out.skin_weights)
         d_body = d_body + ((x - points.detach()) * grad_dir.detach()).sum(-1)
-        x_c = self.canonicalize(ctx, x, out.skin_weights)
+        if s.view_frame == "body":  # the direction as the body at the point sees it
+            x_c, d = self.canonicalize(ctx, x, out.skin_weights, d)
+        else:
+            x_c = self.canonicalize(ctx, x, out.skin_weights)
         feat = self.feature_proj(out.features.to(points.dtype))
         h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat], -1))
         sdf = d_body + h[:, 0] * valid
