@@ -63,6 +63,13 @@ def _scale_t(cams):
     cams["T"][0] = cams["T"][0] * 1e12
 
 
+def _th_string(root):
+    path = root / "params" / "1.npy"
+    params = np.load(path, allow_pickle=True).item()
+    params["Th"] = "abc"
+    np.save(path, params, allow_pickle=True)
+
+
 def _all_masks(value):
     def change(root):
         for path in (root / "mask").rglob("*.png"):
@@ -117,6 +124,7 @@ CAPTURE_CASES = [
     ("calib-R-not-rotation", _vocab("r_scaled", _set("R", (0, 0), 3.0)), "cams['R'][0]: is not a rotation"),
     ("calib-facing-away", _vocab("away", _cams(_turn_away)), "does not see the subject"),
     ("calib-T-1e12", _vocab("far", _cams(_scale_t)), "m away; expected it 0.05..100 m in front"),
+    ("params-Th-string", _vocab("th_str", _th_string), "1.npy: 'Th' is a str; expected numbers"),
     # masks that cannot be a silhouette
     ("masks-all-empty", _vocab("m_empty", _all_masks(0)), "all 30 masks are empty"),
     ("masks-all-full", _vocab("m_full", _all_masks(255)), "all 30 masks are full"),

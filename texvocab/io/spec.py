@@ -58,6 +58,17 @@ def check_arrays(arrays: dict, spec: dict, source: str) -> list[str]:
         if hasattr(value, "tocsc") and not rule.get("sparse_ok"):
             problems.append(f"{source}: '{key}' is a sparse matrix; expected a dense array")
             continue
+        if not hasattr(value, "shape"):  # a string, a number, a list: what it is as an array
+            kind = type(value).__name__
+            try:
+                value = np.asarray(value)
+            except (TypeError, ValueError):  # a ragged list
+                value = np.asarray(None)
+            if value.dtype.kind in "OUS":
+                problems.append(
+                    f"{source}: '{key}' is a {kind}; expected numbers of shape {tuple(rule['shape'])}"
+                )
+                continue
         shape = tuple(value.shape)
         want = rule["shape"]
         ok = len(shape) == len(want)
