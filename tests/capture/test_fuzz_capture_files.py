@@ -4,11 +4,13 @@ either read correctly or raise AssetError / TexvocabError naming the file, never
 exception; what the checks accept is a usable camera."""
 
 import json
+import pickle
 import shutil
 
 import numpy as np
 import pytest
 from bad_files import png_bytes, png_declaring
+from humannerf_cases import make_truth, write_standin
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -140,4 +142,44 @@ def test_thuman_calibration_entries(thuman, tmp_path_factory, where, junk):
         assert str(root) in str(e)
         return
     assert cap.num_views == 2
+    cap.check_image_sizes()
+
+
+@pytest.fixture(scope="module")
+def humannerf(tmp_path_factory):
+    body = default_body()
+    return write_standin(tmp_path_factory.mktemp("fuzz_hn") / "subject", body, make_truth(body))
+
+
+PICKLE_JUNK = st.one_of(
+    JSON_JUNK,
+    st.sampled_from([np.zeros(()), np.zeros((3, 3)), np.zeros((4, 4)), np.eye(4) * 1e12, np.full(5, np.nan)]),
+    st.lists(NUMBERS, min_size=1, max_size=16).map(np.asarray),
+)
+
+
+@FUZZ
+@given(
+    st.sampled_from(["cameras.pkl", "mesh_infos.pkl"]),
+    st.sampled_from(["frame_000000", "frame_000003"]),
+    st.sampled_from(
+        ["intrinsics", "extrinsics", "distortions", "Rh", "Th", "poses", "tpose_joints", "entry"]
+    ),
+    PICKLE_JUNK,
+)
+def test_humannerf_pickle_entries(humannerf, tmp_path_factory, fname, frame, key, junk):
+    root = tmp_path_factory.mktemp("hn") / "subject"
+    shutil.copytree(humannerf, root)
+    data = pickle.loads((root / fname).read_bytes())
+    if key == "entry":
+        data[frame] = junk
+    else:
+        data[frame][key] = junk
+    (root / fname).write_bytes(pickle.dumps(data))
+    try:
+        cap = open_capture(root)
+    except TexvocabError as e:
+        assert str(root) in str(e)
+        return
+    assert cap.num_views == 1
     cap.check_image_sizes()
