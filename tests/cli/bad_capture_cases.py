@@ -5,6 +5,7 @@ full, and sizes and frame rates beyond their stated limits. Each case is (id, ar
 words of the error line); builders copy the world's capture and change the copy."""
 
 import shutil
+import zipfile
 
 import numpy as np
 from bad_files import garbage, gif_bytes, png_declaring, truncated
@@ -86,6 +87,17 @@ def _pose_file(world, name, **arrays):
     return str(path)
 
 
+def _lying_header(world):
+    """A pose file whose 'poses' header declares 10^9 frames over 2 frames of data."""
+    path = world / "bad" / "liar.npz"
+    path.parent.mkdir(exist_ok=True)
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive, archive.open("poses.npy", "w") as fh:
+        header = {"descr": "<f8", "fortran_order": False, "shape": (10**9, 72)}
+        np.lib.format.write_array_header_1_0(fh, header)
+        fh.write(bytes(2 * 72 * 8))
+    return str(path)
+
+
 def _train(name, change):
     return lambda w: ["train", _copy(w, name, change), "--out", str(w / "new_run"), "--set", "num_keys=3"]
 
@@ -159,5 +171,10 @@ CAPTURE_CASES = [
         "synth-poses-rate-string",
         lambda w: ["synth", str(w / "new_cap"), "--poses", _pose_file(w, "str.npz", **AMASS_STRING_RATE)],
         "'mocap_framerate' is ['fast']",
+    ),
+    (
+        "synth-poses-header-declares-1e9-frames",
+        lambda w: ["synth", str(w / "new_cap"), "--poses", _lying_header(w)],
+        "liar.npz: array 'poses' declares (1000000000, 72) float64",
     ),
 ]

@@ -174,6 +174,39 @@ def _plain_tree(value, source: str, key: str = ""):
     return _to_plain(value, key, source)
 
 
+#: Most bytes the arrays of one ``.npz`` may decompress to (an SMPL-X model file holds
+#: about 250 MB): counted from the archive's directory and each array's header before any
+#: array is read, so a small zip of zeros cannot fill memory.
+MAX_NPZ_BYTES = 2**30
+
+
+def _npz_bytes(path: Path, what: str) -> None:
+    """AssetError when the arrays of the archive at ``path`` would decompress to more than
+    :data:`MAX_NPZ_BYTES`, or an array's header declares more bytes than its member holds."""
+    total = 0
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            total += info.file_size
+            if info.filename.endswith(".npy") and total <= MAX_NPZ_BYTES:
+                with archive.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    header = np.lib.format.read_array_header_1_0
+                    shape, _, dtype = (header if version == (1, 0) else np.lib.format.read_array_header_2_0)(
+                        fh
+                    )
+                declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if declared > info.file_size:
+                    raise AssetError(
+                        f"{path}: array '{info.filename[:-4]}' declares {shape} {dtype} "
+                        f"({declared / 1e6:.3g} MB) but holds {info.file_size / 1e6:.3g} MB; expected {what}"
+                    )
+            if total > MAX_NPZ_BYTES:
+                raise AssetError(
+                    f"{path}: its arrays decompress to more than {MAX_NPZ_BYTES / 2**30:g} GiB "
+                    f"(the limit for one .npz); expected {what}"
+                )
+
+
 def read_npz(path: str | Path, what: str = "file") -> dict:
     """Every array of an ``.npz`` (``allow_pickle=False``: object arrays are refused);
     one :class:`AssetError` naming the file for a missing or unreadable one."""
@@ -183,8 +216,11 @@ def read_npz(path: str | Path, what: str = "file") -> dict:
     if not zipfile.is_zipfile(path):  # np.load would try to unpickle it
         raise AssetError(f"{path}: not an .npz archive (a zip of .npy arrays); expected {what}")
     try:
+        _npz_bytes(path, what)
         with np.load(path, allow_pickle=False) as npz:
             data = {k: npz[k] for k in npz.files}
+    except AssetError:
+        raise
     except ValueError:
         raise AssetError(
             f"{path}: holds object (pickled) arrays, which are refused; expected {what} with numeric arrays"
