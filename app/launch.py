@@ -7,6 +7,8 @@ benchmarks (:mod:`texvocab_viewer.testing`)."""
 from __future__ import annotations
 
 import argparse
+import atexit
+import os
 import sys
 
 from texvocab.errors import TexvocabError
@@ -18,7 +20,9 @@ PROG = "python -m texvocab_viewer"
 
 
 def run_from_args(args: argparse.Namespace) -> int:
-    """Run the viewer from :func:`texvocab_viewer.arguments.add_view_arguments`' namespace."""
+    """Run the viewer from :func:`texvocab_viewer.arguments.add_view_arguments`' namespace.
+    Once the window has closed, the process ends at once with its exit code
+    (:func:`exit_now`)."""
     if args.neural_processes < 1:
         raise TexvocabError(f"--neural-processes {args.neural_processes}: expected at least 1")
     if not 0 <= args.neural_preview_wait <= PREVIEW_WAIT_MAX_MS:
@@ -28,7 +32,7 @@ def run_from_args(args: argparse.Namespace) -> int:
         )
     size = parse_size(args.size, WINDOW_MIN)
     script = None if args.script is None else Script(args.script, args.report, args.screenshot)
-    return run_viewer(
+    rc = run_viewer(
         args.source,
         args.smpl,
         size,
@@ -42,6 +46,19 @@ def run_from_args(args: argparse.Namespace) -> int:
         args.neural_processes,
         args.neural_preview_wait,
     )
+    exit_now(rc)
+    return rc  # not reached
+
+
+def exit_now(rc: int) -> None:
+    """End the process with ``rc`` after its exit handlers, without the interpreter's
+    teardown of its modules: with torch, GL and the ImGui backend loaded that takes about
+    a second on a loaded machine, after the window has already closed. Everything the
+    viewer writes is written (exports are finished or removed by then)."""
+    atexit._run_exitfuncs()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(rc)
 
 
 def main(argv: list[str] | None = None) -> int:

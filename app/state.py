@@ -215,13 +215,15 @@ class ViewerState:
         return self._changed(pose, self.rest_trans, "rest pose")
 
     def apply_preset(self, name: str) -> bool:
-        """A named preset (texvocab.body.poses): joints 1..23 from the preset, the root
-        orientation kept, translation = rest translation + the preset's offset."""
+        """A named preset (texvocab.body.poses), the whole pose: its joints, the rest pose's
+        root orientation (upright, facing as the rest pose faces) and the rest translation
+        plus the preset's offset; what ``texvocab shot --pose NAME`` shows, whatever the
+        pose before."""
         if name not in PRESETS:
             raise TexvocabError(f"unknown pose preset {name!r}; expected one of {sorted(PRESETS)}")
         p, t = preset(name)
         pose = np.asarray(p, np.float64).copy()
-        pose[0] = self.pose[0]
+        pose[0] = self.rest_root  # the presets' own roots are all zero
         return self._changed(pose, self.rest_trans + np.asarray(t, np.float64), f"preset {name}")
 
     def key_pose(self, part: str | int, key_index: int) -> tuple[tuple[int, ...], np.ndarray]:

@@ -6,7 +6,6 @@ worker, screenshots and exports, and the File menu's dialogs. The window around 
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import deque
 
@@ -14,12 +13,12 @@ import moderngl
 import numpy as np
 from imgui_bundle import hello_imgui, imgui
 
-from texvocab.errors import TexvocabError
-from texvocab.pipeline import follow_camera, march_settings
+from texvocab.pipeline import march_settings
 from texvocab_viewer.arguments import NEURAL_NICE
-from texvocab_viewer.dialogs import POSE_FILTERS, SOURCE_FILTERS, FileDialogs
-from texvocab_viewer.export.job import Export
-from texvocab_viewer.gl.camera import CaptureViewCamera, OrbitCamera, orbit_for
+from texvocab_viewer.controls.camera import CameraControls
+from texvocab_viewer.controls.exports import ExportControls, follow_cameras
+from texvocab_viewer.controls.files import FileControls
+from texvocab_viewer.dialogs import FileDialogs
 from texvocab_viewer.gl.colors import heat_color
 from texvocab_viewer.gl.scene import SceneOptions, SceneRenderer
 from texvocab_viewer.gl.view_blit import (
@@ -33,19 +32,23 @@ from texvocab_viewer.gl.view_blit import (
 )
 from texvocab_viewer.neural.wake import ui_waker
 from texvocab_viewer.panels.neural import NeuralView, camera_key, late_draw, start_worker
-from texvocab_viewer.panels.pose import load_sequence, tick_sequence
+from texvocab_viewer.panels.pose import tick_sequence
 from texvocab_viewer.panels.vocab import ThumbnailCache
-from texvocab_viewer.state import ViewerState, load_viewer_data
+from texvocab_viewer.state import ViewerState
+from texvocab_viewer.status import StatusLine
+
+__all__ = ["SUBMIT_AFTER", "Viewer", "follow_cameras"]
 
 #: panels whose widgets change the pose: the neural job is submitted as soon as they are
 #: drawn, not when the Neural render panel draws after the 3D view (8 ms later, or more)
 SUBMIT_AFTER = ("Pose",)
 
 
-class Viewer:
+class Viewer(CameraControls, FileControls, ExportControls):
     """Everything the panels share: loaded data, the edited pose, the orbit camera, scene
-    options, GL resources (made in :meth:`post_init`, inside the window's context) and
-    the neural render worker."""
+    options, GL resources (made in :meth:`post_init`, inside the window's context), the
+    neural render worker and the status line. The camera, the File menu and the exports
+    are in :mod:`texvocab_viewer.controls`."""
 
     def __init__(
         self,
@@ -95,6 +98,11 @@ class Viewer:
         self.reopen = None  # ViewerData chosen in File > Open: the window restarts on it
         self.open_error = ""
         self.smpl: str | None = None
+        self.layout = None  # where the panels dock (texvocab_viewer.layout.Layout; the window sets it)
+        self.panel_sizes: dict[str, tuple[float, float, int]] = {}  # per panel: w, h, frame drawn
+        self.status = StatusLine()  # the last error or success, at the window's bottom
+        self.open_sequence = False  # the Pose panel opens its Sequence header once
+        self._export_seen = None  # the export job whose outcome the status line has shown
 
     # -- lifecycle (hello_imgui callbacks) ---------------------------------------------
     def post_init(self) -> None:
@@ -135,6 +143,8 @@ class Viewer:
             )
 
     def before_exit(self) -> None:
+        if self.export is not None and self.export.running:
+            self.export.cancel()  # its partial files removed
         if self.neural is not None:
             self.neural.close()
         if self.thumbs is not None:
@@ -145,6 +155,9 @@ class Viewer:
     def draw_panel(self, name: str, draw) -> None:
         """Draw one docked panel (``draw(viewer)``), timing its UI-thread CPU."""
         cpu = time.thread_time()
+        if imgui.get_current_context() is not None:  # (tests call panels without a window)
+            size = imgui.get_window_size()
+            self.panel_sizes[name] = (size.x, size.y, imgui.get_frame_count())
         draw(self)
         if name in SUBMIT_AFTER:  # its sliders change the pose: the render starts now
             self.submit_neural(poll=False)
@@ -158,6 +171,7 @@ class Viewer:
         self._last_frame = (now, cpu)
         self.view_blit = None  # the 3D view panel sets it if it draws this frame
         self.poll_dialogs()
+        self.show_export_outcome()
         tick_sequence(self)
         self.follow_root()
         self.submit_neural()
@@ -225,63 +239,6 @@ class Viewer:
             poll,
         )
 
-    # -- cameras ------------------------------------------------------------------------
-    def root_position(self) -> np.ndarray:
-        """(3,) world position of the root joint (pelvis) in the current pose."""
-        return self.state.posed()[1][0].astype(np.float64)
-
-    def set_follow(self, on: bool) -> None:
-        """Follow mode: the camera moves with the root. Turning it on centres the root
-        horizontally in an orbit view (its height offset is kept); a capture view keeps
-        its framing and moves along."""
-        self.follow = bool(on)
-        root = self.root_position()
-        if isinstance(self.camera, CaptureViewCamera):
-            self._follow_ref = root - self.camera.shift
-        else:
-            self._follow_ref = np.array([0.0, self.camera.target[1] - root[1], 0.0])
-        self.follow_root()
-
-    def follow_root(self) -> None:
-        if not self.follow:
-            return
-        root = self.root_position()
-        if isinstance(self.camera, CaptureViewCamera):
-            self.camera.shift = root - self._follow_ref
-        else:
-            self.camera.target = root + self._follow_ref
-
-    def set_capture_view(self, index: int | None) -> None:
-        """Look through capture camera ``index`` (as ``texvocab shot --camera N``), or with
-        None go back to the orbit camera (from the capture camera's place)."""
-        cap = self.data.capture
-        if index is None:
-            if isinstance(self.camera, CaptureViewCamera):
-                self.camera = self.camera.to_orbit(self.body_centre())
-        else:
-            if cap is None or not 0 <= index < cap.num_views:
-                raise TexvocabError(f"camera {index}: no such capture view")
-            self.camera = CaptureViewCamera(cap.cameras[index], index)
-        if self.follow:
-            self.set_follow(True)
-
-    def orbit_camera(self) -> OrbitCamera:
-        """The orbit camera, leaving a capture view for the nearest orbit (a drag in the
-        3D view does this)."""
-        if isinstance(self.camera, CaptureViewCamera):
-            self.set_capture_view(None)
-        return self.camera
-
-    def body_centre(self) -> np.ndarray:
-        verts, _ = self.state.posed()
-        return (verts.min(0) + verts.max(0)).astype(np.float64) / 2.0
-
-    def neural_aspect(self) -> float:
-        """Width / height of the neural render: the capture camera's, or the 3D view's."""
-        if isinstance(self.camera, CaptureViewCamera):
-            return self.camera.aspect
-        return self.view_aspect()
-
     def pose_label(self) -> str:
         """What the current pose is, for the render's stale label: a sequence frame, or
         the last edit (ViewerState.change)."""
@@ -291,27 +248,6 @@ class Viewer:
         return self.state.change
 
     # -- helpers for the panels ---------------------------------------------------------
-    def new_orbit(self) -> OrbitCamera:
-        """An orbit camera about the world's up axis (:func:`orbit_for`)."""
-        return orbit_for(self.data.capture)
-
-    def reset_camera(self, aspect: float | None = None) -> None:
-        """Frame the body of the current pose from the front, in a view of width / height
-        ``aspect`` (default: the 3D view's)."""
-        if isinstance(self.camera, CaptureViewCamera):
-            self.camera = self.new_orbit()
-        aspect = self.view_aspect() if aspect is None else aspect
-        verts, _ = self.state.posed()
-        local = verts @ self.camera.basis.T  # right, up, front (x, y, z when +y is up)
-        lo, hi = local.min(0), local.max(0)
-        self.camera.target = ((lo + hi) / 2.0) @ self.camera.basis
-        self.camera.yaw, self.camera.pitch = 0.0, 0.0
-        half = np.tan(np.radians(self.camera.fov) / 2)
-        need = max((hi[1] - lo[1]) / (2 * half), (hi[0] - lo[0]) / (2 * half * aspect))
-        self.camera.distance = 1.12 * float(need) + float(hi[2] - lo[2]) / 2
-        if self.follow:
-            self.set_follow(True)
-
     def render_scene(self, size: tuple[int, int]):
         """The 3D view's texture at ``size``, redrawn only when something changed."""
         if self.scene is None:
@@ -333,111 +269,25 @@ class Viewer:
             self._scene_key = key
         return self._scene_tex
 
-    def shot_size(self) -> tuple[int, int]:
-        """Size of a screenshot: a capture camera's own image size (what ``texvocab shot
-        --camera N`` writes), else the neural render's full level (the 3D view's size
-        without a model)."""
-        if isinstance(self.camera, CaptureViewCamera):
-            return self.camera.camera.width, self.camera.camera.height
-        if self.neural is not None:
-            return self.neural.size_for(self.view_aspect())
-        return self.view_size
-
-    def start_export(self, poses, trans, stem: str, fps: float, view3d: bool = False) -> None:
-        """Render ``poses`` (T, 24, 3) from the 3D view's camera at :meth:`shot_size` in
-        the background (texvocab_viewer.export.job): an MP4, or for one pose neural.png (+ view3d.png, the
-        3D view at the same size, when ``view3d``; only that without a model)."""
-        w, h = self.shot_size()
-        camera = self.camera.to_texvocab_camera(w, h)
-        if self.follow and len(poses) > 1:  # the camera moves with the root, as in the view
-            camera = follow_cameras(camera, np.asarray(trans), self.state.trans)
-        image = None
-        if view3d:
-            self.scene.render(self.state, self.camera, (w, h), self.options)
-            image = self.scene.read((w, h))
-            self.ctx.screen.use()
-        model, march = None, None
-        if self.neural is not None:
-            model = self.data.model
-            march = self.neural.march or march_settings(self.data.settings)
-        self.export = Export(
-            model,
-            march,
-            camera,
-            np.asarray(poses),
-            np.asarray(trans),
-            stem,
-            fps,
-            image,
-            background=self.options.background,
-        )
-
-    def screenshot(self) -> None:
-        """The Screenshot button and F12: the 3D view and the neural render of the current
-        pose, written under exports/shot*/ (never replacing a file)."""
-        if self.export is None or not self.export.running:
-            self.start_export(self.state.pose[None], self.state.trans[None], "shot", 1.0, view3d=True)
-
-    def view_aspect(self) -> float:
-        w, h = self.view_size
-        return w / max(h, 1)
-
     def view_caption(self) -> str:
-        if self.open_error:
-            return f"could not open {self.open_error}"
+        """The 3D view's one line: a screenshot in progress, or the mouse's controls
+        (outcomes and errors go to the status line)."""
         job = self.export
-        if job is not None and job.total == 1:
-            if job.running:
-                return "screenshot: rendering ..."
-            if job.error:
-                return f"screenshot failed: {job.error}"
-            if job.path is not None:
-                return f"screenshot: wrote {job.path}"
+        if job is not None and job.total == 1 and job.running:
+            return "screenshot: rendering ..."
         return "left drag: orbit   wheel: zoom   right drag: pan   F12: screenshot"
 
-    # -- File menu and its dialogs --------------------------------------------------------
-    def show_menus(self) -> None:
-        """The File menu: open a checkpoint or capture (the window restarts on it), open a
-        pose file, screenshot."""
-        missing = self.dialogs.missing()
-        if imgui.begin_menu("File"):
-            if imgui.menu_item("Open checkpoint...", "", False, not missing)[0]:
-                self.dialogs.ask("source", "Open a checkpoint", SOURCE_FILTERS)
-            if imgui.menu_item("Open pose file...", "", False, not missing)[0]:
-                self.dialogs.ask("poses", "Open a pose file", POSE_FILTERS, self.sequence_path)
-            if missing:
-                imgui.text_disabled(missing)
-            imgui.separator()
-            if imgui.menu_item("Screenshot", "F12", False, True)[0]:
-                self.screenshot()
-            imgui.end_menu()
-
-    def poll_dialogs(self) -> None:
-        """Act on a file dialog's answer (once per frame)."""
-        if self.reopen is not None:
-            hello_imgui.get_runner_params().app_shall_exit = True
-        answer = self.dialogs.poll()
-        if answer is None:
+    def show_export_outcome(self) -> None:
+        """Once an export has finished: what it wrote, or why it failed, in the status line."""
+        job = self.export
+        if job is None or job.running or job is self._export_seen:
             return
-        purpose, path = answer
-        if purpose == "poses":
-            load_sequence(self, path)
-        elif purpose == "source":
-            self.open_source(path)
-
-    def open_source(self, path: str) -> None:
-        """Load a checkpoint or capture in the background; when it loaded, the window
-        closes and reopens on it (the pose sequence stays); an error stays in the caption."""
-
-        def load() -> None:
-            try:
-                self.reopen = load_viewer_data(path, self.smpl)
-            except Exception as exc:  # noqa: BLE001 - any failure is shown, the window stays
-                self.open_error = f"{path}: {exc}"
-            hello_imgui.request_refresh()
-
-        self.open_error = ""
-        threading.Thread(target=load, name="texvocab-open", daemon=True).start()
+        self._export_seen = job
+        what = "screenshot" if job.total == 1 else "video"
+        if job.error:
+            self.status.fail(f"{what} not written: {job.error}")
+        elif job.path is not None:
+            self.status.done(f"{what}: wrote {job.path}")
 
     def novelty_colours(self, n: int) -> np.ndarray:
         return heat_color(np.linspace(0.0, 1.0, n))
@@ -455,10 +305,3 @@ class Viewer:
             f"No neural render: {self.data.source} is a capture, not a trained avatar. "
             "Train one (texvocab train CAPTURE --out RUN) and open RUN/checkpoint.pt."
         )
-
-
-def follow_cameras(camera, trans: np.ndarray, now: np.ndarray) -> list:
-    """One camera per frame of root translations ``trans`` (T, 3): ``camera`` (the view
-    at root translation ``now``) moved with the root, as follow mode moves the view (the
-    root joint is its rest position plus the translation)."""
-    return [follow_camera(camera, t - np.asarray(now, np.float64)) for t in trans]

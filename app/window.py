@@ -21,9 +21,11 @@ from imgui_bundle import hello_imgui, imgui, immapp
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import budget_blas_threads
 from texvocab_viewer.arguments import NEURAL_NICE, NEURAL_PREVIEW_WAIT_MS, NEURAL_PROCESSES
-from texvocab_viewer.panels.pose import load_sequence
-from texvocab_viewer.panels.registry import PANELS, dock_splits
+from texvocab_viewer.layout import Layout, layout_for
+from texvocab_viewer.panels.pose import check_pose_file, load_sequence
+from texvocab_viewer.panels.registry import PANELS
 from texvocab_viewer.state import load_viewer_data
+from texvocab_viewer.status import draw_status
 from texvocab_viewer.viewer import Viewer
 
 #: frames per second while nothing changes (no input, no new render level, no playback):
@@ -87,9 +89,20 @@ def _cheap_backgrounds(rp, default_style):
     return setup
 
 
+SIDES = {"left": imgui.Dir.left, "right": imgui.Dir.right, "down": imgui.Dir.down}
+
+
+def apply_layout(rp, layout: Layout) -> None:
+    """Set the runner's dock splits from ``layout`` (:mod:`texvocab_viewer.layout`)."""
+    rp.docking_params.docking_splits = [
+        hello_imgui.DockingSplit(s.parent, s.new, SIDES[s.side], s.ratio) for s in layout.splits
+    ]
+
+
 def _runner_params(viewer: Viewer, title: str):
     rp = hello_imgui.RunnerParams()
     rp.app_window_params.window_title = title
+    rp.imgui_window_params.menu_app_title = "texvocab"  # the menu bar's first menu: short, File fits
     rp.app_window_params.window_geometry.size = viewer.size
     rp.app_window_params.restore_previous_geometry = False
     rp.imgui_window_params.default_imgui_window_type = (
@@ -103,13 +116,17 @@ def _runner_params(viewer: Viewer, title: str):
     rp.imgui_window_params.show_menu_bar = True
     rp.imgui_window_params.show_menu_view = False
     rp.callbacks.show_menus = viewer.show_menus
-    has_model = viewer.data.model is not None
-    rp.docking_params.docking_splits = dock_splits(has_model)
+    rp.imgui_window_params.show_status_bar = True  # the last error or outcome (app/status.py)
+    rp.imgui_window_params.show_status_fps = False
+    rp.imgui_window_params.remember_status_bar_settings = False
+    rp.callbacks.show_status = lambda: draw_status(viewer.status)
+    viewer.layout = layout_for(*viewer.size, viewer.data.model is not None)
+    apply_layout(rp, viewer.layout)
     windows = []
     for panel in PANELS:
         win = hello_imgui.DockableWindow(
             panel.title,
-            panel.space_for(has_model),
+            viewer.layout.spaces[panel.title],
             (lambda f=panel.draw, name=panel.title: viewer.draw_panel(name, f)),
         )
         win.can_be_closed = False
@@ -145,6 +162,8 @@ def run_viewer(
     (texvocab_viewer.arguments.NEURAL_WORKERS); ``neural_processes``: how many render
     processes split each view; ``neural_preview_wait_ms``:
     texvocab_viewer.panels.neural.NeuralView.preview_wait."""
+    if poses:
+        check_pose_file(poses)  # a bad file is refused before the avatar loads
     require_display()
     _choose_gl_platform()
     budget_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread

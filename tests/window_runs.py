@@ -22,20 +22,23 @@ def run_window(
     command: tuple[str, ...] = (PYTHON, "-m", "texvocab_viewer"),
     env=None,
     cwd: Path = ROOT,
+    size: str = "1280x800",
+    screen: str = "1280x1024",
 ):
     """(process, report dict, screenshot path) of ``command SOURCE --script SCRIPT`` in a
-    1280x800 window with a 48 px neural render (``extra``: more arguments)."""
+    ``size`` window on an Xvfb ``screen`` with a 48 px neural render (``extra``: more
+    arguments)."""
     assert XVFB is not None, "xvfb-run is missing: apt-get install xvfb xauth (see scripts/)"
     report, shot = tmp_path / f"{script}.json", tmp_path / f"{script}.png"
     cmd = [
         XVFB,
         "-a",
         "-s",
-        "-screen 0 1280x1024x24",
+        f"-screen 0 {screen}x24",
         *command,
         *([] if source is None else [str(source)]),
         "--size",
-        "1280x800",
+        size,
         "--script",
         script,
         "--report",

@@ -95,10 +95,11 @@ class Shot:
     neural_seconds: float = 0.0
 
 
-def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
+def render_neural(model, march, pose, trans, camera, background, cancelled=None) -> np.ndarray:
     """(H, W, 3) uint8 render of the trained field ``model`` at ``pose`` (24, 3) and
     ``trans`` (3,), seen by ``camera`` (an OpenCV Camera), with ``march`` settings, over
-    ``background`` (the 3D view's): what ``shot`` and the viewer's Screenshot write."""
+    ``background`` (the 3D view's): what ``shot`` and the viewer's exports write.
+    ``cancelled()`` is checked between ray chunks (:func:`texvocab.render.render_image`)."""
     with torch.no_grad():
         ctx = model.pose_feature.context(pose, trans)
         shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
@@ -111,6 +112,7 @@ def render_neural(model, march, pose, trans, camera, background) -> np.ndarray:
             background=tuple(background),
             shell=shell,
             index=ctx.index,
+            cancelled=cancelled,
         )
     return to_uint8(out.rgb.numpy())
 

@@ -41,6 +41,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import pickle
+import sys
 import threading
 import time
 import traceback
@@ -63,6 +64,17 @@ def _newest_job(jobs, job):
     while job is not None and jobs.poll():
         job = jobs.recv()
     return job
+
+
+def _serve_then_exit(*args) -> None:
+    """:func:`_serve`, then the process ends without the interpreter's teardown (torch's
+    takes about a second on a loaded machine, and the viewer's close waits for it);
+    nothing is left to flush but the standard streams. An exception still ends it as
+    one (its exit code says so)."""
+    _serve(*args)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results, newest, previewed) -> None:
@@ -175,7 +187,7 @@ class ProcessWorker(DeliveredLevels):
             child_jobs, jobs = _SPAWN.Pipe(duplex=False)
             results, child_results = _SPAWN.Pipe(duplex=False)
             proc = _SPAWN.Process(
-                target=_serve,
+                target=_serve_then_exit,
                 name=f"texvocab-neural-{k}",
                 daemon=True,
                 args=(

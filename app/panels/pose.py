@@ -143,17 +143,34 @@ def _root(viewer) -> None:
     imgui.pop_id()
 
 
+def check_pose_file(path: str) -> None:
+    """Read and check the pose file ``--poses`` names before anything else loads, so that a
+    bad one is refused at once (TexvocabError naming ``--poses``). Where it goes in a
+    capture's world is decided later (:meth:`PoseSequence.load`)."""
+    try:
+        seq = read_pose_sequence(path.strip(), fps=None)
+    except (TexvocabError, OSError, ValueError) as exc:
+        raise TexvocabError(f"--poses {path}: {exc}") from None
+    if len(seq.poses) == 0:
+        raise TexvocabError(f"--poses {path}: 'poses' holds no frames")
+
+
 def load_sequence(viewer, path: str) -> None:
     """Load a pose file into the timeline and show its first frame. When it cannot be
-    read, the timeline keeps the sequence loaded before (if any) and the panel shows the
-    error line, until a later load succeeds."""
+    read, the timeline keeps the sequence loaded before (if any) and the error shows in
+    the status line and under the path field, until a later load succeeds. The Sequence
+    header opens either way."""
     viewer.sequence_path = path
+    viewer.open_sequence = True
     try:
         sequence = PoseSequence.load(path.strip(), viewer.data.capture)
     except (TexvocabError, OSError, ValueError) as exc:
         viewer.sequence_error = str(exc)
+        kept = "" if viewer.sequence is None else f" (kept {Path(viewer.sequence.path).name})"
+        viewer.status.fail(f"pose file not loaded{kept}: {exc}")
         return
     viewer.sequence, viewer.sequence_error = sequence, ""
+    viewer.status.done(f"loaded {Path(path.strip()).name}: {len(sequence.poses)} frames")
     _show_frame(viewer)
 
 
@@ -249,6 +266,9 @@ def tick_sequence(viewer) -> None:
 def draw_pose_panel(viewer) -> None:
     """The "Pose" window's contents."""
     _presets(viewer)
+    if viewer.open_sequence:  # a pose file was loaded (or failed to): show its section
+        imgui.set_next_item_open(True)
+        viewer.open_sequence = False
     if imgui.collapsing_header("Sequence"):
         _sequence(viewer)
     if imgui.collapsing_header("Root", imgui.TreeNodeFlags_.default_open):

@@ -111,7 +111,8 @@ def _weight_tooltip(weighting: str, num_joints: int, caption: str) -> str:
 
 
 def _part_row(viewer, q) -> None:
-    """One body part: name, nearest-key distance, then its K keys side by side."""
+    """One body part: name, nearest-key distance, then its K keys side by side (in rows
+    when the panel is too narrow for all K)."""
     imgui.push_id(q.part)
     imgui.text(q.part.replace("_", " "))
     imgui.same_line()
@@ -120,7 +121,10 @@ def _part_row(viewer, q) -> None:
     viewer.drawn_keys[q.part] = keys
     vocab = viewer.data.vocab
     num_joints = len(vocab.part_joints[vocab.part_names.index(q.part)])
-    if imgui.begin_table("keys", max(len(keys), 1), imgui.TableFlags_.sizing_stretch_same):
+    # as many keys a row as fit their captions; the rest wrap to the next rows
+    cell = THUMB_PX + imgui.calc_text_size("d 0.0000  w 2.988").x - THUMB_PX / 2
+    columns = max(1, min(len(keys), int(imgui.get_content_region_avail().x // max(cell, 1.0))))
+    if imgui.begin_table("keys", columns, imgui.TableFlags_.sizing_stretch_same):
         for (key_id, frame, weight), d in zip(keys, q.distances, strict=True):
             imgui.table_next_column()
             _key_cell(viewer, q.part, key_id, frame, weight, float(d), num_joints)

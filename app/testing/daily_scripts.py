@@ -113,7 +113,7 @@ def script_open_checkpoint(ctx, viewer, report: dict) -> None:
         ctx.yield_()
     ctx.yield_(2)
     report["open_error"] = viewer.open_error
-    report["caption"] = viewer.view_caption()
+    report["status"] = {"text": viewer.status.text, "error": viewer.status.error}
     report["reopen_source"] = None if viewer.reopen is None else viewer.reopen.source
     report["exit_requested"] = bool(hello_imgui.get_runner_params().app_shall_exit)
 

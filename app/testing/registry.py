@@ -14,9 +14,10 @@ from texvocab_viewer.testing.bench import RENDERS, BenchDriver
 from texvocab_viewer.testing.daily_scripts import DAILY_SCRIPTS
 from texvocab_viewer.testing.driver import Driver, EngineDriver
 from texvocab_viewer.testing.scripts import ENGINE_SCRIPTS
+from texvocab_viewer.testing.window_scripts import WINDOW_SCRIPTS
 
 #: every ImGui Test Engine script by name
-SCRIPTS = {**ENGINE_SCRIPTS, **DAILY_SCRIPTS}
+SCRIPTS = {**ENGINE_SCRIPTS, **DAILY_SCRIPTS, **WINDOW_SCRIPTS}
 
 #: a scripted run whose window reopens (File > Open) goes on with this script, whose
 #: report replaces the first one

@@ -164,7 +164,7 @@ def test_file_open_of_a_bad_file_says_why_and_keeps_the_window(tmp_path):
     ok(proc, rep)
     assert rep["script"] == "open-checkpoint"  # no second window
     assert rep["open_error"].startswith(f"{bad}:") and rep["exit_requested"] is False
-    assert rep["caption"].startswith(f"could not open {bad}:")
+    assert rep["status"]["error"] and rep["status"]["text"].startswith(f"could not open {bad}:")
 
 
 def test_no_dialog_program_is_said_not_hidden(monkeypatch):

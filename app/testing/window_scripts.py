@@ -1,0 +1,112 @@
+"""Scripted runs of the viewer window for what a new user runs into (ImGui Test Engine, as
+:mod:`.scripts`): a bad pose path after a good sequence (the error in the status line),
+closing the window while a video exports, and the layout at a window size."""
+
+from __future__ import annotations
+
+import os
+import time
+
+from imgui_bundle import hello_imgui, imgui
+
+from texvocab_viewer.testing.steps import wait_neural
+
+
+def _wait(ctx, done, timeout: float = 30.0) -> None:
+    t0 = time.perf_counter()
+    while not done() and time.perf_counter() - t0 < timeout:
+        ctx.yield_()
+    ctx.yield_(2)
+
+
+def _status(viewer) -> dict:
+    s = viewer.status
+    return {"text": s.text, "error": s.error, "drawn": s.drawn}
+
+
+def script_bad_pose(ctx, viewer, report: dict) -> None:
+    """With the --poses sequence loaded: File > Open pose file... answered with a bad file,
+    the status line hovered; then a path typed in the Sequence field that does not exist;
+    its "x" clicked; then the path of a good file. The typed paths come from
+    the environment (``TEXVOCAB_TEST_MISSING_POSES``, ``TEXVOCAB_TEST_GOOD_POSES``)."""
+    ctx.yield_(4)
+    seq = viewer.sequence
+    report["start"] = None if seq is None else {"path": seq.path, "frames": len(seq.poses)}
+    ctx.set_ref("##MainMenuBar")
+    ctx.menu_click("File/Open pose file...")
+    _wait(ctx, lambda: bool(viewer.sequence_error))
+    report["after_dialog"] = _status(viewer)
+    report["kept_after_dialog"] = viewer.sequence is seq
+    ctx.set_ref("StatusBar")
+    ctx.mouse_move("##status")
+    ctx.yield_(3)
+    report["tooltip"] = viewer.status.tooltip
+    ctx.item_click("x")  # the error's close button
+    ctx.yield_(2)
+    report["after_close"] = _status(viewer)
+    ctx.set_ref("Pose")
+    report["timeline_shown"] = bool(ctx.item_exists("**/Sequence/##frame"))
+    missing = os.environ["TEXVOCAB_TEST_MISSING_POSES"]
+    ctx.item_input_value("**/Sequence/##path", missing)
+    ctx.item_click("**/Sequence/Load")
+    ctx.yield_(3)
+    report["after_typo"] = _status(viewer)
+    report["kept_after_typo"] = viewer.sequence is seq
+    report["play_shown"] = bool(ctx.item_exists("**/Sequence/Play"))
+    report["timeline_shown_after"] = bool(ctx.item_exists("**/Sequence/##frame"))
+    ctx.item_input_value("**/Sequence/##path", os.environ["TEXVOCAB_TEST_GOOD_POSES"])
+    ctx.item_click("**/Sequence/Load")
+    ctx.yield_(3)
+    report["after_good"] = _status(viewer)
+    report["frames_after_good"] = None if viewer.sequence is None else len(viewer.sequence.poses)
+
+
+def script_close_exporting(ctx, viewer, report: dict) -> None:
+    """Export video of the --poses sequence, then close the window once a frame or two
+    are written (the export still running)."""
+    ctx.yield_(4)
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_click("**/Sequence/Export video")
+    t0 = time.perf_counter()
+    job = viewer.export
+    while (job is None or job.done < 2) and time.perf_counter() - t0 < 60:
+        ctx.yield_()
+        job = viewer.export
+    report["frames_before_close"] = None if job is None else job.done
+    report["total"] = None if job is None else job.total
+    report["running_at_close"] = bool(job is not None and job.running)
+    report["closed_at"] = time.time()
+    hello_imgui.get_runner_params().app_shall_exit = True
+
+
+def script_layout(ctx, viewer, report: dict) -> None:
+    """The layout this window size got: each panel's size when it is drawn (a panel in a
+    tab is brought to the front first), and the Pose panel scrolled to its last slider."""
+    ctx.yield_(6)
+    report["layout"] = viewer.layout.kind
+    report["spaces"] = dict(viewer.layout.spaces)
+    sizes = {}
+    for name in ("Pose", "3D view", "Neural render", "Vocabulary"):
+        frame = imgui.get_frame_count()
+        if viewer.panel_sizes.get(name, (0, 0, -1))[2] < frame - 1:  # behind another tab
+            ctx.window_focus(name)
+            ctx.yield_(3)
+        w, h, drawn = viewer.panel_sizes.get(name, (0.0, 0.0, -1))
+        sizes[name] = {"w": w, "h": h, "drawn": drawn >= frame - 1}
+    report["sizes"] = sizes
+    report["view_size"] = list(viewer.view_size)
+    ctx.window_focus("3D view")
+    ctx.window_focus("Pose")
+    ctx.set_ref("Pose")
+    ctx.scroll_to_item("**/right_hand/##z", imgui.internal.Axis.y)
+    report["last_slider_reached"] = bool(ctx.item_exists("**/right_hand/##z"))
+    ctx.yield_(3)
+    wait_neural(ctx, viewer, report)
+
+
+WINDOW_SCRIPTS = {
+    "layout": script_layout,
+    "bad-pose": script_bad_pose,
+    "close-exporting": script_close_exporting,
+}

@@ -1,0 +1,272 @@
+"""The viewer as a new user meets it, in a real window (Xvfb, ImGui Test Engine): errors
+in the status line with their whole text, a bad ``--poses`` file refused at once, a clean
+close while a video exports, and the layout at small and large window sizes."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+
+import numpy as np
+import pytest
+from tiny_runs import smallest_run
+from window_runs import PYTHON, run_window
+
+slow = pytest.mark.slow  # Xvfb windows
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    return smallest_run(tmp_path_factory.mktemp("user"))
+
+
+def pose_file(path, frames: int):
+    poses = np.zeros((frames, 24, 3), np.float32)
+    poses[:, 18, 1] = np.radians(np.linspace(-10, -100, frames))
+    np.savez(path, poses=poses, trans=np.zeros((frames, 3), np.float32), mocap_framerate=np.float32(30))
+    return path
+
+
+def ok(proc, rep):
+    assert proc.returncode == 0 and rep["ok"], (rep.get("error"), rep.get("engine_log"), proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr
+
+
+@slow
+def test_a_bad_pose_path_after_a_good_sequence_keeps_it_and_says_why(checkpoint, tmp_path):
+    good, later = pose_file(tmp_path / "walk.npz", 12), pose_file(tmp_path / "later.npz", 5)
+    bad = tmp_path / "notes.npz"
+    bad.write_text("not a zip")
+    missing = tmp_path / "no such folder" / "walk_typo.npz"
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    zenity = bin_dir / "zenity"  # File > Open pose file... picks notes.npz
+    zenity.write_text(f'#!/bin/sh\ncase "$*" in *--version*) echo 3.44.0 ;; *) echo {bad} ;; esac\n')
+    zenity.chmod(0o755)
+    env = dict(
+        os.environ,
+        PATH=f"{bin_dir}:{os.environ['PATH']}",
+        TEXVOCAB_TEST_MISSING_POSES=str(missing),
+        TEXVOCAB_TEST_GOOD_POSES=str(later),
+    )
+    proc, rep, _ = run_window(checkpoint, "bad-pose", tmp_path, "--poses", str(good), env=env)
+    ok(proc, rep)
+    assert rep["start"] == {"path": str(good), "frames": 12}
+    # the menu's route: the error is in the status line, whole, and in its tooltip
+    after = rep["after_dialog"]
+    assert after["error"] and rep["kept_after_dialog"] and rep["timeline_shown"]
+    assert after["text"].startswith("pose file not loaded (kept walk.npz): ")
+    assert str(bad) in after["text"] and "not an .npz archive" in after["text"]
+    assert after["drawn"] and after["text"].startswith(after["drawn"].removesuffix("..."))
+    assert rep["tooltip"] == after["text"]
+    assert rep["after_close"] == {"text": "", "error": False, "drawn": ""}  # its "x"
+    # a typo in the path field: the sequence, Play and the timeline stay
+    typo = rep["after_typo"]
+    assert typo["error"] and rep["kept_after_typo"] and rep["play_shown"] and rep["timeline_shown_after"]
+    assert str(missing) in typo["text"] and "not found" in typo["text"]
+    # the next load that succeeds replaces an error
+    assert rep["after_good"] == {
+        "text": "loaded later.npz: 5 frames",
+        "error": False,
+        "drawn": "loaded later.npz: 5 frames",
+    }
+    assert rep["frames_after_good"] == 5
+
+
+def test_a_bad_poses_file_is_refused_before_the_avatar_loads(tmp_path):
+    bad = tmp_path / "notes.npz"
+    bad.write_text("not a zip")
+    # the source does not exist either: the pose file is checked first, with no display
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run(
+        [PYTHON, "-m", "texvocab_viewer", str(tmp_path / "missing.pt"), "--poses", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: --poses {bad}: "), lines
+    assert "not an .npz archive" in lines[0] and "preparing" not in proc.stdout
+
+
+@slow
+def test_closing_the_window_during_export_video_stops_it_and_removes_its_files(checkpoint, tmp_path):
+    poses = pose_file(tmp_path / "walk.npz", 300)
+    work, end = tmp_path / "work", tmp_path / "ended"
+    work.mkdir()
+    # the window's process, then the time it ended (xvfb-run's own teardown not counted)
+    shell = f'"$0" -m texvocab_viewer "$@"; rc=$?; date +%s.%N > {end}; exit $rc'
+    proc, rep, _ = run_window(
+        checkpoint,
+        "close-exporting",
+        tmp_path,
+        "--poses",
+        str(poses),
+        command=("sh", "-c", shell, PYTHON),
+        cwd=work,
+    )
+    ok(proc, rep)
+    assert rep["running_at_close"] and 2 <= rep["frames_before_close"] < rep["total"] == 300
+    assert "terminate called" not in proc.stderr
+    seconds = float(end.read_text()) - rep["closed_at"]
+    assert seconds < 2.0, seconds
+    assert sorted(p.name for p in (work / "exports").iterdir()) == []  # no partial video or frames
+
+
+@slow
+@pytest.mark.parametrize(
+    ("size", "kind"), [("640x400", "narrow"), ("900x600", "medium"), ("1920x1080", "wide")]
+)
+def test_the_panels_keep_a_usable_size_in_small_and_large_windows(checkpoint, tmp_path, size, kind):
+    from PIL import Image
+
+    from texvocab_viewer.layout import MIN_WIDTH
+
+    proc, rep, shot = run_window(checkpoint, "layout", tmp_path, size=size, screen="1920x1200")
+    ok(proc, rep)
+    assert rep["layout"] == kind
+    sizes = rep["sizes"]
+    for name, floor in MIN_WIDTH.items():
+        # every panel is drawn (a tab brought to the front), no narrower than its floor
+        assert sizes[name]["drawn"] and sizes[name]["w"] >= floor - 2, (name, sizes[name])
+        assert sizes[name]["h"] >= 200, (name, sizes[name])
+    w, h = rep["view_size"]
+    assert w >= 300 and h >= 170, rep["view_size"]  # the 3D view's image, under its toolbar
+    assert rep["last_slider_reached"]  # the Pose panel scrolls to its last joint
+    if kind == "narrow":  # stacked: Pose and Vocabulary share a column as tabs
+        assert rep["spaces"]["Pose"] == rep["spaces"]["Vocabulary"]
+    else:
+        assert len(set(rep["spaces"].values())) == 4
+    image = np.asarray(Image.open(shot))
+    assert image.shape[:2] == tuple(int(v) for v in size.split("x"))[::-1] and image.std() > 10
+
+
+def test_a_preset_sets_the_whole_pose_as_shot_does():
+    """After a mocap frame that turned the body and moved it, a preset is the same pose as
+    on a fresh state (what ``texvocab shot --pose NAME`` applies)."""
+    from texvocab_viewer.state import ViewerState, load_viewer_data
+
+    data = load_viewer_data(None)
+    state = ViewerState(data)
+    turned = np.zeros((24, 3))
+    turned[0] = [0.0, np.radians(150.0), 0.2]
+    state.set_pose(turned, [1.0, 0.3, -2.0])
+    state.apply_preset("kick")
+    shot = ViewerState(data)
+    shot.apply_preset("kick")
+    np.testing.assert_array_equal(state.pose, shot.pose)
+    np.testing.assert_array_equal(state.trans, shot.trans)
+    assert not np.allclose(state.pose[0], turned[0])
+
+
+def test_exports_are_written_with_the_users_umask(tmp_path):
+    from texvocab.pipeline import Camera
+    from texvocab_viewer.export.job import Export
+
+    cam = Camera(np.eye(3), np.eye(3), np.zeros(3), 8, 8)
+    old = os.umask(0o027)
+    try:
+        job = Export(
+            None,
+            None,
+            cam,
+            np.zeros((1, 24, 3)),
+            np.zeros((1, 3)),
+            "shot",
+            1.0,
+            np.full((8, 8, 3), 9, np.uint8),
+            folder=tmp_path / "exports",
+        )
+        job.thread.join(30)
+    finally:
+        os.umask(old)
+    assert job.error == ""
+    assert (job.path / "view3d.png").stat().st_mode & 0o777 == 0o640
+
+
+def test_video_frames_and_screenshots_share_the_3d_views_background(tmp_path):
+    """Export video renders each frame as Screenshot renders its one, over the 3D view's
+    background colour (not black)."""
+    import imageio_ffmpeg
+    from PIL import Image
+
+    from texvocab.pipeline import Camera, load_avatar, march_settings
+    from texvocab_viewer.export.job import Export
+    from texvocab_viewer.gl.scene import SceneOptions
+
+    avatar = load_avatar(smallest_run(tmp_path / "run"))
+    march = march_settings(avatar.settings)
+    cam = Camera(
+        np.array([[40.0, 0, 16], [0, 40.0, 16], [0, 0, 1]]), np.eye(3), np.array([0.0, 0.0, 3.0]), 32, 32
+    )
+    background = SceneOptions().background
+    jobs = [
+        Export(
+            avatar.model,
+            march,
+            cam,
+            np.zeros((n, 24, 3)),
+            np.zeros((n, 3)),
+            "walk",
+            30.0,
+            folder=tmp_path / "exports",
+            background=background,
+        )
+        for n in (1, 3)
+    ]
+    for job in jobs:
+        job.thread.join(120)
+        assert job.error == "", job.error
+    shot = np.asarray(Image.open(jobs[0].path / "neural.png").convert("RGB"), np.int16)
+    reader = imageio_ffmpeg.read_frames(str(jobs[1].path))
+    meta = next(reader)
+    frame = np.frombuffer(next(reader), np.uint8).reshape(meta["size"][1], meta["size"][0], 3)
+    expected = np.round(np.asarray(background) * 255)
+    np.testing.assert_allclose(shot[0, 0], expected, atol=1)
+    np.testing.assert_allclose(frame[0, 0], expected, atol=4)  # H.264's rounding
+
+
+def test_the_layout_gives_each_column_its_floor_at_every_width():
+    from texvocab_viewer.layout import MAIN, MIN_WIDTH, layout_for
+
+    for width in range(640, 2600, 20):
+        for model in (True, False):
+            lay = layout_for(width, 700, model)
+            left = right = 0.0
+            rest = float(width)
+            for s in lay.splits:  # the pixels each split takes from the main space
+                if s.side == "down":
+                    continue
+                px = s.ratio * rest
+                rest -= px
+                left, right = (left + px, right) if s.side == "left" else (left, right + px)
+            spaces = lay.spaces
+            assert set(spaces) == set(MIN_WIDTH)
+            pose_col = left
+            assert pose_col >= MIN_WIDTH["Pose"] - 1
+            if spaces["Vocabulary"] == spaces["Pose"]:
+                assert lay.kind == "narrow" and pose_col >= MIN_WIDTH["Vocabulary"] - 1
+            else:
+                assert right >= MIN_WIDTH["Vocabulary"] - 1
+            assert rest >= MIN_WIDTH["3D view"] - 1, (width, model, rest)
+    # at 1280 x 800 the four columns are as they always were: 22 % and 30 % of the rest
+    wide = layout_for(1280, 800, True)
+    assert wide.kind == "wide" and [round(s.ratio, 3) for s in wide.splits] == [0.22, 0.3, 0.5]
+    assert layout_for(640, 400, True).spaces["Neural render"] == MAIN  # a tab beside the 3D view
+    assert layout_for(640, 700, True).spaces["Neural render"] == "NeuralSpace"  # under it
+
+
+def test_the_status_line_cuts_a_long_message_to_its_width():
+    from texvocab_viewer.status import fit_text
+
+    def measure(s):
+        return 7.0 * len(s)  # 7 px a character
+
+    assert fit_text("loaded walk.npz: 9 frames", 700, measure) == "loaded walk.npz: 9 frames"
+    long = "could not open /tmp/a/very/long/path/fake.pt: not a checkpoint"
+    cut = fit_text(long, 140, measure)
+    assert cut.endswith("...") and long.startswith(cut[:-3]) and measure(cut) <= 140
+    assert len(cut) == 20  # the longest start that fits with "..."
+    assert fit_text("first line\nsecond", 700, measure) == "first line..."
