@@ -147,6 +147,12 @@ CAPTURE_CASES = [
         "--size 100000: expected at least 1 and at most 4096",
     ),
     ("synth-texture-size-huge", ["synth", "{base}/new_cap", "--texture-size", "100000"], "at most 4096"),
+    ("synth-ring-views-huge", ["synth", "{base}/new_cap", "--ring-views", "1000000"], "at most 64"),
+    (
+        "demo-size-huge",
+        ["demo", "--out", "{base}/demo", "--size", "100000"],
+        "--size 100000: expected a tile",
+    ),
     ("prepare-texture-size-huge", ["prepare", "{cap}", "--texture-size", "100000"], "texture_size"),
     (
         "render-fps-huge",

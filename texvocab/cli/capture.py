@@ -69,8 +69,9 @@ def add_synth_parser(sub, add_smpl) -> None:
     p.set_defaults(func=cmd_synth)
 
 
-#: Largest image and garment texture sides ``synth`` renders (pixels per side).
-SYNTH_LIMITS = {"size": 4096, "texture_size": 4096}
+#: Largest image and garment texture sides ``synth`` renders (pixels per side), and most
+#: cameras of each kind.
+SYNTH_LIMITS = {"size": 4096, "texture_size": 4096, "ring_views": 64, "raised_views": 64}
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
@@ -84,6 +85,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
         if value is not None and not 1 <= value <= SYNTH_LIMITS.get(name, value):
             top = f" and at most {SYNTH_LIMITS[name]}" if name in SYNTH_LIMITS else ""
             raise TexvocabError(f"--{name.replace('_', '-')} {value}: expected at least 1{top}")
+    if args.raised_views > SYNTH_LIMITS["raised_views"]:
+        raise TexvocabError(
+            f"--raised-views {args.raised_views}: expected at most {SYNTH_LIMITS['raised_views']}"
+        )
     if args.raised_views < 0 or (args.train_frames is not None and args.train_frames < 0):
         raise TexvocabError("--raised-views and --train-frames must not be negative")
     body = load_body(args.smpl)

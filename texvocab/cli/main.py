@@ -34,6 +34,8 @@ def cmd_demo(args) -> int:
     # late: torch and GL; `texvocab --help` stays light
     from texvocab.cli.demo import demo_avatar, demo_capture, run_demo
 
+    if not 16 <= args.size <= 4096:
+        raise TexvocabError(f"--size {args.size}: expected a tile side of 16..4096 pixels")
     t0 = time.perf_counter()
     paths = run_demo(args.out, smpl=args.smpl, size=args.size)
     print(f"rendered the body in {len(paths) - 1} pose views in {time.perf_counter() - t0:.1f} s")
