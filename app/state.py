@@ -23,8 +23,10 @@ from texvocab.pipeline import (
     load_textures,
     needs_placing,
     open_capture,
+    part_distance,
     place_in_capture,
     quat_to_rotvec,
+    rotvec_to_quat,
 )
 from texvocab.pipeline import POSE_PRESETS as PRESETS
 from texvocab.pipeline import pose_preset as preset
@@ -146,6 +148,7 @@ class ViewerState:
         self.trans = self.rest_trans.copy() if trans is None else np.array(trans, np.float64)
         self.version = 0
         self.change = "rest pose"
+        self.moved: tuple[int, ...] = ()  # the joints the last change turned
         self._cache: dict[str, tuple[int, object]] = {}
         self._vocab_texture = None
         self._poser = None
@@ -157,6 +160,7 @@ class ViewerState:
             return False
         if not (np.isfinite(pose).all() and np.isfinite(trans).all()):
             raise TexvocabError("pose and translation must be finite")
+        self.moved = tuple(int(j) for j in np.flatnonzero(np.any(pose != self.pose, axis=1)))
         self.pose, self.trans = pose, trans.copy()
         self.version += 1
         self.change = change
@@ -271,6 +275,33 @@ class ViewerState:
         if self.data.vocab is None:
             return []
         return self._cached("query", lambda: self.data.vocab.query(self.pose))
+
+    def moved_parts(self) -> list[str]:
+        """The vocabulary parts whose joints the last change turned (joints the vocabulary
+        does not see, such as the root under a root-relative condition, do not count)."""
+        vocab = self.data.vocab
+        if vocab is None:
+            return []
+        seen = set(self.moved) - set(vocab.ignored_joints)
+        return [
+            n for n, joints in zip(vocab.part_names, vocab.part_joints, strict=True) if seen & set(joints)
+        ]
+
+    def key_distances(self) -> list[np.ndarray]:
+        """Per vocabulary part, (M_p,) the distance (Eq. 4) of the pose to each of the
+        part's keys, selected or not: the range a selected key's distance lies in."""
+        vocab = self._require_vocab()
+
+        def make():
+            import torch
+
+            quats = rotvec_to_quat(vocab.condition(torch.as_tensor(self.pose, dtype=torch.float64)))
+            return [
+                part_distance(quats[list(joints)], keys.double()).numpy()
+                for joints, keys in zip(vocab.part_joints, vocab.key_quats, strict=True)
+            ]
+
+        return self._cached("key_distances", make)
 
     def novelty(self) -> np.ndarray:
         """(P,) distance of each vocabulary part to its nearest key (Eq. 4); (0,) without

@@ -92,6 +92,8 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self._scene_key = None
         self._scene_tex = None
         self.drawn_keys: dict[str, list[tuple[int, int, float]]] = {}
+        self.drawn_moved: list[str] = []  # the parts the vocabulary panel highlighted
+        self.drawn_distances: dict[str, list[tuple[int, float]]] = {}  # per part: key, bar
         self.neural_stale_shown = ""  # the stale banner the neural panel last drew
         self.stale_log: deque[str] = deque(maxlen=2000)  # that banner, per frame drawn
         self.dialogs = FileDialogs()

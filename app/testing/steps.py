@@ -12,11 +12,14 @@ LEFT_ARM_MOVE = ("**/left_shoulder/##z", -70.0)  # lower the left arm from the T
 
 
 def snapshot(viewer) -> dict:
-    """What the vocabulary panel last drew, per part: [(key id, frame, weight)], and the
-    parts' nearest-key distances."""
+    """What the vocabulary panel last drew, per part: [(key id, frame, weight)], the
+    parts' nearest-key distances, the parts it highlighted as moved and each key's
+    distance bar [(key id, length)]."""
     return {
         "keys": {p: [list(k) for k in v] for p, v in viewer.drawn_keys.items()},
         "novelty": {q.part: float(q.novelty) for q in viewer.state.query()},
+        "moved": list(viewer.drawn_moved),
+        "distance_bars": {p: [list(b) for b in v] for p, v in viewer.drawn_distances.items()},
     }
 
 

@@ -4,8 +4,10 @@ closing the window while a video exports, and the layout at a window size."""
 
 from __future__ import annotations
 
+import ctypes
 import os
 import time
+from pathlib import Path
 
 from imgui_bundle import hello_imgui, imgui
 
@@ -62,8 +64,8 @@ def script_bad_pose(ctx, viewer, report: dict) -> None:
 
 
 def script_close_exporting(ctx, viewer, report: dict) -> None:
-    """Export video of the --poses sequence, then close the window once a frame or two
-    are written (the export still running)."""
+    """Export video of the --poses sequence, then close the window (GLFW's close request)
+    once a frame or two are written, the export still running."""
     ctx.yield_(4)
     ctx.set_ref("Pose")
     ctx.item_open("**/Sequence")
@@ -77,7 +79,22 @@ def script_close_exporting(ctx, viewer, report: dict) -> None:
     report["total"] = None if job is None else job.total
     report["running_at_close"] = bool(job is not None and job.running)
     report["closed_at"] = time.time()
-    hello_imgui.get_runner_params().app_shall_exit = True
+    close_window()  # as the window's close button does
+    rp = hello_imgui.get_runner_params()
+    t0 = time.perf_counter()
+    while not rp.app_shall_exit and time.perf_counter() - t0 < 10:
+        ctx.yield_()
+    report["closed_by_window"] = bool(rp.app_shall_exit)
+
+
+def close_window() -> None:
+    """Ask GLFW to close the window (glfwSetWindowShouldClose, what the window manager's
+    close button sets), through the GLFW library imgui-bundle ships."""
+    import imgui_bundle
+
+    lib = ctypes.CDLL(str(Path(imgui_bundle.__file__).parent / "libglfw.so.3"))
+    lib.glfwSetWindowShouldClose.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    lib.glfwSetWindowShouldClose(hello_imgui.get_glfw_window_address(), 1)
 
 
 def script_layout(ctx, viewer, report: dict) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -109,6 +110,7 @@ def test_closing_the_window_during_export_video_stops_it_and_removes_its_files(c
     )
     ok(proc, rep)
     assert rep["running_at_close"] and 2 <= rep["frames_before_close"] < rep["total"] == 300
+    assert rep["closed_by_window"]  # the window's close request ended the run
     assert "terminate called" not in proc.stderr
     seconds = float(end.read_text()) - rep["closed_at"]
     assert seconds < 2.0, seconds
@@ -270,3 +272,28 @@ def test_the_status_line_cuts_a_long_message_to_its_width():
     assert cut.endswith("...") and long.startswith(cut[:-3]) and measure(cut) <= 140
     assert len(cut) == 20  # the longest start that fits with "..."
     assert fit_text("first line\nsecond", 700, measure) == "first line..."
+
+
+def test_the_vocabulary_panel_knows_the_moved_parts_and_each_keys_range():
+    from texvocab_viewer.panels.vocab import distance_bar
+    from texvocab_viewer.state import ViewerState, load_viewer_data
+
+    saved = Path(__file__).parent.parent / "data" / "checkpoint_main"  # a global-pose vocabulary
+    data = load_viewer_data(str(saved / "checkpoint.pt"), capture=str(saved / "capture"))
+    state = ViewerState(data)
+    state.set_joint(16, (0.0, 0.0, -70.0))  # the left shoulder
+    assert state.moved_parts() == ["left_arm"]
+    state.set_joint(5, (30.0, 0.0, 0.0))  # the right knee
+    assert state.moved_parts() == ["right_leg"]
+    turned = state.pose.copy()
+    turned[0] = [0.0, 1.0, 0.0]  # the root alone
+    state.set_pose(turned)
+    assert state.moved_parts() == ["main_body"]  # its vocabulary sees the root
+    data.vocab.pose_condition = "root-relative"  # one that does not
+    state.set_pose(state.pose * 0.5)
+    state.set_joint(0, (0.0, 20.0, 0.0))
+    assert 0 in data.vocab.ignored_joints and state.moved_parts() == []
+    for q, all_keys in zip(state.query(), state.key_distances(), strict=True):
+        # the selected keys are the nearest of all the part's keys (Eq. 4, the same distances)
+        np.testing.assert_allclose(np.sort(all_keys)[: len(q.distances)], q.distances, atol=1e-9)
+    assert distance_bar(0.2, 0.8) == 0.25 and distance_bar(0.0, 0.0) == 0.0 and distance_bar(2.0, 1.0) == 1.0

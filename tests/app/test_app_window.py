@@ -61,6 +61,16 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     for part, keys in after.items():
         assert len(keys) == 2 and sum(w for _, _, w in keys) == pytest.approx(1.0), part
     assert rep["before"]["novelty"]["left_arm"] != rep["after"]["novelty"]["left_arm"]
+    # the panel highlights the part the slider moved, and draws each key's distance as a
+    # bar against the part's range: the nearest key's bar is the shortest
+    assert rep["after"]["moved"] == ["left_arm"]
+    bars = rep["after"]["distance_bars"]
+    assert set(bars) == set(after)
+    for part, keyed in bars.items():
+        lengths = [b for _, b in keyed]
+        assert [k for k, _ in keyed] == [k for k, _, _ in after[part]], part
+        assert all(0.0 <= b <= 1.0 for b in lengths) and lengths == sorted(lengths), (part, lengths)
+    assert bars["left_arm"][0][1] > 0  # moved off every key: a bar to see
     # the buttons of the newly selected keys exist in the panel
     assert set(rep["left_arm_buttons_found"]) == {str(k) for k, _, _ in after["left_arm"]}
     assert all(rep["left_arm_buttons_found"].values())

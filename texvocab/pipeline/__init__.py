@@ -25,6 +25,8 @@ _API: dict[str, tuple[str, str]] = {
     "corrective_pose_feature": ("texvocab.body.lbs", "pose_feature"),
     "rotvec_to_rotmat": ("texvocab.geometry.rotations", "rotvec_to_rotmat"),
     "quat_to_rotvec": ("texvocab.geometry.rotations", "quat_to_rotvec"),
+    "rotvec_to_quat": ("texvocab.geometry.rotations", "rotvec_to_quat"),
+    "part_distance": ("texvocab.method.vocab", "part_distance"),
     "outward_orientation": ("texvocab.geometry.surface", "outward_orientation"),
     # captures (step 2)
     "Camera": ("texvocab.capture", "Camera"),
