@@ -11,10 +11,10 @@ Groups (each varies one knob from the common base; the first variant is its refe
 small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: mean,
-nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``refinement`` (pose
-refinement: off, root, joints), ``training`` (train_guide: shell, raster; its report adds
-the training PSNR curve per 100 steps, paired by seed). The
-base is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
+nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_m 0.1, 0.5),
+``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
+raster; its report adds the training PSNR curve per 100 steps, paired by seed). The base
+is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
 weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none
 train_residual=off train_band_newton=false train_shell_voxel=0.01``: the project before
 this ablation chose its defaults), so a variant differs from its
@@ -47,7 +47,7 @@ import numpy as np
 
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 
-METRICS = ("psnr_bbox", "ssim_bbox", "lpips")
+METRICS = ("psnr_bbox", "ssim_bbox", "lpips", "iou")  # iou: rendered silhouette (opacity > 0.5)
 SET = "novel_poses"
 # the earlier training rays (marched rest, 5-sample band, shell grid voxel 1 cm)
 EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
@@ -81,6 +81,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # (the default, the reference) against the earlier nearest-seen colour of the same map
     "unseen": {"mean": [], "nearest": ["unseen_texels=nearest"]},
     "view_frame": {"world": [], "body": ["field.view_frame=body"]},
+    "mask": {"λ_m 0.1": [], "λ_m 0.5": ["lambda_mask=0.5"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with
@@ -166,7 +167,7 @@ def train_and_evaluate(job: dict) -> dict:
     if done.is_file():
         result = json.loads(done.read_text())
         if result["steps"] == job["iterations"]:
-            return result
+            return _with_metrics(result, run_dir)
     torch.set_num_threads(job["threads"])
     budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
     cap = open_capture(job["root"])
@@ -219,6 +220,16 @@ def train_and_evaluate(job: dict) -> dict:
     return result
 
 
+def _with_metrics(result: dict, run_dir: Path) -> dict:
+    """A cached result with any METRICS it predates read back from its eval/metrics.json."""
+    missing = [m for m in METRICS if m not in result["per_image"]]
+    report = run_dir / "eval" / "metrics.json"
+    if missing and report.is_file():
+        images = [r for r in json.loads(report.read_text())["images"] if r["set"] == SET]
+        result["per_image"].update({m: [r.get(m) for r in images] for m in missing})
+    return result
+
+
 def _mean(v) -> float | None:
     return None if not v or any(x is None for x in v) else float(np.mean(v))
 
@@ -231,7 +242,7 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
         return []
     seeds = sorted({k[1] for k in results})
     by = {
-        (lab, s): {m: _mean(results[(variants[lab], s)]["per_image"][m]) for m in METRICS}
+        (lab, s): {m: _mean(results[(variants[lab], s)]["per_image"].get(m)) for m in METRICS}
         | {
             "kid": results[(variants[lab], s)].get("kid"),
             "sps": results[(variants[lab], s)]["seconds_per_step"],
@@ -429,7 +440,9 @@ def main(argv=None) -> int:
         for j in jobs:
             f = Path(j["run_dir"]) / "result.json"
             if f.is_file():
-                results[(Path(j["run_dir"]).parent.name, j["seed"])] = json.loads(f.read_text())
+                results[(Path(j["run_dir"]).parent.name, j["seed"])] = _with_metrics(
+                    json.loads(f.read_text()), f.parent
+                )
     else:
         # spawn, not fork: a worker forked after the capture's synthesis (pyrender, torch
         # threads) hung without using any CPU
