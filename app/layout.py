@@ -9,13 +9,15 @@
 Without a trained avatar the Neural render panel only says why it is empty: a tab beside
 Vocabulary (beside the 3D view in a short narrow window). Column widths are fractions of
 the window with a floor in pixels (:data:`MIN_WIDTH`); a panel's contents scroll when they
-need more room. Pure arithmetic: the window turns a :class:`Layout` into hello_imgui's
-dock splits.
+need more room. When the window is resized so that another layout applies, or a panel
+falls under its floor, the panels dock anew (:func:`needs_relayout`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from imgui_bundle import hello_imgui, imgui
 
 MAIN = "MainDockSpace"  # hello_imgui's full-window dock space: the 3D view's
 WIDE = 1100  # window width from which the four columns fit
@@ -88,3 +90,20 @@ def layout_for(width: int, height: int, has_model: bool) -> Layout:
     neural = "NeuralSpace" if stacked else MAIN
     spaces = {"Pose": "PoseSpace", "Vocabulary": "PoseSpace", "3D view": MAIN, "Neural render": neural}
     return Layout("narrow", tuple(splits), spaces)
+
+
+SIDES = {"left": imgui.Dir.left, "right": imgui.Dir.right, "down": imgui.Dir.down}
+
+
+def dock_splits(layout: Layout) -> list[hello_imgui.DockingSplit]:
+    """hello_imgui's dock splits of ``layout``."""
+    return [hello_imgui.DockingSplit(s.parent, s.new, SIDES[s.side], s.ratio) for s in layout.splits]
+
+
+def needs_relayout(current: Layout, wanted: Layout, resized: bool, widths: dict[str, float]) -> bool:
+    """Whether to dock the panels anew: the window's size calls for another layout, or it
+    was resized and a panel drawn ``widths`` wide (by title) lies under its floor (a user's
+    own splitter drags are kept otherwise)."""
+    if (wanted.kind, wanted.spaces) != (current.kind, current.spaces):
+        return True
+    return resized and any(w < MIN_WIDTH[name] - 2 for name, w in widths.items())

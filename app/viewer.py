@@ -30,6 +30,7 @@ from texvocab_viewer.gl.view_blit import (
     warm_image_blit,
     window_framebuffer,
 )
+from texvocab_viewer.layout import dock_splits, layout_for, needs_relayout
 from texvocab_viewer.neural.wake import ui_waker
 from texvocab_viewer.panels.neural import NeuralView, camera_key, late_draw, start_worker
 from texvocab_viewer.panels.pose import tick_sequence
@@ -102,6 +103,9 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self.smpl: str | None = None
         self.layout = None  # where the panels dock (texvocab_viewer.layout.Layout; the window sets it)
         self.panel_sizes: dict[str, tuple[float, float, int]] = {}  # per panel: w, h, frame drawn
+        self._laid_out_for: tuple[int, int] | None = None  # window size of the last layout
+        self._laid_out_at = 0  # its frame
+        self.relayouts = 0  # layouts since the window opened (a resize that called for one)
         self.status = StatusLine()  # the last error or success, at the window's bottom
         self.open_sequence = False  # the Pose panel opens its Sequence header once
         self._export_seen = None  # the export job whose outcome the status line has shown
@@ -154,6 +158,35 @@ class Viewer(CameraControls, FileControls, ExportControls):
         if self.scene is not None:
             self.scene.release()
 
+    def follow_window_size(self) -> None:
+        """Dock the panels anew when the window was resized to a size that calls for
+        another layout, or that left a panel under its floor (texvocab_viewer.layout)."""
+        if self.layout is None:
+            return
+        io = imgui.get_io()
+        size = (int(io.display_size.x), int(io.display_size.y))
+        if min(size) <= 0:
+            return
+        resized = size != self._laid_out_for
+        if self._laid_out_for is None:
+            self._laid_out_for = size
+            return
+        wanted = layout_for(*size, self.data.model is not None)
+        frame = imgui.get_frame_count()
+        # panels drawn in the last frame; a fresh layout gets a few frames to settle
+        widths = {n: w for n, (w, _, f) in self.panel_sizes.items() if f >= frame - 1}
+        if frame - self._laid_out_at < 3 or not needs_relayout(self.layout, wanted, resized, widths):
+            return
+        rp = hello_imgui.get_runner_params()
+        rp.docking_params.docking_splits = dock_splits(wanted)
+        windows = rp.docking_params.dockable_windows
+        for win in windows:
+            win.dock_space_name = wanted.spaces[win.label]
+        rp.docking_params.dockable_windows = windows
+        rp.docking_params.layout_reset = True
+        self.layout, self._laid_out_for, self._laid_out_at = wanted, size, frame
+        self.relayouts += 1
+
     def draw_panel(self, name: str, draw) -> None:
         """Draw one docked panel (``draw(viewer)``), timing its UI-thread CPU."""
         cpu = time.thread_time()
@@ -173,6 +206,7 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self._last_frame = (now, cpu)
         self.view_blit = None  # the 3D view panel sets it if it draws this frame
         self.poll_dialogs()
+        self.follow_window_size()
         self.show_export_outcome()
         tick_sequence(self)
         self.follow_root()

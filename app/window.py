@@ -21,7 +21,7 @@ from imgui_bundle import hello_imgui, imgui, immapp
 from texvocab.errors import TexvocabError
 from texvocab.pipeline import budget_blas_threads
 from texvocab_viewer.arguments import NEURAL_NICE, NEURAL_PREVIEW_WAIT_MS, NEURAL_PROCESSES
-from texvocab_viewer.layout import Layout, layout_for
+from texvocab_viewer.layout import dock_splits, layout_for
 from texvocab_viewer.panels.pose import check_pose_file, load_sequence
 from texvocab_viewer.panels.registry import PANELS
 from texvocab_viewer.state import load_viewer_data
@@ -89,16 +89,6 @@ def _cheap_backgrounds(rp, default_style):
     return setup
 
 
-SIDES = {"left": imgui.Dir.left, "right": imgui.Dir.right, "down": imgui.Dir.down}
-
-
-def apply_layout(rp, layout: Layout) -> None:
-    """Set the runner's dock splits from ``layout`` (:mod:`texvocab_viewer.layout`)."""
-    rp.docking_params.docking_splits = [
-        hello_imgui.DockingSplit(s.parent, s.new, SIDES[s.side], s.ratio) for s in layout.splits
-    ]
-
-
 def _runner_params(viewer: Viewer, title: str):
     rp = hello_imgui.RunnerParams()
     rp.app_window_params.window_title = title
@@ -121,7 +111,7 @@ def _runner_params(viewer: Viewer, title: str):
     rp.imgui_window_params.remember_status_bar_settings = False
     rp.callbacks.show_status = lambda: draw_status(viewer.status)
     viewer.layout = layout_for(*viewer.size, viewer.data.model is not None)
-    apply_layout(rp, viewer.layout)
+    rp.docking_params.docking_splits = dock_splits(viewer.layout)
     windows = []
     for panel in PANELS:
         win = hello_imgui.DockableWindow(

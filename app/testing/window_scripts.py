@@ -34,6 +34,8 @@ def script_bad_pose(ctx, viewer, report: dict) -> None:
     ctx.yield_(4)
     seq = viewer.sequence
     report["start"] = None if seq is None else {"path": seq.path, "frames": len(seq.poses)}
+    ctx.set_ref("Pose")
+    report["open_at_start"] = bool(ctx.item_exists("**/Sequence/Play"))  # the header opened
     ctx.set_ref("##MainMenuBar")
     ctx.menu_click("File/Open pose file...")
     _wait(ctx, lambda: bool(viewer.sequence_error))
@@ -87,22 +89,29 @@ def script_close_exporting(ctx, viewer, report: dict) -> None:
     report["closed_by_window"] = bool(rp.app_shall_exit)
 
 
+def _glfw():
+    import imgui_bundle
+
+    return ctypes.CDLL(str(Path(imgui_bundle.__file__).parent / "libglfw.so.3"))
+
+
+def resize_window(width: int, height: int) -> None:
+    """glfwSetWindowSize on the window, as a user's drag of its border ends."""
+    lib = _glfw()
+    lib.glfwSetWindowSize.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int]
+    lib.glfwSetWindowSize(hello_imgui.get_glfw_window_address(), width, height)
+
+
 def close_window() -> None:
     """Ask GLFW to close the window (glfwSetWindowShouldClose, what the window manager's
     close button sets), through the GLFW library imgui-bundle ships."""
-    import imgui_bundle
-
-    lib = ctypes.CDLL(str(Path(imgui_bundle.__file__).parent / "libglfw.so.3"))
+    lib = _glfw()
     lib.glfwSetWindowShouldClose.argtypes = [ctypes.c_void_p, ctypes.c_int]
     lib.glfwSetWindowShouldClose(hello_imgui.get_glfw_window_address(), 1)
 
 
-def script_layout(ctx, viewer, report: dict) -> None:
-    """The layout this window size got: each panel's size when it is drawn (a panel in a
-    tab is brought to the front first), and the Pose panel scrolled to its last slider."""
-    ctx.yield_(6)
-    report["layout"] = viewer.layout.kind
-    report["spaces"] = dict(viewer.layout.spaces)
+def _panel_sizes(ctx, viewer) -> dict:
+    """Each panel's size when it is drawn (a panel in a tab brought to the front first)."""
     sizes = {}
     for name in ("Pose", "3D view", "Neural render", "Vocabulary"):
         frame = imgui.get_frame_count()
@@ -111,9 +120,19 @@ def script_layout(ctx, viewer, report: dict) -> None:
             ctx.yield_(3)
         w, h, drawn = viewer.panel_sizes.get(name, (0.0, 0.0, -1))
         sizes[name] = {"w": w, "h": h, "drawn": drawn >= frame - 1}
-    report["sizes"] = sizes
-    report["view_size"] = list(viewer.view_size)
     ctx.window_focus("3D view")
+    return sizes
+
+
+def script_layout(ctx, viewer, report: dict) -> None:
+    """The layout this window size got: each panel's size, and the Pose panel scrolled to
+    its last slider."""
+    ctx.yield_(6)
+    report["layout"] = viewer.layout.kind
+    report["spaces"] = dict(viewer.layout.spaces)
+    report["sizes"] = _panel_sizes(ctx, viewer)
+    report["view_size"] = list(viewer.view_size)
+    report["relayouts"] = viewer.relayouts
     ctx.window_focus("Pose")
     ctx.set_ref("Pose")
     ctx.scroll_to_item("**/right_hand/##z", imgui.internal.Axis.y)
@@ -122,8 +141,26 @@ def script_layout(ctx, viewer, report: dict) -> None:
     wait_neural(ctx, viewer, report)
 
 
+def script_resize(ctx, viewer, report: dict) -> None:
+    """The window resized to 640x400, then to 1600x1000 (GLFW, as a user's drag of its
+    border): the layout each size got and the panels' sizes."""
+    ctx.yield_(6)
+    report["start"] = viewer.layout.kind
+    steps = []
+    for w, h in ((640, 400), (1600, 1000)):
+        before = viewer.relayouts
+        resize_window(w, h)
+        _wait(ctx, lambda b=before: viewer.relayouts > b, timeout=15)
+        ctx.yield_(6)
+        io = imgui.get_io()
+        size = [int(io.display_size.x), int(io.display_size.y)]
+        steps.append({"size": size, "layout": viewer.layout.kind, "sizes": _panel_sizes(ctx, viewer)})
+    report["steps"] = steps
+
+
 WINDOW_SCRIPTS = {
     "layout": script_layout,
+    "resize": script_resize,
     "bad-pose": script_bad_pose,
     "close-exporting": script_close_exporting,
 }

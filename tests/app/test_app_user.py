@@ -53,6 +53,7 @@ def test_a_bad_pose_path_after_a_good_sequence_keeps_it_and_says_why(checkpoint,
     proc, rep, _ = run_window(checkpoint, "bad-pose", tmp_path, "--poses", str(good), env=env)
     ok(proc, rep)
     assert rep["start"] == {"path": str(good), "frames": 12}
+    assert rep["open_at_start"]  # --poses opens the Sequence header
     # the menu's route: the error is in the status line, whole, and in its tooltip
     after = rep["after_dialog"]
     assert after["error"] and rep["kept_after_dialog"] and rep["timeline_shown"]
@@ -137,12 +138,29 @@ def test_the_panels_keep_a_usable_size_in_small_and_large_windows(checkpoint, tm
     w, h = rep["view_size"]
     assert w >= 300 and h >= 170, rep["view_size"]  # the 3D view's image, under its toolbar
     assert rep["last_slider_reached"]  # the Pose panel scrolls to its last joint
+    assert rep["relayouts"] == 0  # the layout it opened with stays
     if kind == "narrow":  # stacked: Pose and Vocabulary share a column as tabs
         assert rep["spaces"]["Pose"] == rep["spaces"]["Vocabulary"]
     else:
         assert len(set(rep["spaces"].values())) == 4
     image = np.asarray(Image.open(shot))
     assert image.shape[:2] == tuple(int(v) for v in size.split("x"))[::-1] and image.std() > 10
+
+
+@slow
+def test_a_resized_window_docks_its_panels_anew(checkpoint, tmp_path):
+    from texvocab_viewer.layout import MIN_WIDTH
+
+    proc, rep, _ = run_window(checkpoint, "resize", tmp_path, screen="1920x1200")
+    ok(proc, rep)
+    assert rep["start"] == "wide"  # 1280 x 800
+    (small, large) = rep["steps"]
+    assert small["size"] == [640, 400] and small["layout"] == "narrow"
+    assert large["size"] == [1600, 1000] and large["layout"] == "wide"
+    for step in (small, large):
+        for name, floor in MIN_WIDTH.items():
+            got = step["sizes"][name]
+            assert got["drawn"] and got["w"] >= floor - 2, (step["size"], name, got)
 
 
 def test_a_preset_sets_the_whole_pose_as_shot_does():
