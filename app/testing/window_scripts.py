@@ -89,6 +89,26 @@ def script_close_exporting(ctx, viewer, report: dict) -> None:
     report["closed_by_window"] = bool(rp.app_shall_exit)
 
 
+def script_close_playing(ctx, viewer, report: dict) -> None:
+    """Play the --poses sequence with the neural render at 256 px (busy every frame), then
+    close the window (GLFW's close request)."""
+    ctx.yield_(4)
+    viewer.neural.resolution = 256
+    ctx.set_ref("Pose")
+    ctx.item_click("**/Sequence/Play")
+    seq = viewer.sequence
+    _wait(ctx, lambda: seq.frame >= 5 and viewer.neural.busy, timeout=30)
+    report["playing_at_close"] = bool(seq.playing)
+    report["rendering_at_close"] = bool(viewer.neural.busy)
+    report["closed_at"] = time.time()
+    close_window()
+    rp = hello_imgui.get_runner_params()
+    t0 = time.perf_counter()
+    while not rp.app_shall_exit and time.perf_counter() - t0 < 10:
+        ctx.yield_()
+    report["closed_by_window"] = bool(rp.app_shall_exit)
+
+
 def _glfw():
     import imgui_bundle
 
@@ -163,4 +183,5 @@ WINDOW_SCRIPTS = {
     "resize": script_resize,
     "bad-pose": script_bad_pose,
     "close-exporting": script_close_exporting,
+    "close-playing": script_close_playing,
 }

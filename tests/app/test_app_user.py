@@ -119,6 +119,20 @@ def test_closing_the_window_during_export_video_stops_it_and_removes_its_files(c
 
 
 @slow
+def test_closing_the_window_while_it_plays_and_renders_exits_at_once(checkpoint, tmp_path):
+    poses = pose_file(tmp_path / "walk.npz", 300)
+    end = tmp_path / "ended"
+    shell = f'"$0" -m texvocab_viewer "$@"; rc=$?; date +%s.%N > {end}; exit $rc'
+    proc, rep, _ = run_window(
+        checkpoint, "close-playing", tmp_path, "--poses", str(poses), command=("sh", "-c", shell, PYTHON)
+    )
+    ok(proc, rep)
+    assert rep["playing_at_close"] and rep["rendering_at_close"] and rep["closed_by_window"]
+    seconds = float(end.read_text()) - rep["closed_at"]
+    assert seconds < 2.0, seconds
+
+
+@slow
 @pytest.mark.parametrize(
     ("size", "kind"), [("640x400", "narrow"), ("900x600", "medium"), ("1920x1080", "wide")]
 )
