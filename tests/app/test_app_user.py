@@ -5,6 +5,7 @@ close while a video exports, and the layout at small and large window sizes."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -306,11 +307,13 @@ def test_the_status_line_cuts_a_long_message_to_its_width():
     assert fit_text("first line\nsecond", 700, measure) == "first line..."
 
 
-def test_the_vocabulary_panel_knows_the_moved_parts_and_each_keys_range():
+def test_the_vocabulary_panel_knows_the_moved_parts_and_each_keys_range(tmp_path):
     from texvocab_viewer.panels.vocab import distance_bar
     from texvocab_viewer.state import ViewerState, load_viewer_data
 
-    saved = Path(__file__).parent.parent / "data" / "checkpoint_main"  # a global-pose vocabulary
+    # a global-pose vocabulary; copied, since loading caches texture maps into the capture
+    saved = tmp_path / "checkpoint_main"
+    shutil.copytree(Path(__file__).parent.parent / "data" / "checkpoint_main", saved)
     data = load_viewer_data(str(saved / "checkpoint.pt"), capture=str(saved / "capture"))
     state = ViewerState(data)
     state.set_joint(16, (0.0, 0.0, -70.0))  # the left shoulder
