@@ -178,3 +178,44 @@ def test_texture_map_cache_is_keyed_by_view_set(unlit_capture, tmp_path):
     honest = _maps_of(cap.root, cap.body, eval_views=(1, 5))
     leaky = np.stack([load_texture_map(p)[0] for p in maps]).transpose(0, 3, 1, 2)
     assert not np.array_equal(honest, leaky)  # the all-view maps were not reused
+
+
+def test_texture_map_cache_follows_its_inputs(tmp_path, monkeypatch):
+    """The cache is keyed by what a map was built from: an image rewritten in place (same
+    name, same size) rebuilds that frame only, a changed calibration every frame, and an
+    unchanged capture nothing."""
+    import shutil
+
+    from PIL import Image
+
+    import texvocab.method.texmap as tm
+
+    body = default_body()
+    poses = np.zeros((3, 24, 3), np.float32)
+    settings = SynthSettings(ring_views=2, raised_views=0, size=64, texture_size=64, lighting=False)
+    root = synthesize(tmp_path / "cap", poses, np.zeros((3, 3)), 3, body, settings, progress=False)
+    s = TexmapSettings(size=32)
+    calls = []
+    real = tm.build_texture_map
+    monkeypatch.setattr(tm, "build_texture_map", lambda c, t, st: calls.append(t) or real(c, t, st))
+
+    def prepare():
+        calls.clear()
+        prepare_texture_maps(open_capture(root, body=body), s, progress=False)
+        return list(calls)
+
+    assert prepare() == [0, 1, 2]
+    assert prepare() == []
+    cap = open_capture(root, body=body)
+    img = cap.image_paths[1][0]
+    pixels = np.asarray(Image.open(img)).copy()
+    pixels[10:20, 10:20] = 255 - pixels[10:20, 10:20]
+    Image.fromarray(pixels).save(img)  # same file name, same size, new content
+    assert prepare() == [1]
+    root = tmp_path / "copy"
+    shutil.copytree(cap.root, root)
+    assert prepare() == []  # a copied capture (its cache inside) is the same content
+    annots = np.load(root / "annots.npy", allow_pickle=True).item()
+    annots["cams"]["T"][0] = np.asarray(annots["cams"]["T"][0]) + 1.0  # camera 0 moved 1 mm
+    np.save(root / "annots.npy", annots, allow_pickle=True)
+    assert prepare() == [0, 1, 2]

@@ -34,6 +34,7 @@ from scipy import ndimage
 from tqdm import tqdm
 
 from texvocab.capture.camera import sample_image
+from texvocab.capture.frame_digest import frame_digest
 from texvocab.geometry.raster import rasterize_mesh
 from texvocab.geometry.uv import texel_map
 from texvocab.io.images import atomic_write_bytes
@@ -153,19 +154,24 @@ def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:
     return cache_dir(capture, settings) / f"frame_{capture.frame_ids[frame]:06d}.npz"
 
 
-def _readable(path: Path, size: int) -> bool:
-    """Whether a cached texture map is there and sound; a damaged one (a truncated or
-    foreign file in texvocab's own cache) is logged and rebuilt, never an error."""
+def _cached(path: Path, size: int, digest: bytes) -> str:
+    """``"ok"`` when a cached texture map is there, sound and built from the inputs
+    ``digest`` names (:func:`~texvocab.capture.frame_digest.frame_digest`); ``"missing"``;
+    ``"damaged"`` (a truncated or foreign file in texvocab's own cache: logged); ``"stale"``
+    (built from other images, masks, calibration or pose, or before the files recorded
+    their inputs). Anything but "ok" is rebuilt, never an error."""
     if not path.is_file():
-        return False
+        return "missing"
     try:
-        texture, coverage = load_texture_map(path)
-        ok = texture.shape == (size, size, 3) and coverage.shape == (size, size)
+        with np.load(path, allow_pickle=False) as npz:
+            ok = npz["texture"].shape == (size, size, 3) and npz["coverage"].shape == (size, size)
+            stored = npz["inputs"].tobytes() if "inputs" in npz.files else None
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
-        ok = False
+        ok, stored = False, None
     if not ok:
         log.warning("%s: damaged texture-map cache file, rebuilding it", path)
-    return ok
+        return "damaged"
+    return "ok" if stored == digest else "stale"
 
 
 def load_texture_map(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -176,24 +182,38 @@ def load_texture_map(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def prepare_texture_maps(
     capture, settings: TexmapSettings | None = None, frames=None, progress: bool = True
 ) -> list[Path]:
-    """Build and cache U_t for every training frame; resumable (existing files are kept).
+    """Build and cache U_t for every training frame; resumable (existing files built from
+    the same inputs are kept; each file stores its inputs' digest).
 
     Returns the cache file of each frame, in frame order.
     """
     s = settings or TexmapSettings()
     frames = list(capture.train_frames if frames is None else frames)
     paths = [texture_map_path(capture, t, s) for t in frames]
-    todo = [(t, p) for t, p in zip(frames, paths, strict=True) if not _readable(p, s.size)]
+    views = settings_views(s, capture)
+    digests = {t: frame_digest(capture, t, views) for t in frames}
+    state = {t: _cached(p, s.size, digests[t]) for t, p in zip(frames, paths, strict=True)}
+    todo = [(t, p) for t, p in zip(frames, paths, strict=True) if state[t] != "ok"]
+    stale = sum(v == "stale" for v in state.values())
+    if stale:  # a warning: the user should know the cache no longer matches the capture
+        log.warning(
+            "%s: %d of %d texture maps were built from other images, masks, calibration or "
+            "poses (or before the cache recorded them); rebuilding them",
+            cache_dir(capture, s),
+            stale,
+            len(frames),
+        )
     it = todo
     if progress and todo:
         it = tqdm(todo, desc=f"texture maps {s.size}²", unit="frame")
     for t, path in it:
         texture, coverage = build_texture_map(capture, t, s)
         tex8 = (np.clip(texture, 0, 1) * 255 + 0.5).astype(np.uint8)
+        inputs = np.frombuffer(digests[t], np.uint8)
 
-        def write(tmp, tex8=tex8, coverage=coverage):
+        def write(tmp, tex8=tex8, coverage=coverage, inputs=inputs):
             with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, texture=tex8, coverage=coverage.astype(np.uint8))
+                np.savez_compressed(fh, texture=tex8, coverage=coverage.astype(np.uint8), inputs=inputs)
                 fh.flush()
                 os.fsync(fh.fileno())
 
