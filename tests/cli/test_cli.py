@@ -137,6 +137,8 @@ def test_prepare_and_vocab_commands(tmp_path):
     assert len(list((cap / "texvocab_cache" / "texmaps_32_views_0").glob("frame_*.npz"))) == 3
     out = run("prepare", str(cap), "--texture-size", "32", "--eval-views", check_rc=0).stdout
     assert out.startswith("3 texture maps (32² texels, views 0,1)")
+    share = int(out.splitlines()[1].split("coverage: ")[1].split(" %")[0])
+    assert 40 <= share <= 100  # two ring views see most of the body
     out = run("vocab", str(cap), "--pose", "frame:3", "-k", "2", "--keys", "3", check_rc=0).stdout
     lines = out.strip().splitlines()
     assert "strategy=part, M=3 keys/part, K=2" in lines[1] and len(lines) == 3 + 5

@@ -219,3 +219,24 @@ def test_texture_map_cache_follows_its_inputs(tmp_path, monkeypatch):
     annots["cams"]["T"][0] = np.asarray(annots["cams"]["T"][0]) + 1.0  # camera 0 moved 1 mm
     np.save(root / "annots.npy", annots, allow_pickle=True)
     assert prepare() == [0, 1, 2]
+
+
+def test_coverage_is_reported_and_a_frame_that_saw_little_is_named(unlit_capture, caplog):
+    from texvocab.method.texmap import coverage_note, seen_texel_share
+    from texvocab.pipeline.model import load_textures
+    from texvocab.pipeline.settings import DataSettings, Settings
+
+    cap = unlit_capture
+    paths = prepare_texture_maps(cap, TexmapSettings(size=64), progress=False)
+    cov = np.stack([load_texture_map(p)[1] for p in paths])
+    share = seen_texel_share(cov, cap.body)
+    assert share.shape == (2,) and (share > 0.8).all()  # 8 views see nearly all of the body
+    line, warning = coverage_note(share, cap.frame_ids)
+    assert line.startswith("coverage: ") and warning is None
+    cov[1] = np.where(np.cumsum(cov[1] > 0).reshape(cov[1].shape) > 20, 0, cov[1])  # 20 texels left
+    _, warning = coverage_note(seen_texel_share(cov, cap.body), cap.frame_ids)
+    assert warning.startswith("1 of 2 texture maps saw under 10 %")
+    assert f"frames {cap.frame_ids[1]}" in warning
+    with caplog.at_level("WARNING", logger="texvocab"):
+        load_textures(cap, Settings(data=DataSettings(texture_size=64, eval_views=())), progress=False)
+    assert not any("texture maps saw under" in r.getMessage() for r in caplog.records)  # a sound capture

@@ -6,6 +6,7 @@ their functions: ``texvocab --help`` stays light."""
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -99,7 +100,13 @@ def _open(args):
 
 def cmd_prepare(args: argparse.Namespace) -> int:
     # late: torch (module docstring)
-    from texvocab.method.texmap import cache_dir, prepare_texture_maps
+    from texvocab.method.texmap import (
+        cache_dir,
+        coverage_note,
+        load_texture_map,
+        prepare_texture_maps,
+        seen_texel_share,
+    )
     from texvocab.pipeline.model import texmap_settings
     from texvocab.pipeline.settings import DataSettings, Settings
 
@@ -115,6 +122,11 @@ def cmd_prepare(args: argparse.Namespace) -> int:
         f"{','.join(map(str, settings.views))}) in {cache_dir(cap, settings)} "
         f"({time.perf_counter() - t0:.1f} s)"
     )
+    coverage = np.stack([load_texture_map(p)[1] for p in paths])
+    line, warning = coverage_note(seen_texel_share(coverage, cap.body), cap.frame_ids)
+    print(line)
+    if warning is not None:
+        print(f"warning: {warning}", file=sys.stderr)
     return 0
 
 

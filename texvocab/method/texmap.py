@@ -174,6 +174,37 @@ def _cached(path: Path, size: int, digest: bytes) -> str:
     return "ok" if stored == digest else "stale"
 
 
+COVERAGE_FLOOR = 0.10  # a frame whose views saw less of the body than this is suspect
+
+
+def seen_texel_share(coverage: np.ndarray, body) -> np.ndarray:
+    """(T,) the share of the body's texels (those inside the UV layout) that some view saw,
+    per frame, from coverage maps (T, S, S). One camera sees about a third; a broken
+    calibration or mask sees almost nothing."""
+    coverage = np.asarray(coverage)
+    covered = texel_map(body, coverage.shape[1]).covered
+    return (coverage[:, covered] > 0).mean(1)
+
+
+def coverage_note(share: np.ndarray, frame_ids, floor: float = COVERAGE_FLOOR) -> tuple[str, str | None]:
+    """One summary line of the per-frame ``share`` (:func:`seen_texel_share`) and a warning
+    line naming the frames below ``floor`` (None when there are none)."""
+    share = np.asarray(share, np.float64)
+    worst = int(share.argmin())
+    line = (
+        f"coverage: {100 * np.median(share):.0f} % of the body's texels seen per frame "
+        f"(median over {len(share)}; lowest {100 * share[worst]:.0f} %, frame {frame_ids[worst]})"
+    )
+    low = np.nonzero(share < floor)[0]
+    if not len(low):
+        return line, None
+    names = ", ".join(str(frame_ids[i]) for i in low[:8]) + (", ..." if len(low) > 8 else "")
+    return line, (
+        f"{len(low)} of {len(share)} texture maps saw under {100 * floor:.0f} % of the body's "
+        f"texels (frames {names}): check those frames' masks and the cameras' calibration"
+    )
+
+
 def load_texture_map(path: Path) -> tuple[np.ndarray, np.ndarray]:
     with np.load(path, allow_pickle=False) as npz:
         return npz["texture"].astype(np.float32) / 255.0, npz["coverage"].astype(np.float32)

@@ -7,17 +7,27 @@ vocabulary before loading the weights.
 
 from __future__ import annotations
 
+import logging
+
 import torch
 
 from texvocab.errors import TexvocabError
 from texvocab.method.encoder import build_encoder
 from texvocab.method.feature import PoseFeature
 from texvocab.method.field import AvatarField
-from texvocab.method.texmap import TexmapSettings, load_texture_map, prepare_texture_maps
+from texvocab.method.texmap import (
+    TexmapSettings,
+    coverage_note,
+    load_texture_map,
+    prepare_texture_maps,
+    seen_texel_share,
+)
 from texvocab.method.unseen_texels import fill_unseen_texels
 from texvocab.method.vocab import Vocabulary
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.split import one_camera, one_camera_train_views
+
+log = logging.getLogger("texvocab")
 
 
 def train_views(capture, s: Settings) -> list[int]:
@@ -63,6 +73,9 @@ def load_textures(capture, s: Settings, progress: bool = True) -> torch.Tensor:
     maps = [load_texture_map(p) for p in paths]
     textures = torch.stack([torch.from_numpy(t).permute(2, 0, 1) for t, _ in maps])
     coverage = torch.stack([torch.from_numpy(c) for _, c in maps])
+    _, warning = coverage_note(seen_texel_share(coverage.numpy(), capture.body), capture.frame_ids)
+    if warning is not None:
+        log.warning("%s: %s", capture.root, warning)
     return fill_unseen_texels(textures, coverage, s.data.unseen_texels)
 
 
