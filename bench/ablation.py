@@ -39,6 +39,8 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import os
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -112,6 +114,20 @@ GROUPS: dict[str, dict[str, list[str]]] = {
         "adaptive": ["min_key_distance=0.05"],
     },
 }
+
+
+def die_with_parent() -> None:
+    """Pool initializer: on Linux, ask the kernel to end this worker when the process that
+    started it dies (``prctl(PR_SET_PDEATHSIG, SIGTERM)``), so a killed bench leaves no
+    training workers behind. Elsewhere it does nothing."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(1, int(signal.SIGTERM), 0, 0, 0) != 0:  # 1 = PR_SET_PDEATHSIG
+        print(f"warning: worker {os.getpid()} will outlive a killed bench", file=sys.stderr)
 
 
 def make_capture(out: Path, motion: str = "compositional") -> Path:
@@ -446,7 +462,9 @@ def main(argv=None) -> int:
     else:
         # spawn, not fork: a worker forked after the capture's synthesis (pyrender, torch
         # threads) hung without using any CPU
-        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with ProcessPoolExecutor(
+            args.jobs, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent
+        ) as pool:
             done = list(pool.map(train_and_evaluate, jobs))
         results = {(r["run"], r["seed"]): r for r in done}
     lines = [

@@ -64,3 +64,60 @@ def test_the_evaluation_preset_does_not_change_training_unless_asked():
     assert (shown.render.coarse_samples, shown.render.fine_samples, shown.train.seed) == (6, 2, 3)
     old, _ = mod.run_settings({**job, "train_with_preset": True})
     assert (old.render.coarse_samples, old.render.fine_samples) == (6, 2)
+
+
+_ORPHAN_SCRIPT = """
+import multiprocessing, os, sys, time
+from concurrent.futures import ProcessPoolExecutor
+sys.path.insert(0, sys.argv[1])  # the spawned worker inherits the path and imports it too
+import ablation
+
+def pid_then_sleep(_):
+    print(os.getpid(), flush=True)
+    time.sleep(120)
+
+if __name__ == "__main__":
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(1, mp_context=ctx, initializer=ablation.die_with_parent) as pool:
+        list(pool.map(pid_then_sleep, [0]))
+"""
+
+
+def test_a_killed_bench_leaves_no_training_worker(tmp_path):
+    """The pool's workers end with the bench: SIGKILL on the parent, and the worker that was
+    sleeping in a job is gone within seconds."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "orphan.py"
+    script.write_text(_ORPHAN_SCRIPT)
+    parent = subprocess.Popen(
+        [sys.executable, str(script), str(ROOT / "bench")],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    try:
+        worker = int(parent.stdout.readline())
+        os.kill(worker, 0)  # alive while the parent is
+        parent.kill()
+        parent.wait(30)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            try:
+                os.kill(worker, 0)
+            except ProcessLookupError:
+                break
+            # a zombie awaiting its reaper counts as gone
+            stat = Path(f"/proc/{worker}/stat")
+            if stat.is_file() and stat.read_text().split(") ")[1].startswith("Z"):
+                break
+            time.sleep(0.2)
+        else:
+            os.kill(worker, signal.SIGKILL)
+            raise AssertionError("the worker outlived its killed bench")
+    finally:
+        parent.kill()
