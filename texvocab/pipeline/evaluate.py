@@ -22,10 +22,12 @@ import torch
 from tqdm import tqdm
 
 from texvocab.body.poses import preset
+from texvocab.capture.fold_regions import FoldRegions
 from texvocab.capture.synth import ground_truth_renderer
 from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 from texvocab.metrics import evaluate_pair, frechet
+from texvocab.metrics.fold_region import fold_region_metrics, summarise_fold
 from texvocab.metrics.image import SSIM_WINDOW
 from texvocab.pipeline.split import one_camera, scored_views
 from texvocab.render import prepare_shell, render_image
@@ -169,12 +171,18 @@ def evaluate_sets(
             bar.set_postfix_str(name)
             pairs = getattr(items, "pairs", None)
             feats = _PairFeatures(extractor if len(items) >= 2 else None)
-            per, rows = [], []
+            # synthetic captures: metrics on the pixels whose truth changes with pose
+            folds = FoldRegions.load(items.capture.root) if pairs and hasattr(items, "capture") else None
+            per, rows, fold_per = [], [], []
             for i, (pose, trans, cam, gt, mask) in enumerate(items):
                 pred, alpha, stats = render_view_rgba(model, pose, trans, cam, march, scale)
                 m = evaluate_pair(pred, gt, mask, lpips_model=lpips_model)
                 m["iou"] = silhouette_iou(alpha, mask)
                 m["seconds"] = stats.seconds
+                if folds is not None:
+                    region = folds.region(*pairs[i])
+                    fold_per.append(None if region is None else fold_region_metrics(pred, gt, region))
+                    m.update(fold_per[-1] or {})
                 per.append(m)
                 where = {"frame": int(pairs[i][0]), "view": int(pairs[i][1])} if pairs else {}
                 records.append({"set": name, "index": i, **where, **m})
@@ -184,6 +192,8 @@ def evaluate_sets(
                 bar.update()
             bar.set_postfix_str(f"{name}: FID/KID")
             table[name] = {**summarise(per), **feats.scores(), "images": len(per)}
+            if folds is not None:
+                table[name].update(summarise_fold(fold_per))
             if getattr(items, "label", None):  # e.g. "seen view" (texvocab.pipeline.split)
                 table[name]["views"] = items.label
             grids[name] = rows
@@ -246,6 +256,13 @@ def format_table(table: dict[str, dict], checkpoint: str = "", split: str = "") 
         ]
         shown = f"{name} ({row['views']})" if row.get("views") else name
         lines.append(f"| {shown} | " + " | ".join(cells) + " |")
+    folds = [(name, row) for name, row in table.items() if "fold_images" in row]
+    if folds:  # texvocab.metrics.fold_region
+        lines += ["", "Fold regions (pixels whose truth changes with pose):", ""]
+        lines += ["| set | images | psnr_fold | ssim_fold |", "|---|---|---|---|"]
+        for name, row in folds:
+            cells = [str(row["fold_images"]), _cell(row, "psnr_fold", 2), _cell(row, "ssim_fold", 4)]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
