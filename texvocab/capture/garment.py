@@ -65,6 +65,115 @@ def _crease(x: np.ndarray, sharpness: int = 3) -> np.ndarray:
     return np.maximum(0.0, np.cos(2 * np.pi * x)) ** sharpness
 
 
+def regions(points: np.ndarray, weights: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Per rest point (N, 3) with skinning weights (N, J), given the rest joints (J, 3):
+    0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""
+    p, jnt = points, joints
+    dom = weights.argmax(1)
+    region = np.full(len(p), 2)
+    legs = np.isin(
+        dom,
+        [
+            J["left_hip"],
+            J["right_hip"],
+            J["left_knee"],
+            J["right_knee"],
+            J["left_ankle"],
+            J["right_ankle"],
+        ],
+    )
+    region[legs | (p[:, 1] < jnt[J["pelvis"], 1] + 0.04)] = 3
+    ankle_y = jnt[J["left_ankle"], 1]
+    region[np.isin(dom, [J["left_foot"], J["right_foot"]]) | (p[:, 1] < ankle_y + 0.03)] = 4
+    wrist_x = abs(jnt[J["left_wrist"], 0])  # long sleeves: folds form on fabric
+    arm_skin = (np.abs(p[:, 0]) > wrist_x - 0.03) & (p[:, 1] > jnt[J["pelvis"], 1])
+    region[arm_skin] = 0
+    head = np.isin(dom, [J["head"], J["neck"]]) & (p[:, 1] > jnt[J["neck"], 1] - 0.02)
+    region[head] = 0
+    hair = head & (
+        (p[:, 1] > jnt[J["head"], 1] + 0.06)
+        | ((p[:, 2] < jnt[J["head"], 2] - 0.02) & (p[:, 1] > jnt[J["head"], 1] - 0.04))
+    )
+    region[hair] = 1
+    return region
+
+
+def fold_localities(points: np.ndarray, joints: np.ndarray, sources=FOLD_SOURCES) -> dict[str, tuple]:
+    """Per fold source, which rest points (N, 3) lie near its joint and their bone
+    coordinates; ``joints`` (24, 3) rest joints."""
+    local = {s.name: _locality(points, joints, s) for s in sources}
+    local["_count"] = (len(points),)
+    local["_sources"] = tuple(sources)
+    return local
+
+
+def _locality(points: np.ndarray, joints: np.ndarray, s: FoldSource):
+    pivot = joints[s.joints[-1]]
+    bone = joints[s.child] - joints[s.joints[0]]
+    bone /= np.linalg.norm(bone)
+    rel = points - pivot
+    along = rel @ bone - s.offset
+    radial = rel - np.outer(rel @ bone + 0.0, bone)
+    dist = np.linalg.norm(radial, axis=1)
+    near = np.nonzero((np.abs(along) < 2.0 * s.reach) & (dist < 0.2))[0]
+    ref = np.cross(bone, [0.0, 0.0, 1.0] if abs(bone[2]) < 0.9 else [1.0, 0.0, 0.0])
+    ref /= np.linalg.norm(ref)
+    rad = radial[near] / np.maximum(dist[near], 1e-9)[:, None]
+    azim = np.arctan2(rad @ np.cross(bone, ref), rad @ ref)
+    return near, bone, along[near], rad, azim
+
+
+def fold_intensity(
+    local: dict[str, tuple],
+    pose,
+    skin: dict[str, np.ndarray] | None = None,
+    sharpness: int = 3,
+    buckling: bool = False,
+) -> np.ndarray:
+    """(N,) crease intensity (>= 0, not clipped) at the points of ``local``
+    (:func:`fold_localities`) for a pose (24, 3) axis-angle. ``skin``: per source, a factor
+    (N,) in [0, 1] that keeps its creases on its own part's surface (None: no limit);
+    ``sharpness``: crease profile ``max(0, cos) ** sharpness`` (3: thin painted lines, 1:
+    the rounded ridges of cloth geometry); ``buckling``: crease strength grows as the
+    square root of the bend and twist angles, as the amplitude of buckled cloth grows with
+    the square root of its compression (False: linearly, as painted folds)."""
+    pose = torch.as_tensor(np.asarray(pose, dtype=np.float64))
+    total = np.zeros(local["_count"][0])
+    for s in local["_sources"]:
+        near, bone, along, rad, azim = local[s.name]
+        q = rotvec_to_quat(pose[list(s.joints)])
+        qc = q[0]
+        for k in range(1, len(q)):
+            qc = quat_multiply(qc, q[k])
+        R = quat_to_rotmat(qc).numpy()
+        moved = R @ bone
+        cos_b = float(np.clip(moved @ bone, -1, 1))
+        bend = np.arccos(cos_b)
+        twist = 2 * np.arctan2(float(qc[1:].numpy() @ bone), float(qc[0]))
+        twist = (twist + np.pi) % (2 * np.pi) - np.pi
+        fold = np.zeros(len(near))
+        if bend > 1e-3:
+            n = moved - cos_b * bone
+            n /= np.linalg.norm(n)
+            inner = 0.3 + 0.7 * np.clip(rad @ n, 0, 1)  # sleeves bunch all round, most inside
+            spacing = s.spacing * (1.0 - 0.35 * min(bend / np.pi, 1.0))
+            centre = 0.25 * s.reach * np.sin(bend)  # creases gather toward the bend
+            env = np.exp(-0.5 * ((along - centre) / s.reach) ** 2)
+            strength = np.clip(bend / (np.pi / 2), 0, 1.2)
+            strength = np.sqrt(strength) if buckling else strength
+            wave = _crease(along / spacing + 0.15 * np.sin(azim * 2 + bend), sharpness)
+            fold += strength * env * inner * wave
+        if abs(twist) > 1e-3:
+            env = np.exp(-0.5 * (along / (1.3 * s.reach)) ** 2)
+            helix = _crease(along / (1.4 * s.spacing) + np.sign(twist) * 2 * azim / (2 * np.pi), sharpness)
+            twisted = np.clip(abs(twist) / (np.pi / 6), 0, 1)
+            fold += (np.sqrt(twisted) if buckling else twisted) * env * helix * 0.8
+        if skin is not None:
+            fold = fold * skin[s.name][near]
+        total[near] = np.maximum(total[near], fold)
+    return total
+
+
 class Garment:
     """Texture generator for one body.
 
@@ -84,7 +193,7 @@ class Garment:
         self.points = self.texels.points(body.v_template.double().numpy(), faces)
         self.weights = self.texels.interpolate(body.weights.double().numpy(), faces)
         self.albedo = self._paint_albedo()
-        self._local = {s.name: self._locality(s) for s in FOLD_SOURCES}
+        self._local = fold_localities(self.points, self.joints)
 
     # -- static albedo -------------------------------------------------------------------
     def _to_image(self, values: np.ndarray) -> np.ndarray:
@@ -94,34 +203,7 @@ class Garment:
 
     def _regions(self) -> np.ndarray:
         """Per texel: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""
-        p, jnt = self.points, self.joints
-        dom = self.weights.argmax(1)
-        region = np.full(len(p), 2)
-        legs = np.isin(
-            dom,
-            [
-                J["left_hip"],
-                J["right_hip"],
-                J["left_knee"],
-                J["right_knee"],
-                J["left_ankle"],
-                J["right_ankle"],
-            ],
-        )
-        region[legs | (p[:, 1] < jnt[J["pelvis"], 1] + 0.04)] = 3
-        ankle_y = jnt[J["left_ankle"], 1]
-        region[np.isin(dom, [J["left_foot"], J["right_foot"]]) | (p[:, 1] < ankle_y + 0.03)] = 4
-        wrist_x = abs(jnt[J["left_wrist"], 0])  # long sleeves: folds form on fabric
-        arm_skin = (np.abs(p[:, 0]) > wrist_x - 0.03) & (p[:, 1] > jnt[J["pelvis"], 1])
-        region[arm_skin] = 0
-        head = np.isin(dom, [J["head"], J["neck"]]) & (p[:, 1] > jnt[J["neck"], 1] - 0.02)
-        region[head] = 0
-        hair = head & (
-            (p[:, 1] > jnt[J["head"], 1] + 0.06)
-            | ((p[:, 2] < jnt[J["head"], 2] - 0.02) & (p[:, 1] > jnt[J["head"], 1] - 0.04))
-        )
-        region[hair] = 1
-        return region
+        return regions(self.points, self.weights, self.joints)
 
     def _paint_albedo(self) -> np.ndarray:
         p, jnt = self.points, self.joints
@@ -162,54 +244,9 @@ class Garment:
         return self._to_image(np.clip(col, 0, 1)).astype(np.float32)
 
     # -- pose-dependent folds ----------------------------------------------------------
-    def _locality(self, s: FoldSource):
-        pivot = self.joints[s.joints[-1]]
-        bone = self.joints[s.child] - self.joints[s.joints[0]]
-        bone /= np.linalg.norm(bone)
-        rel = self.points - pivot
-        along = rel @ bone - s.offset
-        radial = rel - np.outer(rel @ bone + 0.0, bone)
-        dist = np.linalg.norm(radial, axis=1)
-        near = np.nonzero((np.abs(along) < 2.0 * s.reach) & (dist < 0.2))[0]
-        ref = np.cross(bone, [0.0, 0.0, 1.0] if abs(bone[2]) < 0.9 else [1.0, 0.0, 0.0])
-        ref /= np.linalg.norm(ref)
-        rad = radial[near] / np.maximum(dist[near], 1e-9)[:, None]
-        azim = np.arctan2(rad @ np.cross(bone, ref), rad @ ref)
-        return near, bone, along[near], rad, azim
-
     def fold_map(self, pose) -> np.ndarray:
         """(size, size) crease intensity in [0, 1] for a pose (24, 3) axis-angle."""
-        pose = torch.as_tensor(np.asarray(pose, dtype=np.float64))
-        total = np.zeros(len(self.points))
-        for s in FOLD_SOURCES:
-            near, bone, along, rad, azim = self._local[s.name]
-            q = rotvec_to_quat(pose[list(s.joints)])
-            qc = q[0]
-            for k in range(1, len(q)):
-                qc = quat_multiply(qc, q[k])
-            R = quat_to_rotmat(qc).numpy()
-            moved = R @ bone
-            cos_b = float(np.clip(moved @ bone, -1, 1))
-            bend = np.arccos(cos_b)
-            twist = 2 * np.arctan2(float(qc[1:].numpy() @ bone), float(qc[0]))
-            twist = (twist + np.pi) % (2 * np.pi) - np.pi
-            fold = np.zeros(len(near))
-            if bend > 1e-3:
-                n = moved - cos_b * bone
-                n /= np.linalg.norm(n)
-                inner = 0.3 + 0.7 * np.clip(rad @ n, 0, 1)  # sleeves bunch all round, most inside
-                spacing = s.spacing * (1.0 - 0.35 * min(bend / np.pi, 1.0))
-                centre = 0.25 * s.reach * np.sin(bend)  # creases gather toward the bend
-                env = np.exp(-0.5 * ((along - centre) / s.reach) ** 2)
-                strength = np.clip(bend / (np.pi / 2), 0, 1.2)
-                wave = _crease(along / spacing + 0.15 * np.sin(azim * 2 + bend))
-                fold += strength * env * inner * wave
-            if abs(twist) > 1e-3:
-                env = np.exp(-0.5 * (along / (1.3 * s.reach)) ** 2)
-                helix = _crease(along / (1.4 * s.spacing) + np.sign(twist) * 2 * azim / (2 * np.pi))
-                fold += np.clip(abs(twist) / (np.pi / 6), 0, 1) * env * helix * 0.8
-            total[near] = np.maximum(total[near], fold)
-        return self._to_image(np.clip(total, 0, 1)).astype(np.float32)
+        return self._to_image(np.clip(fold_intensity(self._local, pose), 0, 1)).astype(np.float32)
 
     def texture(self, pose) -> np.ndarray:
         """(size, size, 3) float32 albedo with the pose's folds (row 0 = v = 1)."""

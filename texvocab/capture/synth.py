@@ -20,7 +20,11 @@ from tqdm import tqdm
 from texvocab.body.pose_files import read_pose_sequence
 from texvocab.capture.camera import Camera
 from texvocab.capture.capture import SYNTH_META
+from texvocab.capture.fold_regions import FoldRegions, fold_region
 from texvocab.capture.garment import Garment
+from texvocab.capture.garment_mesh import ClothMesh
+from texvocab.capture.garment_sets import DEFAULT_GARMENT, garment_spec
+from texvocab.capture.synth_realism import CameraEffects, noisy_fit
 from texvocab.capture.thuman import ThumanWriter
 from texvocab.capture.zju import ZjuWriter
 from texvocab.errors import AssetError
@@ -43,6 +47,14 @@ class SynthSettings:
     seed: int = 0
     target_y: float = -0.3
     lighting: bool = True  # False: unlit albedo (tests compare texture maps to it)
+    garment: str = DEFAULT_GARMENT  # texvocab.capture.garment_sets
+    # texvocab.capture.synth_realism (all 0: the truth, clean images)
+    fit_noise_deg: float = 0.0
+    fit_noise_trans: float = 0.0
+    exposure_sd: float = 0.0
+    white_balance_sd: float = 0.0
+    sensor_noise: float = 0.0
+    fold_regions: bool = True  # store fold_regions.npz (texvocab.metrics.fold_region)
 
 
 def default_cameras(s: SynthSettings) -> list[Camera]:
@@ -83,7 +95,9 @@ class SynthRenderer:
         self._pr = pyrender
         self.body = body
         self.settings = settings or SynthSettings()
+        spec = garment_spec(self.settings.garment)
         self.garment = Garment(body, self.settings.texture_size)
+        self.cloth = None if spec is None else ClothMesh(body, spec)
         self.vidx, uvidx, self.rfaces = _split_seams(body.faces.numpy(), body.ft.numpy())
         self.uv = body.vt.numpy()[uvidx]
         self._renderer = None
@@ -102,26 +116,33 @@ class SynthRenderer:
     ) -> list[tuple[np.ndarray, np.ndarray]]:
         """[(rgb (H, W, 3) float32, mask (H, W) bool)] per camera for one pose (24, 3).
 
-        ``texture_pose`` (tests, inspection): take the clothing's folds from another pose
-        while keeping this pose's geometry.
+        ``texture_pose`` (tests, inspection, fold regions): take the clothing's folds from
+        another pose while keeping this pose's body (painted folds in the albedo, or a
+        garment's fold ridges on its cloth).
         """
         import trimesh  # late: ~1 s to import, needed only with pyrender (not by load_pose_file)
 
         pr = self._pr
-        out = self.body.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
-        verts = out.vertices[0].double().numpy()
-        normals = trimesh.Trimesh(verts, self.body.faces.numpy(), process=False).vertex_normals
-        tex = self.garment.texture(pose if texture_pose is None else texture_pose)
+        fold_pose = pose if texture_pose is None else texture_pose
+        if self.cloth is None:  # painted: the body mesh, folds in the albedo
+            out = self.body.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
+            verts = out.vertices[0].double().numpy()
+            normals = trimesh.Trimesh(verts, self.body.faces.numpy(), process=False).vertex_normals
+            tex = self.garment.texture(fold_pose)
+            positions, normals, uv, faces = verts[self.vidx], normals[self.vidx], self.uv, self.rfaces
+        else:  # cloth geometry: folds are ridges of the surface, the albedo is static
+            positions, normals = self.cloth.posed(pose, trans, fold_pose)
+            tex, uv, faces = self.garment.albedo, self.cloth.uv, self.cloth.faces
         # pyrender samples row 0 at v = 1, the project's convention (texvocab.geometry.uv).
         texture = pr.Texture(source=(tex * 255 + 0.5).astype(np.uint8), source_channels="RGB")
         material = pr.MetallicRoughnessMaterial(
             baseColorTexture=texture, metallicFactor=0.0, roughnessFactor=0.9
         )
         prim = pr.Primitive(
-            positions=verts[self.vidx],
-            normals=normals[self.vidx],
-            texcoord_0=self.uv,
-            indices=self.rfaces,
+            positions=positions,
+            normals=normals,
+            texcoord_0=uv,
+            indices=faces,
             material=material,
         )
         scene = pr.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.32, 0.32, 0.32])
@@ -201,14 +222,29 @@ def synthesize(
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     renderer = SynthRenderer(body, settings)
+    s = settings
+    rec_poses, rec_trans = poses, trans
+    if s.fit_noise_deg > 0 or s.fit_noise_trans > 0:
+        rec_poses, rec_trans = noisy_fit(poses, trans, s.fit_noise_deg, s.fit_noise_trans, s.seed)
+    effects = CameraEffects(len(cameras), s.exposure_sd, s.white_balance_sd, s.sensor_noise, s.seed)
+    rest = np.zeros((24, 3), np.float32)
+    regions = []
     try:
         writer = (ZjuWriter if layout == "zju" else ThumanWriter)(tmp, cameras, body)
         frames = range(len(poses))
         if progress:
             frames = tqdm(frames, desc=f"synth {out.name}", unit="frame")
         for t in frames:
-            writer.add_frame(t, poses[t], trans[t], renderer.render(poses[t], trans[t], cameras))
+            renders = renderer.render(poses[t], trans[t], cameras)
+            if s.fold_regions and t >= num_train:  # novel frame: where the truth depends on pose
+                flat = renderer.render(poses[t], trans[t], cameras, texture_pose=rest)
+                regions.append([fold_region(a[0], b[0]) for a, b in zip(renders, flat, strict=True)])
+            if effects.active:
+                renders = [(effects.apply(v, rgb), mask) for v, (rgb, mask) in enumerate(renders)]
+            writer.add_frame(t, rec_poses[t], rec_trans[t], renders)
         writer.finish()
+        if regions:
+            FoldRegions.save(tmp, range(num_train, len(poses)), range(len(cameras)), np.asarray(regions))
         meta = {
             "generator": "texvocab synth",
             "layout": layout,
@@ -218,6 +254,11 @@ def synthesize(
             "settings": asdict(settings),
             "cameras": [c.to_dict() for c in cameras],
         }
+        if effects.active:
+            meta["camera_effects"] = effects.to_dict()
+        if rec_poses is not poses:  # for analysis only: no reader returns these
+            meta["true_poses"] = poses.reshape(len(poses), -1).tolist()
+            meta["true_trans"] = trans.tolist()
         (tmp / SYNTH_META).write_text(json.dumps(meta, indent=1))
         if out.exists():
             shutil.rmtree(out)

@@ -64,6 +64,30 @@ def add_synth_parser(sub, add_smpl) -> None:
     p.add_argument("--raised-views", type=int, default=2)
     p.add_argument("--texture-size", type=int, default=1024)
     p.add_argument("--seed", type=int, default=0, help="motion seed (default 0)")
+    p.add_argument(
+        "--garment",
+        default="painted",
+        help="what the body wears: painted (default: the body mesh with painted folds), "
+        "hoodie, wide-trousers, loose (cloth geometry off the body, lit fold ridges; "
+        "docs/data.md, 'Garments')",
+    )
+    p.add_argument(
+        "--fit-noise-deg",
+        type=float,
+        default=0.0,
+        help="record SMPL fits with this RMS rotation error per joint, degrees (default 0: exact)",
+    )
+    p.add_argument(
+        "--fit-noise-trans",
+        type=float,
+        default=0.0,
+        help="record root translations with this RMS error, metres (default 0)",
+    )
+    p.add_argument("--exposure-sd", type=float, default=0.0, help="per-camera exposure offset sd, stops")
+    p.add_argument(
+        "--white-balance-sd", type=float, default=0.0, help="per-camera, per-channel gain sd, stops"
+    )
+    p.add_argument("--sensor-noise", type=float, default=0.0, help="per-pixel Gaussian noise sd (0..1 units)")
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     add_smpl(p)
     p.set_defaults(func=cmd_synth)
@@ -77,6 +101,7 @@ SYNTH_LIMITS = {"size": 4096, "texture_size": 4096, "ring_views": 64, "raised_vi
 def cmd_synth(args: argparse.Namespace) -> int:
     # late: torch; `texvocab --help` stays light (module docstring)
     from texvocab.body import load_body
+    from texvocab.capture.garment_sets import garment_spec
     from texvocab.capture.motion import default_motion
     from texvocab.capture.synth import SynthSettings, load_pose_file, settings_of, synthesize
 
@@ -91,6 +116,16 @@ def cmd_synth(args: argparse.Namespace) -> int:
         )
     if args.raised_views < 0 or (args.train_frames is not None and args.train_frames < 0):
         raise TexvocabError("--raised-views and --train-frames must not be negative")
+    realism = {
+        k: getattr(args, k, 0.0)
+        for k in ("fit_noise_deg", "fit_noise_trans", "exposure_sd", "white_balance_sd", "sensor_noise")
+    }
+    bad = [k for k, v in realism.items() if not 0.0 <= v <= (1.0 if k == "sensor_noise" else 90.0)]
+    if bad:
+        flag = "--" + bad[0].replace("_", "-")
+        raise TexvocabError(f"{flag} {realism[bad[0]]}: expected a value >= 0 (and a sensible size)")
+    garment = getattr(args, "garment", "painted")
+    garment_spec(garment)  # AssetError (a TexvocabError) for an unknown name
     body = load_body(args.smpl)
     cameras = None
     if args.like:
@@ -104,6 +139,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
             size=args.size,
             texture_size=args.texture_size,
             seed=args.seed,
+            garment=garment,
+            **realism,
         )
     if args.poses:
         poses, trans = load_pose_file(args.poses)
