@@ -31,8 +31,9 @@ from texvocab_viewer.gl.view_blit import (
     window_framebuffer,
 )
 from texvocab_viewer.layout import dock_splits, layout_for, needs_relayout
+from texvocab_viewer.neural.view import NeuralView, camera_key, start_worker
 from texvocab_viewer.neural.wake import ui_waker
-from texvocab_viewer.panels.neural import NeuralView, camera_key, late_draw, start_worker
+from texvocab_viewer.panels.neural import late_draw
 from texvocab_viewer.panels.pose import tick_sequence
 from texvocab_viewer.panels.vocab import ThumbnailCache
 from texvocab_viewer.state import ViewerState
@@ -95,8 +96,10 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self.drawn_keys: dict[str, list[tuple[int, int, float]]] = {}
         self.drawn_moved: list[str] = []  # the parts the vocabulary panel highlighted
         self.drawn_distances: dict[str, list[tuple[int, float]]] = {}  # per part: key, bar
-        self.neural_stale_shown = ""  # the stale banner the neural panel last drew
-        self.stale_log: deque[str] = deque(maxlen=2000)  # that banner, per frame drawn
+        self.neural_stale_shown = ""  # the stale line (NeuralView.stale_line) last drawn
+        self.stale_log: deque[str] = deque(maxlen=2000)  # that line, per frame drawn
+        self.neural_banner_drawn = ""  # the banner over the stale image, cut to its width
+        self.neural_tooltip = ""  # the banner's whole text, when the image was hovered
         self.dialogs = FileDialogs()
         self.reopen = None  # ViewerData chosen in File > Open: the window restarts on it
         self.open_error = ""

@@ -151,7 +151,7 @@ def run_viewer(
     returned). ``neural_worker``: "process" or "thread"
     (texvocab_viewer.arguments.NEURAL_WORKERS); ``neural_processes``: how many render
     processes split each view; ``neural_preview_wait_ms``:
-    texvocab_viewer.panels.neural.NeuralView.preview_wait."""
+    texvocab_viewer.neural.view.NeuralView.preview_wait."""
     if poses:
         check_pose_file(poses)  # a bad file is refused before the avatar loads
     require_display()

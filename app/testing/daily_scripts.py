@@ -30,6 +30,11 @@ def script_stale(ctx, viewer, report: dict) -> None:
     ctx.item_input_value("**/left_shoulder/##z", -40.0)
     ctx.yield_(3)
     report["live_off_line"] = viewer.neural_stale_shown
+    report["live_off_banner"] = viewer.neural_banner_drawn
+    ctx.set_ref("Neural render")
+    ctx.mouse_move("**/##image")  # the stale image hovered: the banner's whole text
+    ctx.yield_(3)
+    report["live_off_tooltip"] = viewer.neural_tooltip
 
 
 def script_camera_view(ctx, viewer, report: dict) -> None:

@@ -72,6 +72,13 @@ def test_a_changed_pose_marks_the_shown_render_stale_until_its_first_level(check
     assert rep["neural"]["level"] == 1 and rep["neural"]["errors"] == []
     # with Live off nothing new renders: the image stays marked, and the banner says why
     assert rep["live_off_line"] == ("stale: shows left shoulder z -70°; Live is off (Render now)")
+    # the banner says the pose was edited since (the whole line does not fit the image's
+    # width in a 1280-wide window); hovering the image gives the whole text
+    assert rep["live_off_banner"] == "stale, pose edited since"
+    assert rep["live_off_tooltip"] == (
+        "stale: shows left shoulder z -70°; Live is off (Render now)\n"
+        "shown: left shoulder z -70°\ncurrent: left shoulder z -40°"
+    )
 
 
 def test_capture_camera_preset_matches_shot_camera_n(checkpoint, tmp_path):
@@ -276,7 +283,7 @@ def test_a_pose_panel_edit_is_submitted_before_the_3d_view_draws():
     """The Pose panel's slider changes the pose mid-frame: the neural job goes out right
     after that panel (Viewer.SUBMIT_AFTER), not when the Neural render panel draws after
     the 3D view's work; only the frame's start polls levels."""
-    from texvocab_viewer.panels.neural import NeuralView
+    from texvocab_viewer.neural.view import NeuralView
     from texvocab_viewer.state import load_viewer_data
     from texvocab_viewer.viewer import Viewer
 
@@ -313,9 +320,9 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     ``preview_wait`` from the submission, and take it; poses streaming in (a dragged
     slider) never make a frame wait, nor does ``preview_wait`` 0, a preview that came
     while the frame was built (late_poll took it) or a cancelled wait (a popup)."""
-    import texvocab_viewer.panels.neural as pn
+    import texvocab_viewer.neural.view as pn
+    from texvocab_viewer.neural.view import NeuralView
     from texvocab_viewer.neural.worker import RenderFrame
-    from texvocab_viewer.panels.neural import NeuralView
     from texvocab_viewer.state import load_viewer_data
     from texvocab_viewer.viewer import Viewer
 

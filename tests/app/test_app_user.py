@@ -307,6 +307,49 @@ def test_the_status_line_cuts_a_long_message_to_its_width():
     assert fit_text("first line\nsecond", 700, measure) == "first line..."
 
 
+def test_the_stale_banner_says_what_changed_and_its_tooltip_what_it_shows():
+    from texvocab_viewer.neural.view import NeuralView
+    from texvocab_viewer.neural.worker import RenderFrame
+    from texvocab_viewer.panels.neural import banner_text
+    from texvocab_viewer.state import load_viewer_data
+    from texvocab_viewer.viewer import Viewer
+
+    class Worker:
+        busy, delivered, errors = False, [], []
+
+        def submit(self, job):
+            pass
+
+        def poll(self):
+            return None
+
+    v = Viewer(load_viewer_data(None))
+    nv = NeuralView(None, None, None, worker=Worker())
+    nv.update(v.state, v.camera, 1.0, label="rest pose")
+    nv.frame = RenderFrame(nv.version, 1, np.zeros((8, 8, 3), np.float32), 0.1, 0.1)  # shown
+    assert nv.stale_reason() == "" and nv.stale_tooltip() == ""
+    v.state.set_joint(16, (0.0, 0.0, -70.0))
+    nv.update(v.state, v.camera, 1.0, label=v.pose_label())
+    assert nv.stale_reason() == "pose edited since"
+    line = nv.stale_line()
+    assert line == "stale: shows rest pose; rendering left shoulder z -70°"
+    assert nv.stale_tooltip() == f"{line}\nshown: rest pose\ncurrent: left shoulder z -70°"
+    nv.frame = RenderFrame(nv.version, 1, np.zeros((8, 8, 3), np.float32), 0.1, 0.1)
+    v.camera.orbit(30.0, 0.0)  # the camera alone
+    nv.update(v.state, v.camera, 1.0, label=v.pose_label())
+    assert nv.stale_reason() == "camera moved since"
+
+    def measure(s):
+        return 7.0 * len(s)
+
+    wide = banner_text("pose edited since", line, 600, measure)
+    assert wide == "stale, pose edited since: shows rest pose; rendering left shoulder z -70°"
+    assert banner_text("pose edited since", line, 300, measure) == "stale, pose edited since"
+    cut = banner_text("pose edited since", line, 120, measure)
+    assert cut.endswith("...") and measure(cut) <= 120 - 12 and cut.startswith("stale, ")
+    assert banner_text("pose edited since", "", 600, measure) == ""
+
+
 def test_the_vocabulary_panel_knows_the_moved_parts_and_each_keys_range(tmp_path):
     from texvocab_viewer.panels.vocab import distance_bar
     from texvocab_viewer.state import ViewerState, load_viewer_data
