@@ -80,6 +80,10 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self.preset = ""
         self.sequence = None
         self.sequence_path, self.sequence_error = "", ""
+        self.sequence_place = "auto"  # where a pose file goes in the capture's world (PLACES)
+        #: calls a scripted run asks the window's thread to make (GL is current only there),
+        #: made after the frame's panels (before_imgui_render)
+        self.window_thread_calls: deque = deque()
         self.export = None  # the last texvocab_viewer.export.job.Export job
         self.view_rect = (0.0, 0.0, 0.0, 0.0)  # x, y, w, h in window pixels
         self.view_blit: ViewBlit | None = None  # where the 3D view's image goes this frame
@@ -230,6 +234,10 @@ class Viewer(CameraControls, FileControls, ExportControls):
         if self.view_blit is not None:
             self.view_blits += blit_view(self.view_blit, *window_framebuffer())
             self.ctx.screen.use()  # moderngl's idea of the bound framebuffer, again
+        if self.window_thread_calls:
+            while self.window_thread_calls:
+                self.window_thread_calls.popleft()()
+            self.ctx.screen.use()
 
     def before_swap(self) -> None:
         """After ImGui drew the frame, before the swap: when this frame changed the pose

@@ -4,7 +4,8 @@ sliders (degrees, within joint limits) per joint, resets, and a pose-sequence ti
 Widget IDs (for the ImGui Test Engine): window "Pose", a joint's sliders under
 ``<joint name>/x``, ``/y``, ``/z`` (e.g. ``**/left_shoulder/z``), buttons
 ``**/<part>/Reset part``, ``**/<joint>/reset``, ``**/Reset all``, the timeline
-``**/Sequence/##frame``, ``**/Sequence/Play`` (``Pause``), ``**/Sequence/Open...``.
+``**/Sequence/##frame``, ``**/Sequence/Play`` (``Pause``), ``**/Sequence/Open...``, the
+placement combo ``Sequence/place``.
 
 A joint value outside its limits (a pose from a file or a key) is shown in red with its
 exact value, and stays as it is until its own slider moves.
@@ -34,6 +35,16 @@ AXES = ("x", "y", "z")
 DEFAULT_FPS = 30.0  # playback rate of a file that states none
 EXPORT_FPS = 30.0  # "Export video" keeps every n-th frame of faster sequences
 OUT_OF_LIMIT = (0.75, 0.18, 0.15, 1.0)
+#: where a pose file's motion goes in a capture's world: ``texvocab render --place``'s
+#: choices (texvocab.pipeline.needs_placing, place_in_capture)
+PLACES = ("auto", "capture", "keep")
+PLACE_HELP = (
+    "where the motion goes in the capture's world (as texvocab render --place):\n"
+    "auto: turned into the capture's world when it is not Y up (ZJU-MoCap)\n"
+    "capture: its up axis the capture's, its first frame facing camera 0, standing where\n"
+    "    the capture's subject stands\n"
+    "keep: as the file has it"
+)
 
 
 class PoseSequence:
@@ -50,16 +61,17 @@ class PoseSequence:
         self._clock = 0.0
 
     @classmethod
-    def load(cls, path: str, capture=None) -> PoseSequence:
-        """The pose file at ``path``; with a ``capture`` whose world is not Y up (ZJU-MoCap),
-        its motion turned into that world facing camera 0, as ``texvocab render --place
-        auto`` does (:mod:`texvocab.pipeline.clip_placement`)."""
+    def load(cls, path: str, capture=None, place: str = "auto") -> PoseSequence:
+        """The pose file at ``path``; with a ``capture``, its motion placed in that world as
+        ``texvocab render --place PLACE`` places it (:mod:`texvocab.pipeline.clip_placement`;
+        ``auto``: turned into the capture's world facing camera 0 when it is not Y up, as
+        ZJU-MoCap's; ``capture``: always; ``keep``: never)."""
         pelvis = None if capture is None else capture.body.rest_joints[0].double().numpy()
         seq = read_pose_sequence(path, fps=None, pelvis=pelvis)  # every frame, at its rate
         if len(seq.poses) == 0:
             raise TexvocabError(f"{path}: 'poses' holds no frames")
         poses, trans = seq.poses, seq.trans
-        if capture is not None and needs_placing(capture, "auto"):
+        if capture is not None and needs_placing(capture, place):
             poses, trans = place_in_capture(poses, trans, pelvis, capture, capture.cameras[0])
         return cls(path, poses, trans, seq.source_fps)
 
@@ -163,7 +175,7 @@ def load_sequence(viewer, path: str) -> None:
     viewer.sequence_path = path
     viewer.open_sequence = True
     try:
-        sequence = PoseSequence.load(path.strip(), viewer.data.capture)
+        sequence = PoseSequence.load(path.strip(), viewer.data.capture, viewer.sequence_place)
     except (TexvocabError, OSError, ValueError) as exc:
         viewer.sequence_error = str(exc)
         kept = "" if viewer.sequence is None else f" (kept {Path(viewer.sequence.path).name})"
@@ -195,6 +207,7 @@ def _sequence(viewer) -> None:
     imgui.end_disabled()
     if missing and imgui.is_item_hovered(imgui.HoveredFlags_.allow_when_disabled):
         imgui.set_tooltip(missing)
+    _placement(viewer)
     if viewer.sequence_error:
         imgui.push_text_wrap_pos(0.0)
         imgui.text_colored(imgui.ImVec4(1.0, 0.45, 0.4, 1.0), viewer.sequence_error)
@@ -222,6 +235,26 @@ def _sequence(viewer) -> None:
         imgui.text_disabled(f"{Path(seq.path).name}, {len(seq.poses)} frames, {rate}")
     _export_buttons(viewer)
     imgui.pop_id()
+
+
+def _placement(viewer) -> None:
+    """The "place" combo (a capture only): where the motion goes in the capture's world; a
+    change loads the sequence again, placed anew, at the same frame."""
+    if viewer.data.capture is None:
+        return
+    imgui.set_next_item_width(110)
+    changed, index = imgui.combo("place", PLACES.index(viewer.sequence_place), list(PLACES))
+    if imgui.is_item_hovered():
+        imgui.set_tooltip(PLACE_HELP)
+    if changed and PLACES[index] != viewer.sequence_place:
+        viewer.sequence_place = PLACES[index]
+        seq = viewer.sequence
+        if seq is not None:
+            frame = seq.frame
+            load_sequence(viewer, seq.path)
+            if viewer.sequence is not seq:
+                viewer.sequence.frame = min(frame, len(viewer.sequence.poses) - 1)
+                _show_frame(viewer)
 
 
 def _export_buttons(viewer) -> None:

@@ -1,5 +1,6 @@
 """Every scripted run of the viewer window by its ``--script`` name: the ImGui Test Engine
-scripts (:mod:`.scripts`, :mod:`.daily_scripts`) and the benchmark's per-frame driver
+scripts (:mod:`.scripts`, :mod:`.daily_scripts`, :mod:`.window_scripts`,
+:mod:`.mocap_scripts`) and the benchmark's per-frame driver
 (``bench[:SECONDS[:RES[:RENDERS]]]``, :mod:`.bench`). :class:`Script` is what
 :func:`texvocab_viewer.window.run_viewer` calls on each window it opens."""
 
@@ -13,11 +14,18 @@ from texvocab.errors import TexvocabError
 from texvocab_viewer.testing.bench import RENDERS, BenchDriver
 from texvocab_viewer.testing.daily_scripts import DAILY_SCRIPTS
 from texvocab_viewer.testing.driver import Driver, EngineDriver
+from texvocab_viewer.testing.mocap_scripts import script_mocap_frames, script_mocap_novelty
 from texvocab_viewer.testing.scripts import ENGINE_SCRIPTS
 from texvocab_viewer.testing.window_scripts import WINDOW_SCRIPTS
 
 #: every ImGui Test Engine script by name
-SCRIPTS = {**ENGINE_SCRIPTS, **DAILY_SCRIPTS, **WINDOW_SCRIPTS}
+SCRIPTS = {
+    **ENGINE_SCRIPTS,
+    **DAILY_SCRIPTS,
+    **WINDOW_SCRIPTS,
+    "mocap-frames": script_mocap_frames,
+    "mocap-novelty": script_mocap_novelty,
+}
 
 #: a scripted run whose window reopens (File > Open) goes on with this script, whose
 #: report replaces the first one
