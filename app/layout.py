@@ -4,7 +4,9 @@
   Vocabulary;
 - **medium**: three columns, Pose | the 3D view over the Neural render | Vocabulary;
 - **narrow**: two columns, Pose and Vocabulary as tabs | the 3D view over the Neural
-  render, or, in a window under :data:`TALL` pixels high, the two as tabs.
+  render, or, in a window under :data:`TALL` pixels high, the two as tabs;
+- **tabs** (under :data:`NARROW` pixels, where two columns cannot both keep their floor):
+  one column, the four panels as tabs, each the window's whole width.
 
 Without a trained avatar the Neural render panel only says why it is empty: a tab beside
 Vocabulary (beside the 3D view in a short narrow window). Column widths are fractions of
@@ -22,6 +24,7 @@ from imgui_bundle import hello_imgui, imgui
 MAIN = "MainDockSpace"  # hello_imgui's full-window dock space: the 3D view's
 WIDE = 1100  # window width from which the four columns fit
 MEDIUM = 840  # from which three do
+NARROW = 590  # from which two columns do (the Vocabulary's floor and the 3D view's)
 TALL = 560  # window height from which the 3D view and the neural render fit one above the other
 #: smallest width of a column in pixels, per panel
 MIN_WIDTH = {"Pose": 250, "Vocabulary": 270, "Neural render": 220, "3D view": 320}
@@ -42,7 +45,7 @@ class Split:
 
 @dataclass(frozen=True)
 class Layout:
-    """``kind`` ("wide", "medium", "narrow"), the dock ``splits`` in order and each
+    """``kind`` ("wide", "medium", "narrow", "tabs"), the dock ``splits`` in order and each
     panel's dock space by title (``spaces``); panels that share a space are tabs."""
 
     kind: str
@@ -57,6 +60,8 @@ def _share(pixels: float, of: float) -> float:
 def layout_for(width: int, height: int, has_model: bool) -> Layout:
     """The layout of a ``width`` x ``height`` window (see the module docstring)."""
     w = float(width)
+    if w < NARROW:
+        return Layout("tabs", (), {name: MAIN for name in ("Pose", "3D view", "Neural render", "Vocabulary")})
     if w >= WIDE:
         pose = max(MIN_WIDTH["Pose"], 0.22 * w)
         vocab = max(MIN_WIDTH["Vocabulary"], 0.30 * (w - pose))

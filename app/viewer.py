@@ -189,6 +189,7 @@ class Viewer(CameraControls, FileControls, ExportControls):
         windows = rp.docking_params.dockable_windows
         for win in windows:
             win.dock_space_name = wanted.spaces[win.label]
+            win.focus_window_at_next_frame = wanted.kind == "tabs" and win.label == "3D view"
         rp.docking_params.dockable_windows = windows
         rp.docking_params.layout_reset = True
         self.layout, self._laid_out_for, self._laid_out_at = wanted, size, frame

@@ -120,6 +120,8 @@ def _runner_params(viewer: Viewer, title: str):
             (lambda f=panel.draw, name=panel.title: viewer.draw_panel(name, f)),
         )
         win.can_be_closed = False
+        # one column of tabs: the 3D view in front
+        win.focus_window_at_next_frame = viewer.layout.kind == "tabs" and panel.title == "3D view"
         windows.append(win)
     rp.docking_params.dockable_windows = windows
     rp.callbacks.setup_imgui_style = _cheap_backgrounds(rp, rp.callbacks.setup_imgui_style)

@@ -148,6 +148,8 @@ def script_layout(ctx, viewer, report: dict) -> None:
     """The layout this window size got: each panel's size, and the Pose panel scrolled to
     its last slider."""
     ctx.yield_(6)
+    frame = imgui.get_frame_count()
+    report["drawn_at_start"] = sorted(n for n, (_, _, f) in viewer.panel_sizes.items() if f >= frame - 1)
     report["layout"] = viewer.layout.kind
     report["spaces"] = dict(viewer.layout.spaces)
     report["sizes"] = _panel_sizes(ctx, viewer)

@@ -135,7 +135,8 @@ def test_closing_the_window_while_it_plays_and_renders_exits_at_once(checkpoint,
 
 @slow
 @pytest.mark.parametrize(
-    ("size", "kind"), [("640x400", "narrow"), ("900x600", "medium"), ("1920x1080", "wide")]
+    ("size", "kind"),
+    [("480x320", "tabs"), ("640x400", "narrow"), ("900x600", "medium"), ("1920x1080", "wide")],
 )
 def test_the_panels_keep_a_usable_size_in_small_and_large_windows(checkpoint, tmp_path, size, kind):
     from PIL import Image
@@ -154,7 +155,11 @@ def test_the_panels_keep_a_usable_size_in_small_and_large_windows(checkpoint, tm
     assert w >= 300 and h >= 170, rep["view_size"]  # the 3D view's image, under its toolbar
     assert rep["last_slider_reached"]  # the Pose panel scrolls to its last joint
     assert rep["relayouts"] == 0  # the layout it opened with stays
-    if kind == "narrow":  # stacked: Pose and Vocabulary share a column as tabs
+    if kind == "tabs":  # one column: the four panels as tabs, each the window's width
+        assert len(set(rep["spaces"].values())) == 1
+        assert all(sizes[name]["w"] == 480 for name in sizes), sizes
+        assert rep["drawn_at_start"] == ["3D view"]  # the tab in front at start
+    elif kind == "narrow":  # stacked: Pose and Vocabulary share a column as tabs
         assert rep["spaces"]["Pose"] == rep["spaces"]["Vocabulary"]
     else:
         assert len(set(rep["spaces"].values())) == 4
@@ -264,11 +269,15 @@ def test_video_frames_and_screenshots_share_the_3d_views_background(tmp_path):
 
 
 def test_the_layout_gives_each_column_its_floor_at_every_width():
-    from texvocab_viewer.layout import MAIN, MIN_WIDTH, layout_for
+    from texvocab_viewer.layout import MAIN, MIN_WIDTH, NARROW, layout_for
 
-    for width in range(640, 2600, 20):
+    for width in range(320, 2600, 20):
         for model in (True, False):
             lay = layout_for(width, 700, model)
+            if lay.kind == "tabs":  # one column: every panel a tab, the window's width
+                assert width < NARROW and lay.splits == () and set(lay.spaces.values()) == {MAIN}
+                assert width >= max(MIN_WIDTH.values())
+                continue
             left = right = 0.0
             rest = float(width)
             for s in lay.splits:  # the pixels each split takes from the main space
