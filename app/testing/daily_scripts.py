@@ -4,6 +4,7 @@ its reopen, and ``look-*`` scripts that end in a state worth a screenshot."""
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -172,6 +173,20 @@ def script_look_playback(ctx, viewer, report: dict) -> None:
         ctx.yield_()
 
 
+def script_look_bad_pose(ctx, viewer, report: dict) -> None:
+    """For a screenshot: the --poses sequence loaded, then the path
+    ``TEXVOCAB_TEST_MISSING_POSES`` names typed in the Sequence field and loaded: the
+    error in the status line, the sequence kept."""
+    ctx.yield_(4)
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.item_input_value("**/Sequence/##path", os.environ["TEXVOCAB_TEST_MISSING_POSES"])
+    ctx.item_click("**/Sequence/Load")
+    ctx.yield_(4)
+    report["status"] = {"text": viewer.status.text, "error": viewer.status.error}
+    report["kept"] = None if viewer.sequence is None else len(viewer.sequence.poses)
+
+
 DAILY_SCRIPTS = {
     "stale": script_stale,
     "camera-view": script_camera_view,
@@ -182,4 +197,5 @@ DAILY_SCRIPTS = {
     "look-stale": script_look_stale,
     "look-views": script_look_views,
     "look-playback": script_look_playback,
+    "look-bad-pose": script_look_bad_pose,
 }

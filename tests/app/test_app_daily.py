@@ -252,15 +252,20 @@ def test_screenshot_without_a_model_writes_the_3d_view_alone(tmp_path):
     assert sorted(p.name for p in job.path.iterdir()) == ["view3d.png"]
 
 
-@pytest.mark.parametrize("script", ["look-stale", "look-views", "look-playback"])
+@pytest.mark.parametrize("script", ["look-stale", "look-views", "look-playback", "look-bad-pose"])
 def test_screenshot_scripts_end_in_their_state(checkpoint, tmp_path, script):
-    """The look-* scripts that produce the README's window screenshots still run."""
+    """The look-* scripts that produce the README's and the viewer page's window
+    screenshots still run, and end in their state."""
     poses = walk_file(tmp_path / "walk.npz", 12, 30.0)
-    proc, rep, shot = run_window(checkpoint, script, tmp_path, "--poses", str(poses))
+    env = dict(os.environ, TEXVOCAB_TEST_MISSING_POSES=str(tmp_path / "walk_typo.npz"))
+    proc, rep, shot = run_window(checkpoint, script, tmp_path, "--poses", str(poses), env=env)
     ok(proc, rep)
     assert np.asarray(Image.open(shot)).std() > 10
     if script == "look-stale":
         assert rep["stale_line"].startswith("stale: shows frame 0; rendering left shoulder")
+    if script == "look-bad-pose":
+        assert rep["status"]["error"] and "walk_typo.npz" in rep["status"]["text"]
+        assert rep["kept"] == 12
 
 
 def test_dialog_program_search_follows_path(monkeypatch, tmp_path):
