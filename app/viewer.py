@@ -80,7 +80,7 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self.preset = ""
         self.sequence = None
         self.sequence_path, self.sequence_error = "", ""
-        self.sequence_place = "auto"  # where a pose file goes in the capture's world (PLACES)
+        self.sequence_root = "floor"  # where a pose file stands in the capture's world (ROOTS)
         #: calls a scripted run asks the window's thread to make (GL is current only there),
         #: made after the frame's panels (before_imgui_render)
         self.window_thread_calls: deque = deque()

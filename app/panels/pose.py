@@ -5,7 +5,7 @@ Widget IDs (for the ImGui Test Engine): window "Pose", a joint's sliders under
 ``<joint name>/x``, ``/y``, ``/z`` (e.g. ``**/left_shoulder/z``), buttons
 ``**/<part>/Reset part``, ``**/<joint>/reset``, ``**/Reset all``, the timeline
 ``**/Sequence/##frame``, ``**/Sequence/Play`` (``Pause``), ``**/Sequence/Open...``, the
-placement combo ``Sequence/place``.
+root combo ``Sequence/root``.
 
 A joint value outside its limits (a pose from a file or a key) is shown in red with its
 exact value, and stays as it is until its own slider moves.
@@ -24,8 +24,9 @@ from texvocab.pipeline import (
     BODY_PARTS,
     JOINT_LIMITS_DEG,
     JOINT_NAMES,
-    needs_placing,
-    place_in_capture,
+    ROOT_HELP,
+    ROOTS,
+    place_motion,
     read_pose_sequence,
 )
 from texvocab.pipeline import POSE_PRESETS as PRESETS
@@ -35,16 +36,9 @@ AXES = ("x", "y", "z")
 DEFAULT_FPS = 30.0  # playback rate of a file that states none
 EXPORT_FPS = 30.0  # "Export video" keeps every n-th frame of faster sequences
 OUT_OF_LIMIT = (0.75, 0.18, 0.15, 1.0)
-#: where a pose file's motion goes in a capture's world: ``texvocab render --place``'s
-#: choices (texvocab.pipeline.needs_placing, place_in_capture)
-PLACES = ("auto", "capture", "keep")
-PLACE_HELP = (
-    "where the motion goes in the capture's world (as texvocab render --place):\n"
-    "auto: turned into the capture's world when it is not Y up (ZJU-MoCap)\n"
-    "capture: its up axis the capture's, its first frame facing camera 0, standing where\n"
-    "    the capture's subject stands\n"
-    "keep: as the file has it"
-)
+#: where a pose file's motion stands in a capture's world: ``texvocab render --root``'s
+#: choices (texvocab.pipeline.place_motion)
+ROOT_TOOLTIP = "where the motion stands (as texvocab render --root):\n" + ROOT_HELP.replace("; ", "\n")
 
 
 class PoseSequence:
@@ -61,18 +55,17 @@ class PoseSequence:
         self._clock = 0.0
 
     @classmethod
-    def load(cls, path: str, capture=None, place: str = "auto") -> PoseSequence:
-        """The pose file at ``path``; with a ``capture``, its motion placed in that world as
-        ``texvocab render --place PLACE`` places it (:mod:`texvocab.pipeline.clip_placement`;
-        ``auto``: turned into the capture's world facing camera 0 when it is not Y up, as
-        ZJU-MoCap's; ``capture``: always; ``keep``: never)."""
+    def load(cls, path: str, capture=None, root: str = "floor") -> PoseSequence:
+        """The pose file at ``path``; with a ``capture``, its motion put into that world as
+        ``texvocab render --root ROOT`` puts it (:func:`texvocab.pipeline.place_motion`:
+        turned upright when the capture is not Y up, then stood by ``root``)."""
         pelvis = None if capture is None else capture.body.rest_joints[0].double().numpy()
         seq = read_pose_sequence(path, fps=None, pelvis=pelvis)  # every frame, at its rate
         if len(seq.poses) == 0:
             raise TexvocabError(f"{path}: 'poses' holds no frames")
         poses, trans = seq.poses, seq.trans
-        if capture is not None and needs_placing(capture, place):
-            poses, trans = place_in_capture(poses, trans, pelvis, capture, capture.cameras[0])
+        if capture is not None:
+            poses, trans = place_motion(poses, trans, pelvis, capture, capture.cameras[0], root)
         return cls(path, poses, trans, seq.source_fps)
 
     def advance(self, now: float) -> bool:
@@ -175,7 +168,7 @@ def load_sequence(viewer, path: str) -> None:
     viewer.sequence_path = path
     viewer.open_sequence = True
     try:
-        sequence = PoseSequence.load(path.strip(), viewer.data.capture, viewer.sequence_place)
+        sequence = PoseSequence.load(path.strip(), viewer.data.capture, viewer.sequence_root)
     except (TexvocabError, OSError, ValueError) as exc:
         viewer.sequence_error = str(exc)
         kept = "" if viewer.sequence is None else f" (kept {Path(viewer.sequence.path).name})"
@@ -238,16 +231,16 @@ def _sequence(viewer) -> None:
 
 
 def _placement(viewer) -> None:
-    """The "place" combo (a capture only): where the motion goes in the capture's world; a
-    change loads the sequence again, placed anew, at the same frame."""
+    """The "root" combo (a capture only): where the motion stands in the capture's world;
+    a change loads the sequence again, placed anew, at the same frame."""
     if viewer.data.capture is None:
         return
     imgui.set_next_item_width(110)
-    changed, index = imgui.combo("place", PLACES.index(viewer.sequence_place), list(PLACES))
+    changed, index = imgui.combo("root", ROOTS.index(viewer.sequence_root), list(ROOTS))
     if imgui.is_item_hovered():
-        imgui.set_tooltip(PLACE_HELP)
-    if changed and PLACES[index] != viewer.sequence_place:
-        viewer.sequence_place = PLACES[index]
+        imgui.set_tooltip(ROOT_TOOLTIP)
+    if changed and ROOTS[index] != viewer.sequence_root:
+        viewer.sequence_root = ROOTS[index]
         seq = viewer.sequence
         if seq is not None:
             frame = seq.frame

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from texvocab.pipeline import save_png
-from texvocab_viewer.panels.pose import PLACES
+from texvocab_viewer.panels.pose import ROOTS
 
 HEAD, LEFT_FOOT, RIGHT_FOOT = 15, 10, 11  # SMPL joints
 LEFT_HIP, RIGHT_HIP = 1, 2
@@ -60,8 +60,8 @@ def _show_frame(ctx, viewer, frame: int) -> None:
 
 
 def script_mocap_frames(ctx, viewer, report: dict) -> None:
-    """Capture view 1 from the camera combo, the placement ``TEXVOCAB_TEST_PLACE`` names
-    (if any) from the Sequence's "place" combo, Follow if ``TEXVOCAB_TEST_FOLLOW``; the
+    """Capture view 1 from the camera combo, the root choice ``TEXVOCAB_TEST_ROOT`` names
+    (if any) from the Sequence's "root" combo, Follow if ``TEXVOCAB_TEST_FOLLOW``; the
     --poses sequence's first, middle and last frames, each read back from the 3D view
     (``view1_frameN.png``)."""
     ctx.yield_(4)
@@ -75,14 +75,14 @@ def script_mocap_frames(ctx, viewer, report: dict) -> None:
         return
     ctx.set_ref("Pose")
     ctx.item_open("**/Sequence")
-    place = os.environ.get("TEXVOCAB_TEST_PLACE")
-    if place:  # the Sequence's "place" combo, as a user picks it
-        ctx.item_click("Sequence/place")
+    root = os.environ.get("TEXVOCAB_TEST_ROOT")
+    if root:  # the Sequence's "root" combo, as a user picks it
+        ctx.item_click("Sequence/root")
         ctx.yield_(2)
-        index = PLACES.index(place)  # imgui.combo pushes each entry's index
-        ctx.item_click(f"//##Combo_00/$${index}/{place}")
+        index = ROOTS.index(root)  # imgui.combo pushes each entry's index
+        ctx.item_click(f"//##Combo_00/$${index}/{root}")
         ctx.yield_(2)
-    report["place"] = viewer.sequence_place
+    report["root_choice"] = viewer.sequence_root
     seq = viewer.sequence
     last = len(seq.poses) - 1
     if os.environ.get("TEXVOCAB_TEST_FOLLOW"):  # the camera moves with the root from frame 0

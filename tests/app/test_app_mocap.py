@@ -38,15 +38,15 @@ def silhouette(png) -> np.ndarray:
 def test_capture_view_1_keeps_the_amass_sample_in_frame_head_to_feet(checkpoint, tmp_path):
     amass_file(tmp_path / "walk.npz", frames=151, rate=120.0)  # 1.25 s: 1.25 m along +X
     out = tmp_path / "views"
-    # placed as texvocab render --place capture places it (standing where the capture's
-    # subject stands, facing camera 0 at its first frame), the camera following the root
-    place = {"TEXVOCAB_TEST_PLACE": "capture", "TEXVOCAB_TEST_FOLLOW": "1"}
-    env = dict(os.environ, TEXVOCAB_TEST_OUT=str(out), **place)
+    # the default root choice, as texvocab render --root floor places it: the lowest foot
+    # on the capture's floor, starting where the capture's subject starts; Follow keeps the
+    # capture camera's view on the walking root (its 1.25 m would leave a fixed view)
+    env = dict(os.environ, TEXVOCAB_TEST_OUT=str(out), TEXVOCAB_TEST_FOLLOW="1")
     proc, rep, _ = run_window(
         checkpoint, "mocap-frames", tmp_path, "--poses", str(tmp_path / "walk.npz"), env=env, timeout=300
     )
     ok(proc, rep)
-    assert rep["camera_index"] == 1 and rep["frames_in_file"] == 151 and rep["place"] == "capture"
+    assert rep["camera_index"] == 1 and rep["frames_in_file"] == 151 and rep["root_choice"] == "floor"
     assert rep["follow"]
     assert [s["shown"] for s in rep["shots"]] == [0, 75, 150]
     for shot in rep["shots"]:

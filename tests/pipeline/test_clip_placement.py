@@ -96,3 +96,54 @@ def test_the_viewer_orbits_about_the_captures_up_axis(zju_like, capture):
     to_camera = zju_like.cameras[0].center - cam.target
     flat = to_camera - np.dot(to_camera, up) * up
     assert np.dot(cam.front, flat / np.linalg.norm(flat)) > 0.999
+
+
+def _floating_walk(n=6, lift=1.2):
+    walk, _ = preset("walk")
+    poses = np.repeat(np.asarray(walk, np.float64)[None], n, 0)
+    # walks 30 cm a frame along +X, 1.2 m above where a floor would be, 2 m off to the side
+    trans = np.stack([np.array([2.0 + 0.3 * i, lift, -1.5]) for i in range(n)])
+    return poses, trans
+
+
+def _lowest(cap, p, t, up):
+    v = cap.body.forward(torch.as_tensor(p), torch.as_tensor(t)).vertices.double().numpy()
+    return (v @ up).min()
+
+
+@pytest.mark.parametrize("world", ["y_up", "zju_like"])
+def test_root_floor_stands_the_motion_on_the_captures_floor_where_its_subject_starts(
+    world, capture, zju_like
+):
+    from texvocab.pipeline.clip_placement import place_motion, start_point
+
+    cap = zju_like if world == "zju_like" else open_capture(capture)
+    up = capture_up(cap) if world == "zju_like" else np.array([0.0, 1.0, 0.0])
+    j0 = cap.body.rest_joints[0].double().numpy()
+    poses, trans = _floating_walk()
+    floor = _lowest(cap, cap.poses[: cap.num_train], cap.trans[: cap.num_train], up)
+    start = start_point(cap)
+    results = {}
+    for root in ("floor", "in-place", "facing"):
+        p, t = place_motion(poses, trans, j0, cap, cap.cameras[1], root)
+        results[root] = (p, t)
+        assert abs(_lowest(cap, p, t, up) - floor) < 1e-4, root  # the lowest foot on the floor
+        off = (t[0] + j0) - start
+        np.testing.assert_allclose(off - np.dot(off, up) * up, 0, atol=1e-6)  # starts where the subject does
+    pel = results["floor"][1] + j0
+    travel = np.linalg.norm(np.diff(pel, axis=0), axis=1)
+    np.testing.assert_allclose(travel, 0.3, atol=1e-6)  # floor keeps the path
+    pel = results["in-place"][1] + j0
+    flat = pel - np.outer(pel @ up, up)
+    np.testing.assert_allclose(flat - flat[0], 0, atol=1e-6)  # in-place: no travel
+    p, t = results["facing"]
+    facing = rotvec_to_rotmat(torch.as_tensor(p[0, 0])).numpy() @ [0, 0, 1.0]
+    want = cap.cameras[1].center - (t[0] + j0)
+    a, b = (x - np.dot(x, up) * up for x in (facing, want))
+    assert np.dot(a, b) / np.linalg.norm(a) / np.linalg.norm(b) > 0.999
+    if world == "y_up":  # recorded: the file's motion untouched
+        p, t = place_motion(poses, trans, j0, cap, cap.cameras[1], "recorded")
+        np.testing.assert_array_equal(t, trans)
+        np.testing.assert_array_equal(p, poses)
+    with pytest.raises(ValueError, match="root='up': expected one of"):
+        place_motion(poses, trans, j0, cap, cap.cameras[1], "up")

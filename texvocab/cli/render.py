@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from texvocab.errors import TexvocabError
+from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 
 def add_render_parser(sub, add_smpl) -> None:
@@ -56,9 +57,9 @@ def add_render_parser(sub, add_smpl) -> None:
     )
     p.add_argument(
         "--root",
-        choices=("keep", "zero"),
-        default="keep",
-        help="zero: drop the root orientation and translation",
+        choices=(*ROOTS, "zero", "keep"),
+        default="floor",
+        help=ROOT_HELP + "; zero: the root orientation and translation dropped; keep: recorded",
     )
     p.add_argument(
         "--up",
@@ -141,7 +142,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         render_frames,
         write_mp4,
     )
-    from texvocab.pipeline.clip_placement import needs_placing, place_in_capture
+    from texvocab.pipeline.clip_placement import needs_placing, place_motion
     from texvocab.pipeline.clip_worker import FrameWorker
     from texvocab.pipeline.settings import RENDER_KNOBS, march_settings, render_overrides
 
@@ -191,12 +192,14 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--camera {args.camera}: the capture has views 0..{cap.num_views - 1}")
     settings = render_overrides(trained, args.preset, args.overrides)
     pelvis = model.body.rest_joints[0].double().numpy()
-    seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=args.root, pelvis=pelvis)
+    read_root = "zero" if args.root == "zero" else "keep"
+    seq = read_pose_sequence(args.poses, fps=args.fps, up=args.up, root=read_root, pelvis=pelvis)
     keep = _frame_range(args.frames, len(seq))
     poses, trans = seq.poses[keep.start : keep.stop], seq.trans[keep.start : keep.stop]
     placed = needs_placing(cap, args.place)
-    if placed:  # the motion into the capture's world (its up axis, facing the camera)
-        poses, trans = place_in_capture(poses, trans, pelvis, cap, cap.cameras[args.camera])
+    root = "recorded" if args.root in ("zero", "keep") else args.root
+    # the motion into the capture's world (its up axis, facing the camera), stood by --root
+    poses, trans = place_motion(poses, trans, pelvis, cap, cap.cameras[args.camera], root, args.place)
     fps = seq.fps or args.fps
     knobs = {k: getattr(settings.render, k) for k in RENDER_KNOBS}
     spec = ClipSpec.make(

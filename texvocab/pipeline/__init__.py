@@ -66,6 +66,9 @@ _API: dict[str, tuple[str, str]] = {
     "stand_point": ("texvocab.pipeline.clip_placement", "stand_point"),
     "toward": ("texvocab.pipeline.clip_placement", "toward"),
     "place_in_capture": ("texvocab.pipeline.clip_placement", "place_in_capture"),
+    "place_motion": ("texvocab.pipeline.clip_placement", "place_motion"),
+    "ROOTS": ("texvocab.pipeline.root_choice", "ROOTS"),
+    "ROOT_HELP": ("texvocab.pipeline.root_choice", "ROOT_HELP"),
     # threads
     "budget_blas_threads": ("texvocab.blas", "budget_blas_threads"),
     "blas_threads": ("texvocab.blas", "blas_threads"),
