@@ -17,6 +17,7 @@ from texvocab.pipeline import (
     contact_sheet,
     load_pose_file,
     march_settings,
+    place_motion,
     prepare_shell,
     render_image,
     save_png,
@@ -31,9 +32,16 @@ from texvocab_viewer.state import ViewerData, ViewerState, load_viewer_data
 DEFAULT_SIZE = (640, 400)
 
 
-def apply_pose(state: ViewerState, spec: str) -> None:
+def _views(state: ViewerState) -> int:
+    cap = state.data.capture
+    return 0 if cap is None else cap.num_views
+
+
+def apply_pose(state: ViewerState, spec: str, root: str = "floor", view: int = 0) -> None:
     """Set ``state`` from a preset name, a capture frame index (``N`` or ``frame:N``), or
-    ``FILE.npz[:N]`` (poses (T, 24, 3) and optional trans (T, 3))."""
+    ``FILE.npz[:N]`` (poses (T, 24, 3) and optional trans (T, 3)); with a capture, a
+    file's motion stands by ``root`` as ``texvocab render --root`` stands it (``facing``
+    turns it to capture view ``view``)."""
     cap = state.data.capture
     if spec in PRESETS:
         state.apply_preset(spec)
@@ -55,6 +63,9 @@ def apply_pose(state: ViewerState, spec: str) -> None:
         n = int(idx or 0)
         if n >= len(poses):
             raise TexvocabError(f"--pose {spec}: {path} has poses 0..{len(poses) - 1}")
+        if cap is not None:
+            pelvis = cap.body.rest_joints[0].double().numpy()
+            poses, trans = place_motion(poses, trans, pelvis, cap, cap.cameras[view], root)
         state.set_pose(poses[n], trans[n])
         return
     raise TexvocabError(
@@ -178,7 +189,8 @@ def cmd_shot(args: argparse.Namespace) -> int:
     if args.neural and data.model is None:
         raise TexvocabError(f"--neural: {args.source} is a capture, not a checkpoint")
     state = ViewerState(data)
-    apply_pose(state, args.pose)
+    view = int(args.camera) if str(args.camera).isdigit() and state.data.capture is not None else 0
+    apply_pose(state, args.pose, getattr(args, "root", "floor"), min(view, max(0, _views(state) - 1)))
     camera = parse_camera(args.camera, data, state)
     if args.size is not None:
         size = parse_size(args.size)

@@ -13,6 +13,7 @@ from texvocab.cli.capture import add_sheet_parser, add_synth_parser
 from texvocab.cli.method import add_method_parsers, add_train_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.errors import TexvocabError
+from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 # The command line stands above the viewer (an import-linter contract: texvocab_viewer never
 # imports texvocab.cli). The viewer's arguments module is light (no GL, no torch) and builds
@@ -119,6 +120,12 @@ def add_viewer_parsers(sub) -> None:
         default="a_pose",
         help="a preset name (t_pose, a_pose, walk, squat, ...), a capture frame "
         "index N (or frame:N), or FILE.npz[:N] (default: a_pose)",
+    )
+    p.add_argument(
+        "--root",
+        choices=ROOTS,
+        default="floor",
+        help="where a FILE.npz pose stands in a capture's world (as texvocab render --root): " + ROOT_HELP,
     )
     p.add_argument(
         "--camera",
