@@ -47,3 +47,30 @@ def test_a_pose_file_within_the_limit_reads(tmp_path):
 
 def test_the_limit_holds_an_smplx_model_file():
     assert safe_pickle.MAX_NPZ_BYTES >= 500e6  # SMPL-X's model arrays are about 250 MB
+
+
+def _npy(path, shape, rows_written: int, dtype="<f8") -> None:
+    """A .npy whose header declares ``shape`` with ``rows_written`` rows of zeros after it."""
+    with open(path, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": dtype, "fortran_order": False, "shape": shape})
+        fh.write(bytes(rows_written * int(np.prod(shape[1:])) * np.dtype(dtype).itemsize))
+
+
+def test_an_npy_declaring_more_than_the_limit_or_than_it_holds_is_refused(tmp_path, monkeypatch):
+    good = tmp_path / "good.npy"
+    _npy(good, (4, 3), 4)
+    np.testing.assert_array_equal(safe_pickle.read_npy_object(good), np.zeros((4, 3)))
+    huge = tmp_path / "huge.npy"
+    _npy(huge, (10**7, 10**7), 1)  # 800 TB declared in a few hundred bytes
+    with pytest.raises(AssetError, match=r"huge.npy: it holds more than 1 GiB"):
+        safe_pickle.read_npy_object(huge)
+    monkeypatch.setattr(safe_pickle.np.lib.format, "read_array", lambda *a, **k: pytest.fail("read"))
+    short = tmp_path / "short.npy"
+    _npy(short, (1000, 3), 10)
+    with pytest.raises(AssetError, match=r"short.npy: truncated: its header declares 24000 bytes"):
+        safe_pickle.read_npy_object(short)
+    monkeypatch.setattr(safe_pickle, "MAX_NPZ_BYTES", 2**10)
+    obj = tmp_path / "obj.npy"
+    np.save(obj, np.array({"K": list(range(2000))}, dtype=object), allow_pickle=True)
+    with pytest.raises(AssetError, match=r"obj.npy: it holds more than"):
+        safe_pickle.read_npy_object(obj)

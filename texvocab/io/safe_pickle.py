@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import codecs
 import io
+import math
 import pickle
 import zipfile
 from pathlib import Path
@@ -152,9 +153,18 @@ def read_npy_object(path: str | Path) -> object:
                 if version == (1, 0)
                 else np.lib.format.read_array_header_2_0
             )
-            _, _, dtype = read_header(fh)
+            shape, _, dtype = read_header(fh)
+            size = path.stat().st_size
+            declared = size if dtype.hasobject else math.prod(shape) * dtype.itemsize
+            if declared > MAX_NPZ_BYTES:
+                raise AssetError(
+                    f"{path}: it holds more than {MAX_NPZ_BYTES / 2**30:g} GiB "
+                    f"({declared} bytes); expected a smaller array"
+                )
             if dtype.hasobject:
                 arr = RestrictedUnpickler(fh, str(path)).load()
+            elif size < fh.tell() + declared:
+                raise AssetError(f"{path}: truncated: its header declares {declared} bytes of data")
             else:
                 arr = np.lib.format.read_array(io.BytesIO(path.read_bytes()), allow_pickle=False)
     except AssetError:
