@@ -93,7 +93,13 @@ def test_left_arm_slider_drives_the_vocabulary_panel(tiny_checkpoint, tmp_path):
     assert rep["sequence_error"] == "" and rep["sequence_frames"] == 4
     assert rep["sequence_frame"] == 2
     np.testing.assert_allclose(rep["pose_at_frame"], seq_poses[2], atol=1e-6)
-    np.testing.assert_allclose(rep["trans_at_frame"], seq_trans[2], atol=1e-6)
+    # the file's frame as the Root box's default (floor) stands it in the capture's world
+    from texvocab.pipeline import load_avatar
+    from texvocab_viewer.panels.pose import PoseSequence
+
+    placed = PoseSequence.load(str(tmp_path / "seq.npz"), load_avatar(tiny_checkpoint).capture)
+    np.testing.assert_allclose(rep["trans_at_frame"], placed.trans[2], atol=1e-6)
+    np.testing.assert_allclose(np.diff(placed.trans[:, 2]), np.diff(seq_trans[:, 2]), atol=1e-6)
     # Play advances the timeline by wall time (30 fps) and the pose follows; Pause stops
     assert rep["played_to"] != 2 and rep["played_pose_matches"] and rep["paused"]
 

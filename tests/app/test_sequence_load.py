@@ -23,6 +23,7 @@ def test_a_bad_path_after_a_good_sequence_keeps_it(tmp_path, monkeypatch):
         sequence_path="",
         status=StatusLine(),
         open_sequence=False,
+        sequence_root="floor",
     )
     load_sequence(viewer, str(tmp_path / "walk.npz"))
     good = viewer.sequence
