@@ -110,6 +110,7 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self.smpl: str | None = None
         self.layout = None  # where the panels dock (texvocab_viewer.layout.Layout; the window sets it)
         self.panel_sizes: dict[str, tuple[float, float, int]] = {}  # per panel: w, h, frame drawn
+        self.drawn_timeline_note = ""  # the Pose panel's "pose edited since" line, last drawn
         self._laid_out_for: tuple[int, int] | None = None  # window size of the last layout
         self._laid_out_at = 0  # its frame
         self.relayouts = 0  # layouts since the window opened (a resize that called for one)

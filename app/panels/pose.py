@@ -35,6 +35,7 @@ from texvocab_viewer.dialogs import POSE_FILTERS
 AXES = ("x", "y", "z")
 DEFAULT_FPS = 30.0  # playback rate of a file that states none
 EXPORT_FPS = 30.0  # "Export video" keeps every n-th frame of faster sequences
+EDITED_SINCE = "pose edited since frame %d"  # under the timeline once the pose leaves it
 OUT_OF_LIMIT = (0.75, 0.18, 0.15, 1.0)
 #: where a pose file's motion stands in a capture's world: ``texvocab render --root``'s
 #: choices (texvocab.pipeline.place_motion)
@@ -216,11 +217,16 @@ def _sequence(viewer) -> None:
         imgui.same_line()
         imgui.set_next_item_width(-1)
         edited = seq.shown_version != viewer.state.version
-        text = f"frame %d / {len(seq.poses) - 1}" + ("  (pose edited since)" if edited else "")
+        text = f"frame %d / {len(seq.poses) - 1}"
         changed, frame = imgui.slider_int("##frame", seq.frame, 0, len(seq.poses) - 1, text)
         if changed or (imgui.is_item_activated() and edited):
             seq.frame = frame
             _show_frame(viewer)
+        viewer.drawn_timeline_note = EDITED_SINCE % seq.frame if edited else ""
+        if edited:  # a line of its own, wrapped: never cut off by a narrow panel
+            imgui.push_text_wrap_pos(0.0)
+            imgui.text_disabled(viewer.drawn_timeline_note)
+            imgui.pop_text_wrap_pos()
         imgui.set_next_item_width(100)
         _, seq.fps = imgui.slider_float("fps", seq.fps, 1.0, 120.0, "%.0f fps")
         imgui.same_line()

@@ -1,6 +1,7 @@
 """Scripted runs of the viewer window for what a new user runs into (ImGui Test Engine, as
 :mod:`.scripts`): a bad pose path after a good sequence (the error in the status line),
-closing the window while a video exports, and the layout at a window size."""
+closing the window while a video exports, the layout at a window size and the timeline's
+"pose edited since" line in a narrow one."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 from imgui_bundle import hello_imgui, imgui
 
-from texvocab_viewer.testing.steps import wait_neural
+from texvocab_viewer.testing.steps import LEFT_ARM_MOVE, wait_neural
 
 
 def _wait(ctx, done, timeout: float = 30.0) -> None:
@@ -109,6 +110,24 @@ def script_close_playing(ctx, viewer, report: dict) -> None:
     report["closed_by_window"] = bool(rp.app_shall_exit)
 
 
+def script_edited_narrow(ctx, viewer, report: dict) -> None:
+    """The --poses sequence at frame 0, then a slider moved (the pose leaves the
+    sequence): the timeline's "pose edited since" line and the Pose panel's width."""
+    ctx.yield_(4)
+    ctx.window_focus("Pose")
+    ctx.set_ref("Pose")
+    ctx.item_open("**/Sequence")
+    ctx.yield_(2)
+    report["note_before"] = viewer.drawn_timeline_note
+    ctx.item_input_value(*LEFT_ARM_MOVE)
+    ctx.scroll_to_item("**/Sequence/##frame", imgui.internal.Axis.y)
+    ctx.yield_(4)
+    note = viewer.drawn_timeline_note
+    report["note"] = note
+    report["note_width"] = float(imgui.calc_text_size(note).x)
+    report["pose_width"] = float(viewer.panel_sizes.get("Pose", (0.0, 0.0, -1))[0])
+
+
 def _glfw():
     import imgui_bundle
 
@@ -186,4 +205,5 @@ WINDOW_SCRIPTS = {
     "bad-pose": script_bad_pose,
     "close-exporting": script_close_exporting,
     "close-playing": script_close_playing,
+    "edited-narrow": script_edited_narrow,
 }

@@ -120,6 +120,22 @@ def test_closing_the_window_during_export_video_stops_it_and_removes_its_files(c
 
 
 @slow
+def test_the_timeline_says_pose_edited_since_on_its_own_line_in_a_narrow_window(checkpoint, tmp_path):
+    from PIL import Image
+
+    poses = pose_file(tmp_path / "walk.npz", 12)
+    proc, rep, shot = run_window(
+        checkpoint, "edited-narrow", tmp_path, "--poses", str(poses), size="480x320", screen="640x480"
+    )
+    ok(proc, rep)
+    assert rep["note_before"] == ""  # the pose is the sequence's frame
+    assert rep["note"] == "pose edited since frame 0"  # a slider moved it away
+    # drawn wrapped on a line of its own, so the narrow panel cannot cut it off
+    assert 0 < rep["note_width"] and rep["pose_width"] == 480
+    assert np.asarray(Image.open(shot)).shape[:2] == (320, 480)
+
+
+@slow
 def test_closing_the_window_while_it_plays_and_renders_exits_at_once(checkpoint, tmp_path):
     poses = pose_file(tmp_path / "walk.npz", 300)
     end = tmp_path / "ended"
