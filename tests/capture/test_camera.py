@@ -85,3 +85,38 @@ def test_non_finite_calibration_is_named(cam, field):
     fields = CameraFields.keyed("", "K", "R", "t", "dist", "size")
     with pytest.raises(AssetError, match=rf"calib\.json: camera 'c0' {field}: holds NaN or inf"):
         check_camera(cam, "calib.json", fields)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8])
+def test_pixel_taps_sample_as_zero_padded_bilinear_interpolation(dtype):
+    """The taps a camera keeps for its undistortion read what bilinear interpolation of
+    the image padded with zeros gives (scipy's), at positions inside, on and past the
+    border; integer images are rounded."""
+    from scipy import ndimage
+
+    from texvocab.capture.camera import PixelTaps
+
+    rng = np.random.default_rng(3)
+    image = (rng.random((9, 13, 3)) * 255).astype(dtype)
+    x = np.concatenate([rng.uniform(-2, 15, 400), [-1.0, -0.5, 0.0, 12.0, 12.5, 13.0]])
+    y = np.concatenate([rng.uniform(-2, 11, 400), [0.0, 4.0, -0.5, 8.0, 8.5, 9.0]])
+    taps = PixelTaps.at(image.shape, x, y)
+    got = taps.apply(image)
+    want = np.stack(
+        [
+            ndimage.map_coordinates(image[..., c].astype(np.float64), [y, x], order=1, mode="grid-constant")
+            for c in range(3)
+        ],
+        -1,
+    )
+    if dtype == np.uint8:
+        np.testing.assert_array_less(np.abs(got.astype(np.float64) - want), 0.5 + 1e-3)
+    else:
+        np.testing.assert_allclose(got, want, atol=1e-4)
+    # one set of taps serves every image of the size; nearest reads the rounded pixel or 0
+    np.testing.assert_allclose(taps.apply(image[..., :1] * 0 + 1).ravel()[:400].max(), 1.0, atol=1e-6)
+    near = PixelTaps.at(image.shape, x, y, nearest=True).apply(image)
+    xi, yi = np.rint(x).astype(int), np.rint(y).astype(int)
+    inside = (xi >= 0) & (xi < 13) & (yi >= 0) & (yi < 9)
+    np.testing.assert_array_equal(near[inside], image[yi[inside], xi[inside]])
+    assert not near[~inside].any()
