@@ -19,7 +19,7 @@ from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 # imports texvocab.cli). The viewer's arguments module is light (no GL, no torch) and builds
 # the `view` parser; the window, `shot` and the demo's viewer are imported inside the
 # commands that run them, so `texvocab --help` loads neither imgui_bundle, moderngl nor torch.
-from texvocab_viewer.arguments import add_view_arguments
+from texvocab_viewer.arguments import add_other_capture, add_view_arguments
 
 
 def _add_smpl(p: argparse.ArgumentParser) -> None:
@@ -162,6 +162,7 @@ def add_viewer_parsers(sub) -> None:
         help="the capture folder a checkpoint was trained on, when it is not where the "
         "checkpoint records it (moved, or another machine)",
     )
+    add_other_capture(p)
     _add_smpl(p)
     p.set_defaults(func=cmd_shot)
 

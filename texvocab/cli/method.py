@@ -205,6 +205,12 @@ def add_train_parsers(sub, add_smpl) -> None:
         "--resume", action="store_true", help="continue from OUT/checkpoint.pt (--iterations N extends it)"
     )
     p.add_argument(
+        "--other-capture",
+        action="store_true",
+        help="with --resume: continue a checkpoint trained on another capture than CAPTURE "
+        "(other frames, views or calibration; refused without it), with one warning line",
+    )
+    p.add_argument(
         "--ddp",
         type=int,
         default=None,
@@ -253,6 +259,12 @@ def add_train_parsers(sub, add_smpl) -> None:
     p.add_argument("capture", help="capture folder (the one trained on)")
     p.add_argument("--out", default=None, help="report folder (default: next to the checkpoint)")
     p.add_argument(
+        "--other-capture",
+        action="store_true",
+        help="evaluate on CAPTURE though it is not the capture the checkpoint was trained "
+        "on (other frames, views or calibration; refused without it), with one warning line",
+    )
+    p.add_argument(
         "--per-set",
         type=int,
         default=None,
@@ -291,10 +303,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_run_folder(out, args.resume, args.overwrite)
     cap = _open(args)
+    if args.resume and not args.other_capture and (out / "checkpoint.pt").is_file():
+        _refuse_other_capture(out / "checkpoint.pt", cap)  # before the texture maps are built
     if args.ddp is not None or _under_torchrun():
         return _train_parallel(args, settings, out)
     trainer = Trainer(cap, settings, out)
-    if args.resume and trainer.resume():
+    if args.resume and trainer.resume(args.other_capture):
         print(f"resumed at step {trainer.step} from {trainer.checkpoint_path}")
     logs = trainer.run()
     last = logs[-1] if logs else {}
@@ -303,6 +317,14 @@ def cmd_train(args: argparse.Namespace) -> int:
         f"{last.get('psnr', float('nan')):.2f} dB; checkpoint {trainer.checkpoint_path}"
     )
     return 0
+
+
+def _refuse_other_capture(checkpoint: Path, cap) -> None:
+    """TexvocabError when ``checkpoint`` was trained on another capture than ``cap``."""
+    from texvocab.capture.identity import check_capture_identity  # late: torch
+    from texvocab.io.checkpoint import load_checkpoint
+
+    check_capture_identity(load_checkpoint(checkpoint), cap, checkpoint)
 
 
 def _under_torchrun() -> bool:
@@ -323,6 +345,7 @@ def _train_parallel(args: argparse.Namespace, settings, out: Path) -> int:
         "settings": settings,
         "out": str(out),
         "resume": args.resume,
+        "other_capture": args.other_capture,
         "smpl": args.smpl,
         "train_frames": args.train_frames,
     }
@@ -354,7 +377,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     if args.per_set is not None and args.per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {args.per_set}")
-    avatar = load_avatar(args.checkpoint, _open(args))
+    avatar = load_avatar(args.checkpoint, _open(args), other_capture=args.other_capture)
     model, ck = avatar.model, avatar.checkpoint
     settings = render_overrides(avatar.settings, args.preset, args.overrides)
     sets = build_sets(avatar.capture, settings, args.per_set)

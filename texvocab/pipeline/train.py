@@ -28,6 +28,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from texvocab.capture.identity import IDENTITY_KEY, capture_identity, check_capture_identity
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.method.pose_refinement import PoseRefinement
@@ -247,6 +248,7 @@ class Trainer:
             "settings": self.s.to_dict(),
             "capture": str(Path(self.capture.root).resolve()),
             "num_train": self.capture.num_train,
+            IDENTITY_KEY: capture_identity(self.capture),
             "model": self.model.state_dict(),
             "optimizer": self.optim.state_dict(),
             "vocab": self.model.pose_feature.vocab.to_dict(),
@@ -259,11 +261,14 @@ class Trainer:
             return self.checkpoint_path
         return save_checkpoint(self.checkpoint_path, self.state())
 
-    def resume(self) -> bool:
-        """Load the last checkpoint in the output folder, if any; True when resumed."""
+    def resume(self, other_capture: bool = False) -> bool:
+        """Load the last checkpoint in the output folder, if any; True when resumed. A
+        checkpoint of another capture is refused unless ``other_capture``
+        (:func:`~texvocab.capture.identity.check_capture_identity`)."""
         if not self.checkpoint_path.is_file():
             return False
         ck = load_checkpoint(self.checkpoint_path)
+        check_capture_identity(ck, self.capture, self.checkpoint_path, other_capture)
         theirs, ours = Settings.from_dict(ck["settings"]).dotted(), self.s.dotted()
         differ = [k for k in ours if k not in SCHEDULE and theirs.get(k) != ours[k]]
         if differ:
