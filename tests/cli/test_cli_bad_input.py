@@ -11,7 +11,8 @@ import pytest
 import torch
 from bad_capture_cases import CAPTURE_CASES
 from disk_snapshot import snapshot
-from train_cases import tiny_settings
+from identity_cases import identity_cases
+from train_cases import set_arguments, tiny_settings
 
 from texvocab.body import default_body
 from texvocab.capture import open as open_capture
@@ -154,231 +155,240 @@ T = [
 ]
 
 
-def _tiny_sets() -> list[str]:
-    """--set items reproducing the fixture run's settings (the defaults aside)."""
-    from texvocab.pipeline.settings import Settings
-
-    ours, default = tiny_settings(iterations=2, perceptual="off").dotted(), Settings().dotted()
-    items = [f"{k}={v}" for k, v in ours.items() if default[k] != v]
-    return sum((["--set", i] for i in items), [])
-
-
-R = ["train", CAP, "--out", RUN, "--resume"] + _tiny_sets()
+SETS = set_arguments(tiny_settings(iterations=2, perceptual="off"))  # the fixture run's
+R = ["train", CAP, "--out", RUN, "--resume"] + SETS
 # (case id, argv with {cap}/{run}/{base} placeholders or a callable building it, expected
 # words in the error line)
-CASES = [
-    ("set-encoder-foo", T + ["--set", "encoder=foo"], "encoder"),
-    ("set-field-3", T + ["--set", "field=3"], "field"),
-    ("set-lr-nan", T + ["--set", "lr=nan"], "lr"),
-    ("set-lr-zero", T + ["--set", "lr=0"], "lr"),
-    ("set-pos-freqs-negative", T + ["--set", "field.pos_freqs=-1"], "field.pos_freqs"),
-    ("set-lambda-color-nan", T + ["--set", "lambda_color=nan"], "lambda_color"),
-    ("set-lambda-mask-inf", T + ["--set", "lambda_mask=inf"], "lambda_mask"),
-    ("set-checkpoint-every-0", T + ["--set", "checkpoint_every=0"], "checkpoint_every"),
-    ("set-max-minutes-negative", T + ["--set", "max_minutes=-1"], "max_minutes"),
-    ("set-k-above-m", T + ["--set", "num_keys=3", "--set", "k=5"], "k="),
-    ("set-num-keys-above-frames", T + ["--set", "num_keys=50"], "num_keys"),
-    ("set-eval-views-outside", T + ["--set", "eval_views=1,99"], "eval_views"),
-    ("set-train-eval-overlap", T + ["--set", "train_views=1,2"], "train_views"),
-    ("set-eval-views-none", T + ["--set", "eval_views=none"], "eval_views"),
-    ("set-strategy-bogus", T + ["--set", "strategy=bogus"], "strategy"),
-    ("set-weighting-bogus", T + ["--set", "weighting=bogus"], "weighting"),
-    ("set-unknown", T + ["--set", "nosuch=1"], "nosuch"),
-    ("set-unknown-field", T + ["--set", "field.nosuch=1"], "field.nosuch"),
-    ("set-no-equals", T + ["--set", "lr"], "key=value"),
-    ("set-texture-size-abc", T + ["--set", "texture_size=abc"], "texture_size"),
-    ("set-perceptual-vgg", T + ["--set", "perceptual=vgg"], "perceptual"),
-    ("set-patch-size-4", T + ["--set", "patch_size=4"], "patch_size"),
-    ("set-view-weighting-max", T + ["--set", "view_weighting=max"], "view_weighting"),
-    ("set-fg-fraction-2", T + ["--set", "fg_fraction=2"], "fg_fraction"),
-    ("set-dotted-range", T + ["--set", "render.coarse_samples=0"], "render.coarse_samples=0"),
-    ("set-dotted-type", T + ["--set", "train.coarse_samples=2.5"], "train.coarse_samples"),
-    ("set-dotted-unknown", T + ["--set", "train.nosuch=1"], "train.nosuch"),
-    ("set-group", T + ["--set", "render=3"], "group of settings"),
-    (
-        "eval-set-train-knob",
-        ["eval", RUN + "/checkpoint.pt", CAP, "--set", "train.coarse_samples=3"],
-        "only render knobs",
-    ),
-    (
-        "eval-set-misspelt",
-        ["eval", RUN + "/checkpoint.pt", CAP, "--set", "render.coarse_sample=3"],
-        "render.coarse_samples",
-    ),
-    ("iterations-negative", ["train", CAP, "--out", "{base}/new_run", "--iterations", "-5"], "iterations"),
-    ("out-is-a-file", lambda w: ["train", str(w / "cap"), "--out", _out_file(w)], "is a file"),
-    ("out-holds-checkpoint", ["train", CAP, "--out", RUN, "--iterations", "3"], "--resume"),
-    ("resume-and-overwrite", ["train", CAP, "--out", RUN, "--resume", "--overwrite"], "exclude"),
-    ("resume-past-iterations", R + ["--iterations", "1"], "already at step 2"),
-    ("resume-other-settings", R + ["--set", "lr=0.1"], "written with train.lr"),
-    ("synth-frames-0", ["synth", "{base}/new_cap", "--frames", "0"], "--frames"),
-    ("synth-frames-negative", ["synth", "{base}/new_cap", "--frames", "-3"], "--frames"),
-    ("synth-size-0", ["synth", "{base}/new_cap", "--size", "0"], "--size"),
-    (
-        "synth-overwrite-user-folder",
-        lambda w: ["synth", _user_folder(w), "--overwrite", "--frames", "1"],
-        "not one",
-    ),
-    (
-        "synth-poses-empty",
-        lambda w: [
-            "synth",
-            str(w / "new_cap"),
-            "--poses",
-            _poses_file(w, "empty.npz", poses=np.zeros((0, 72))),
-        ],
-        "0 frames",
-    ),
-    (
-        "synth-poses-text-npz",
-        lambda w: ["synth", str(w / "new_cap"), "--poses", _file(w, "text.npz", b"this is text, not numpy")],
-        "text.npz: not an .npz archive",
-    ),
-    (
-        "synth-poses-wrong-shape",
-        lambda w: [
-            "synth",
-            str(w / "new_cap"),
-            "--poses",
-            _poses_file(w, "shape.npz", poses=np.zeros((4, 5))),
-        ],
-        "poses",
-    ),
-    (
-        "synth-poses-huge",
-        lambda w: [
-            "synth",
-            str(w / "new_cap"),
-            "--poses",
-            _poses_file(w, "huge.npz", poses=np.full((2, 72), 1e30)),
-        ],
-        "pose",
-    ),
-    ("eval-per-set-negative", ["eval", RUN + "/checkpoint.pt", CAP, "--per-set", "-1"], "--per-set"),
-    (
-        "eval-vocab-junk",
-        lambda w: ["eval", _ckpt_with(w, "vocab", _vocab_junk), str(w / "cap")],
-        "vocabulary",
-    ),
-    (
-        "eval-vocab-frames-outside",
-        lambda w: ["eval", _ckpt_with(w, "frames", _frames_out_of_range), str(w / "cap")],
-        "vocabulary",
-    ),
-    (
-        "eval-settings-string",
-        lambda w: ["eval", _ckpt_with(w, "settings", _settings_str), str(w / "cap")],
-        "settings",
-    ),
-    (
-        "eval-wrong-tensor-shape",
-        lambda w: ["eval", _ckpt_with(w, "shape", _wrong_shape), str(w / "cap")],
-        "weights do not fit",
-    ),
-    (
-        "eval-nan-weights",
-        lambda w: ["eval", _ckpt_with(w, "nan", _nan_weight), str(w / "cap")],
-        "holds NaN or inf",
-    ),
-    (
-        "render-nan-weights",
-        lambda w: [
-            "render",
-            _ckpt_with(w, "nan", _nan_weight),
-            "--poses",
-            _still_poses(w),
-            "--out",
-            str(w / "bad" / "nan.mp4"),
-        ],
-        "holds NaN or inf",
-    ),
-    ("eval-text-checkpoint", lambda w: ["eval", _file(w, "text.pt", b"hello"), str(w / "cap")], "text.pt"),
-    (
-        "eval-malicious-checkpoint",
-        lambda w: ["eval", _evil_checkpoint(w), str(w / "cap")],
-        "refused by the weights-only reader",
-    ),
-    ("eval-missing-checkpoint", ["eval", "{base}/nope.pt", CAP], "nope.pt"),
-    ("eval-missing-capture", ["eval", RUN + "/checkpoint.pt", "{base}/nope_cap"], "nope_cap"),
-    (
-        "view-neural-processes-0",
-        ["view", RUN + "/checkpoint.pt", "--neural-processes", "0"],
-        "--neural-processes",
-    ),
-    (
-        "view-preview-wait-negative",
-        ["view", RUN + "/checkpoint.pt", "--neural-preview-wait", "-5"],
-        "--neural-preview-wait -5: expected 0..200",
-    ),
-    (
-        "view-preview-wait-huge",
-        ["view", RUN + "/checkpoint.pt", "--neural-preview-wait", "1000"],
-        "--neural-preview-wait 1000",
-    ),
-    ("vocab-k-0", ["vocab", CAP, "--pose", "frame:0", "-k", "0"], "k"),
-    ("vocab-keys-0", ["vocab", CAP, "--pose", "frame:0", "--keys", "0"], "keys"),
-    ("vocab-frame-abc", ["vocab", CAP, "--pose", "frame:abc"], "frame:abc"),
-    ("vocab-frame-999", ["vocab", CAP, "--pose", "frame:999"], "frame"),
-    (
-        "vocab-min-distance-negative",
-        ["vocab", CAP, "--pose", "frame:0", "--min-distance", "-1"],
-        "--min-distance",
-    ),
-    (
-        "sheet-frames-abc",
-        ["contact-sheet", CAP, "--frames", "1,abc", "--out", "{base}/sheet.png"],
-        "--frames",
-    ),
-    (
-        "annots-K-4x2x2",
-        lambda w: ["vocab", _capture_copy(w, "k422", _annots("K", None)), "--pose", "frame:0"],
-        "K",
-    ),
-    (
-        "annots-ims-abc",
-        lambda w: ["vocab", _capture_copy(w, "imsabc", _annots("ims", "abc")), "--pose", "frame:0"],
-        "ims",
-    ),
-    (
-        "annots-not-a-dict",
-        lambda w: [
-            "vocab",
-            _capture_copy(w, "notdict", lambda r: np.save(r / "annots.npy", np.arange(3))),
-            "--pose",
-            "frame:0",
-        ],
-        "annots.npy",
-    ),
-    (
-        "synth-json-broken",
-        lambda w: [
-            "vocab",
-            _capture_copy(w, "json", lambda r: (r / "texvocab_synth.json").write_text("{broken")),
-            "--pose",
-            "frame:0",
-        ],
-        "texvocab_synth.json",
-    ),
-    (
-        "train-image-other-size",
-        lambda w: [
-            "train",
-            _capture_copy(w, "resized", _resize_one_image),
-            "--out",
-            str(w / "new_run"),
-            "--set",
-            "num_keys=3",
-        ],
-        "48x48",
-    ),
-    (
-        "capture-pose-1e30",
-        lambda w: ["vocab", _capture_copy(w, "hugepose", _huge_pose), "--pose", "frame:0"],
-        "SMPL parameters",
-    ),
-    ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
-    ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
-] + CAPTURE_CASES
+CASES = (
+    [
+        ("set-encoder-foo", T + ["--set", "encoder=foo"], "encoder"),
+        ("set-field-3", T + ["--set", "field=3"], "field"),
+        ("set-lr-nan", T + ["--set", "lr=nan"], "lr"),
+        ("set-lr-zero", T + ["--set", "lr=0"], "lr"),
+        ("set-pos-freqs-negative", T + ["--set", "field.pos_freqs=-1"], "field.pos_freqs"),
+        ("set-lambda-color-nan", T + ["--set", "lambda_color=nan"], "lambda_color"),
+        ("set-lambda-mask-inf", T + ["--set", "lambda_mask=inf"], "lambda_mask"),
+        ("set-checkpoint-every-0", T + ["--set", "checkpoint_every=0"], "checkpoint_every"),
+        ("set-max-minutes-negative", T + ["--set", "max_minutes=-1"], "max_minutes"),
+        ("set-k-above-m", T + ["--set", "num_keys=3", "--set", "k=5"], "k="),
+        ("set-num-keys-above-frames", T + ["--set", "num_keys=50"], "num_keys"),
+        ("set-eval-views-outside", T + ["--set", "eval_views=1,99"], "eval_views"),
+        ("set-train-eval-overlap", T + ["--set", "train_views=1,2"], "train_views"),
+        ("set-eval-views-none", T + ["--set", "eval_views=none"], "eval_views"),
+        ("set-strategy-bogus", T + ["--set", "strategy=bogus"], "strategy"),
+        ("set-weighting-bogus", T + ["--set", "weighting=bogus"], "weighting"),
+        ("set-unknown", T + ["--set", "nosuch=1"], "nosuch"),
+        ("set-unknown-field", T + ["--set", "field.nosuch=1"], "field.nosuch"),
+        ("set-no-equals", T + ["--set", "lr"], "key=value"),
+        ("set-texture-size-abc", T + ["--set", "texture_size=abc"], "texture_size"),
+        ("set-perceptual-vgg", T + ["--set", "perceptual=vgg"], "perceptual"),
+        ("set-patch-size-4", T + ["--set", "patch_size=4"], "patch_size"),
+        ("set-view-weighting-max", T + ["--set", "view_weighting=max"], "view_weighting"),
+        ("set-fg-fraction-2", T + ["--set", "fg_fraction=2"], "fg_fraction"),
+        ("set-dotted-range", T + ["--set", "render.coarse_samples=0"], "render.coarse_samples=0"),
+        ("set-dotted-type", T + ["--set", "train.coarse_samples=2.5"], "train.coarse_samples"),
+        ("set-dotted-unknown", T + ["--set", "train.nosuch=1"], "train.nosuch"),
+        ("set-group", T + ["--set", "render=3"], "group of settings"),
+        (
+            "eval-set-train-knob",
+            ["eval", RUN + "/checkpoint.pt", CAP, "--set", "train.coarse_samples=3"],
+            "only render knobs",
+        ),
+        (
+            "eval-set-misspelt",
+            ["eval", RUN + "/checkpoint.pt", CAP, "--set", "render.coarse_sample=3"],
+            "render.coarse_samples",
+        ),
+        (
+            "iterations-negative",
+            ["train", CAP, "--out", "{base}/new_run", "--iterations", "-5"],
+            "iterations",
+        ),
+        ("out-is-a-file", lambda w: ["train", str(w / "cap"), "--out", _out_file(w)], "is a file"),
+        ("out-holds-checkpoint", ["train", CAP, "--out", RUN, "--iterations", "3"], "--resume"),
+        ("resume-and-overwrite", ["train", CAP, "--out", RUN, "--resume", "--overwrite"], "exclude"),
+        ("resume-past-iterations", R + ["--iterations", "1"], "already at step 2"),
+        ("resume-other-settings", R + ["--set", "lr=0.1"], "written with train.lr"),
+        ("synth-frames-0", ["synth", "{base}/new_cap", "--frames", "0"], "--frames"),
+        ("synth-frames-negative", ["synth", "{base}/new_cap", "--frames", "-3"], "--frames"),
+        ("synth-size-0", ["synth", "{base}/new_cap", "--size", "0"], "--size"),
+        (
+            "synth-overwrite-user-folder",
+            lambda w: ["synth", _user_folder(w), "--overwrite", "--frames", "1"],
+            "not one",
+        ),
+        (
+            "synth-poses-empty",
+            lambda w: [
+                "synth",
+                str(w / "new_cap"),
+                "--poses",
+                _poses_file(w, "empty.npz", poses=np.zeros((0, 72))),
+            ],
+            "0 frames",
+        ),
+        (
+            "synth-poses-text-npz",
+            lambda w: [
+                "synth",
+                str(w / "new_cap"),
+                "--poses",
+                _file(w, "text.npz", b"this is text, not numpy"),
+            ],
+            "text.npz: not an .npz archive",
+        ),
+        (
+            "synth-poses-wrong-shape",
+            lambda w: [
+                "synth",
+                str(w / "new_cap"),
+                "--poses",
+                _poses_file(w, "shape.npz", poses=np.zeros((4, 5))),
+            ],
+            "poses",
+        ),
+        (
+            "synth-poses-huge",
+            lambda w: [
+                "synth",
+                str(w / "new_cap"),
+                "--poses",
+                _poses_file(w, "huge.npz", poses=np.full((2, 72), 1e30)),
+            ],
+            "pose",
+        ),
+        ("eval-per-set-negative", ["eval", RUN + "/checkpoint.pt", CAP, "--per-set", "-1"], "--per-set"),
+        (
+            "eval-vocab-junk",
+            lambda w: ["eval", _ckpt_with(w, "vocab", _vocab_junk), str(w / "cap")],
+            "vocabulary",
+        ),
+        (
+            "eval-vocab-frames-outside",
+            lambda w: ["eval", _ckpt_with(w, "frames", _frames_out_of_range), str(w / "cap")],
+            "vocabulary",
+        ),
+        (
+            "eval-settings-string",
+            lambda w: ["eval", _ckpt_with(w, "settings", _settings_str), str(w / "cap")],
+            "settings",
+        ),
+        (
+            "eval-wrong-tensor-shape",
+            lambda w: ["eval", _ckpt_with(w, "shape", _wrong_shape), str(w / "cap")],
+            "weights do not fit",
+        ),
+        (
+            "eval-nan-weights",
+            lambda w: ["eval", _ckpt_with(w, "nan", _nan_weight), str(w / "cap")],
+            "holds NaN or inf",
+        ),
+        (
+            "render-nan-weights",
+            lambda w: [
+                "render",
+                _ckpt_with(w, "nan", _nan_weight),
+                "--poses",
+                _still_poses(w),
+                "--out",
+                str(w / "bad" / "nan.mp4"),
+            ],
+            "holds NaN or inf",
+        ),
+        (
+            "eval-text-checkpoint",
+            lambda w: ["eval", _file(w, "text.pt", b"hello"), str(w / "cap")],
+            "text.pt",
+        ),
+        (
+            "eval-malicious-checkpoint",
+            lambda w: ["eval", _evil_checkpoint(w), str(w / "cap")],
+            "refused by the weights-only reader",
+        ),
+        ("eval-missing-checkpoint", ["eval", "{base}/nope.pt", CAP], "nope.pt"),
+        ("eval-missing-capture", ["eval", RUN + "/checkpoint.pt", "{base}/nope_cap"], "nope_cap"),
+        (
+            "view-neural-processes-0",
+            ["view", RUN + "/checkpoint.pt", "--neural-processes", "0"],
+            "--neural-processes",
+        ),
+        (
+            "view-preview-wait-negative",
+            ["view", RUN + "/checkpoint.pt", "--neural-preview-wait", "-5"],
+            "--neural-preview-wait -5: expected 0..200",
+        ),
+        (
+            "view-preview-wait-huge",
+            ["view", RUN + "/checkpoint.pt", "--neural-preview-wait", "1000"],
+            "--neural-preview-wait 1000",
+        ),
+        ("vocab-k-0", ["vocab", CAP, "--pose", "frame:0", "-k", "0"], "k"),
+        ("vocab-keys-0", ["vocab", CAP, "--pose", "frame:0", "--keys", "0"], "keys"),
+        ("vocab-frame-abc", ["vocab", CAP, "--pose", "frame:abc"], "frame:abc"),
+        ("vocab-frame-999", ["vocab", CAP, "--pose", "frame:999"], "frame"),
+        (
+            "vocab-min-distance-negative",
+            ["vocab", CAP, "--pose", "frame:0", "--min-distance", "-1"],
+            "--min-distance",
+        ),
+        (
+            "sheet-frames-abc",
+            ["contact-sheet", CAP, "--frames", "1,abc", "--out", "{base}/sheet.png"],
+            "--frames",
+        ),
+        (
+            "annots-K-4x2x2",
+            lambda w: ["vocab", _capture_copy(w, "k422", _annots("K", None)), "--pose", "frame:0"],
+            "K",
+        ),
+        (
+            "annots-ims-abc",
+            lambda w: ["vocab", _capture_copy(w, "imsabc", _annots("ims", "abc")), "--pose", "frame:0"],
+            "ims",
+        ),
+        (
+            "annots-not-a-dict",
+            lambda w: [
+                "vocab",
+                _capture_copy(w, "notdict", lambda r: np.save(r / "annots.npy", np.arange(3))),
+                "--pose",
+                "frame:0",
+            ],
+            "annots.npy",
+        ),
+        (
+            "synth-json-broken",
+            lambda w: [
+                "vocab",
+                _capture_copy(w, "json", lambda r: (r / "texvocab_synth.json").write_text("{broken")),
+                "--pose",
+                "frame:0",
+            ],
+            "texvocab_synth.json",
+        ),
+        (
+            "train-image-other-size",
+            lambda w: [
+                "train",
+                _capture_copy(w, "resized", _resize_one_image),
+                "--out",
+                str(w / "new_run"),
+                "--set",
+                "num_keys=3",
+            ],
+            "48x48",
+        ),
+        (
+            "capture-pose-1e30",
+            lambda w: ["vocab", _capture_copy(w, "hugepose", _huge_pose), "--pose", "frame:0"],
+            "SMPL parameters",
+        ),
+        ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
+        ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
+    ]
+    + CAPTURE_CASES
+    + identity_cases(SETS)
+)
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])

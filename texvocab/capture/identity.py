@@ -107,6 +107,6 @@ def check_capture_identity(
         return diffs
     what = f"{path} was trained on another capture than {capture.root} ({'; '.join(diffs)})"
     if not other_capture:
-        raise TexvocabError(f"{what}; pass {ACCEPT_FLAG} to use {capture.root} anyway")
+        raise TexvocabError(f"{what}; pass {ACCEPT_FLAG} to use it anyway")
     log.warning("warning: %s; using it as %s asks", what, ACCEPT_FLAG)
     return diffs
