@@ -13,6 +13,7 @@ from texvocab.cli.capture import add_sheet_parser, add_synth_parser
 from texvocab.cli.method import add_method_parsers, add_train_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.errors import TexvocabError
+from texvocab.io.full_disk import disk_full_cause, disk_full_reason
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 # The command line stands above the viewer (an import-linter contract: texvocab_viewer never
@@ -232,6 +233,13 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, RuntimeError) as exc:  # a full disk no caller said more of (eval, render)
+        full = disk_full_cause(exc)
+        if full is None:
+            raise
+        where = f"{full.filename}: " if full.filename else ""
+        print(f"error: {where}{disk_full_reason(full)} (texvocab {args.command})", file=sys.stderr)
         return 2
 
 
