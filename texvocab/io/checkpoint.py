@@ -2,7 +2,8 @@
 (tensors and plain Python containers only: loading one never runs code).
 
 Layout (see assets_spec/checkpoint.md): {"format": "texvocab-checkpoint", "version": 2,
-"step": int, "settings": dict, "capture": str, "num_train": int, "model": state_dict,
+"step": int, "settings": dict, "capture": str, "num_train": int, "capture_identity": dict
+(:mod:`texvocab.capture.identity`; absent before it existed), "model": state_dict,
 "optimizer": state_dict, "vocab": {...}, "rng": {"torch": ByteTensor}}. Version 2 stores
 the settings as a dict per group; version 1 stored them flat. Both are read
 (:meth:`texvocab.pipeline.settings.Settings.from_dict`).
