@@ -97,11 +97,14 @@ def test_a_checkpoint_without_the_identity_loads_on_any_capture_silently(run, tm
 
 def test_an_unreadable_identity_is_refused_by_name(run, tmp_path):
     ck = torch.load(run, weights_only=True)
-    ck[IDENTITY_KEY] = {"layout": 3}
-    bad = tmp_path / "bad.pt"
-    torch.save(ck, bad)
-    with pytest.raises(TexvocabError, match=f"{IDENTITY_KEY} is not readable"):
-        load_avatar(bad, open_capture(run.parent.parent / "cap"), progress=False)
+    cap = open_capture(run.parent.parent / "cap")
+    short = {**capture_identity(cap), "frame_ids": [0]}  # 2 frames, 1 id
+    for junk in ({"layout": 3}, short, "zju"):
+        ck[IDENTITY_KEY] = junk
+        bad = tmp_path / "bad.pt"
+        torch.save(ck, bad)
+        with pytest.raises(TexvocabError, match=f"{IDENTITY_KEY} is not readable"):
+            load_avatar(bad, cap, progress=False)
 
 
 def test_resume_checks_the_capture(run, caplog):

@@ -58,6 +58,7 @@ def _readable(recorded: object) -> bool:
         and isinstance(recorded.get("layout"), str)
         and all(type(recorded.get(k)) is int for k in ("num_frames", "num_views"))
         and isinstance(recorded.get("frame_ids"), list)
+        and len(recorded["frame_ids"]) == recorded["num_frames"]
         and all(type(f) is int for f in recorded["frame_ids"])
         and isinstance(recorded.get("calibration"), str)
     )
