@@ -25,6 +25,7 @@ class SmallDisk:
 
     def leave(self, free: int) -> None:
         size = self.used() + -(-free // PAGE) * PAGE
+        assert size > 0, "a tmpfs of size 0 is unlimited: put a file on it first"
         subprocess.run(["mount", "-o", f"remount,size={size}", str(self.root)], check=True)
 
 

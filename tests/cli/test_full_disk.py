@@ -86,3 +86,21 @@ def test_prepare_on_a_full_disk_keeps_whole_maps_only(world, disk, free_pages, c
     assert f"{len(maps)} of 4 texture maps" in line and (len(maps) > 0) == (free_pages > 0), line
     assert all(load_texture_map(p)[0].shape[0] == 32 for p in maps)  # whole files only
     assert _hidden(cap) == []
+
+
+@pytest.mark.parametrize("command", ["eval", "render"])
+def test_eval_and_render_on_a_full_disk_give_one_line(world, disk, tmp_path, command, capsys):
+    import numpy as np
+
+    ckpt, out = str(world / "run" / "checkpoint.pt"), disk.root / "out"
+    if command == "eval":
+        argv = ["eval", ckpt, str(world / "cap"), "--per-set", "1", "--out", str(out)]
+    else:
+        np.savez(tmp_path / "still.npz", poses=np.zeros((1, 72)))
+        argv = ["render", ckpt, "--poses", str(tmp_path / "still.npz"), "--out", str(out)]
+    (disk.root / "filler").write_bytes(b"x")  # a tmpfs of size 0 would be unlimited
+    disk.leave(free=0)
+    assert main(argv) == 2
+    line = _error_line(capsys.readouterr().err)
+    assert line.startswith(f"error: {out}") and f"no space left on device (texvocab {command})" in line
+    assert _hidden(disk.root) == []  # no temporary file left
