@@ -56,13 +56,23 @@ def test_resume_on_another_capture_with_the_flag(world, tmp_path, caplog):
     assert load_checkpoint(run / "checkpoint.pt")["step"] == 3
 
 
-def test_shot_and_view_take_the_flag(world, caplog):
+def test_shot_on_another_capture_with_the_flag(world, tmp_path, caplog, capsys):
+    moved = _copy(world, "moved", moved_camera)
+    argv = ["shot", str(world / "run" / "checkpoint.pt"), "--capture", moved, "--camera", "1"]
+    argv += ["--size", "64x64", "--out", str(tmp_path / "shot")]
+    assert main(argv) == 2  # refused without the flag
+    assert "calibration differs); pass --other-capture" in capsys.readouterr().err
+    caplog.set_level(logging.WARNING, logger="texvocab")
+    assert main(argv + ["--other-capture"]) == 0
+    assert len(_warning_lines(caplog.text)) == 1
+    assert (tmp_path / "shot" / "neural.png").is_file()
+
+
+def test_view_takes_the_flag(world, caplog):
     moved = _copy(world, "moved", moved_camera)
     ckpt = str(world / "run" / "checkpoint.pt")
-    parser = build_parser()
-    for cmd in (["view", ckpt], ["shot", ckpt, "--out", "x"]):
-        args = parser.parse_args([*cmd, "--capture", moved, "--other-capture"])
-        assert args.other_capture is True
+    args = build_parser().parse_args(["view", ckpt, "--capture", moved, "--other-capture"])
+    assert args.other_capture is True
     with pytest.raises(TexvocabError, match="calibration differs"):
         load_viewer_data(ckpt, capture=moved)
     caplog.set_level(logging.WARNING, logger="texvocab")
