@@ -44,4 +44,9 @@ def identity_cases(resume_sets: list[str]) -> list:
             ),
             "calibration differs",
         ),
+        (
+            "train-other-capture-without-resume",
+            lambda w: ["train", str(w / "cap"), "--out", str(w / "new_run"), "--other-capture"],
+            "--other-capture applies with --resume",
+        ),
     ]

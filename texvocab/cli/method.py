@@ -297,6 +297,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     if args.ddp is not None and args.ddp < 1:
         raise TexvocabError(f"--ddp {args.ddp}: expected a number of processes >= 1")
+    if args.other_capture and not args.resume:
+        raise TexvocabError("--other-capture applies with --resume (a checkpoint to continue on CAPTURE)")
     pre = preset_overrides(args.preset) if args.preset else []
     steps = [] if args.iterations is None else [f"train.iterations={args.iterations}"]
     settings = Settings().with_overrides(pre + args.overrides + steps)
