@@ -10,8 +10,9 @@ import time
 from pathlib import Path
 
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
-from texvocab.cli.method import add_method_parsers, add_train_parsers
+from texvocab.cli.method import add_method_parsers
 from texvocab.cli.render import add_render_parser
+from texvocab.cli.training import add_train_parsers
 from texvocab.errors import TexvocabError
 from texvocab.io.full_disk import disk_full_cause, disk_full_reason
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
