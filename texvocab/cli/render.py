@@ -7,6 +7,7 @@ import argparse
 import time
 from pathlib import Path
 
+from texvocab.cli.training import add_settings_arguments
 from texvocab.errors import TexvocabError
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
@@ -90,19 +91,10 @@ def add_render_parser(sub, add_smpl) -> None:
         help="render on a capture the checkpoint was not trained on (other frames, views "
         "or calibration; refused without it), with one warning line",
     )
-    p.add_argument(
-        "--preset",
-        choices=("fast", "balanced", "quality"),
-        default=None,
-        help="render preset (render knobs only; the rest is in the checkpoint)",
-    )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a render knob, e.g. --set render.image_scale=0.5",
+    add_settings_arguments(
+        p,
+        "render preset (render knobs only; the rest is in the checkpoint)",
+        "override a render knob, e.g. --set render.image_scale=0.5",
     )
     p.add_argument(
         "--ray",

@@ -14,6 +14,13 @@ from texvocab.errors import TexvocabError
 from texvocab.pipeline.run_folder import check_run_folder
 
 
+def add_settings_arguments(p: argparse.ArgumentParser, preset_help: str, set_help: str) -> None:
+    """``--preset fast|balanced|quality`` and ``--set KEY=VALUE`` (repeatable, into
+    ``args.overrides``) of ``train``, ``eval`` and ``render``."""
+    p.add_argument("--preset", choices=("fast", "balanced", "quality"), default=None, help=preset_help)
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=set_help)
+
+
 def add_train_parsers(sub, add_smpl) -> None:
     p = sub.add_parser(
         "train",
@@ -47,19 +54,10 @@ def add_train_parsers(sub, add_smpl) -> None:
         action="store_true",
         help="replace the run in OUT (refused without it when OUT holds a checkpoint)",
     )
-    p.add_argument(
-        "--preset",
-        choices=("fast", "balanced", "quality"),
-        default=None,
-        help="speed/accuracy preset (bench/tradeoff.py); --set applies after it",
-    )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a setting, e.g. --set vocab.strategy=joint --set field.hidden=64",
+    add_settings_arguments(
+        p,
+        "speed/accuracy preset (bench/tradeoff.py); --set applies after it",
+        "override a setting, e.g. --set vocab.strategy=joint --set field.hidden=64",
     )
     p.add_argument(
         "--train-frames",
@@ -96,19 +94,10 @@ def add_train_parsers(sub, add_smpl) -> None:
         help="only N frames per set, evenly spread, for a quick look (default: all "
         "novel frames and as many training frames)",
     )
-    p.add_argument(
-        "--preset",
-        choices=("fast", "balanced", "quality"),
-        default=None,
-        help="render preset (render knobs only; the rest is in the checkpoint)",
-    )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a render knob, e.g. --set render.coarse_samples=24",
+    add_settings_arguments(
+        p,
+        "render preset (render knobs only; the rest is in the checkpoint)",
+        "override a render knob, e.g. --set render.coarse_samples=24",
     )
     add_smpl(p)
     p.set_defaults(func=cmd_eval)
