@@ -37,7 +37,7 @@ def is_disk_full(exc: BaseException) -> bool:
 
 
 def disk_full_reason(exc: OSError) -> str:
-    """ "no space left on device" or "disk quota exceeded"."""
+    """The reason in words: "no space left on device" or "disk quota exceeded"."""
     return os.strerror(exc.errno).lower()
 
 
