@@ -55,6 +55,17 @@ def parse_size(spec: str, minimum: tuple[int, int] = IMAGE_MIN) -> tuple[int, in
     return size
 
 
+def add_other_capture(p: argparse.ArgumentParser) -> None:
+    """``--other-capture`` of ``view`` and ``shot``: accept a capture other than the one
+    the checkpoint was trained on."""
+    p.add_argument(
+        "--other-capture",
+        action="store_true",
+        help="show the checkpoint on a capture it was not trained on (other frames, views "
+        "or calibration; refused without it), with one warning line",
+    )
+
+
 def add_view_arguments(p: argparse.ArgumentParser) -> None:
     """The viewer's arguments (``texvocab view`` and ``python -m texvocab_viewer``)."""
     p.add_argument(
@@ -83,6 +94,7 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         help="the capture folder a checkpoint was trained on, when it is not where the "
         "checkpoint records it (moved, or another machine)",
     )
+    add_other_capture(p)
     p.add_argument("--script", default=None, help=argparse.SUPPRESS)
     p.add_argument("--report", default=None, help=argparse.SUPPRESS)
     p.add_argument("--screenshot", default=None, help=argparse.SUPPRESS)

@@ -45,6 +45,7 @@ def run_from_args(args: argparse.Namespace) -> int:
         args.neural_worker,
         args.neural_processes,
         args.neural_preview_wait,
+        other_capture=args.other_capture,
     )
     exit_now(rc)
     return rc  # not reached

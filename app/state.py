@@ -71,9 +71,11 @@ def _capture_data(path: Path, smpl: str | None) -> ViewerData:
     )
 
 
-def _checkpoint_data(path: Path, smpl: str | None, capture: str | None = None) -> ViewerData:
+def _checkpoint_data(
+    path: Path, smpl: str | None, capture: str | None = None, other_capture: bool = False
+) -> ViewerData:
     cap = None if capture is None else open_capture(Path(capture).expanduser(), body=load_body(smpl))
-    avatar = load_avatar(path, cap, smpl=smpl)
+    avatar = load_avatar(path, cap, smpl=smpl, other_capture=other_capture)
     model = avatar.model
     textures = model.pose_feature.textures.permute(0, 2, 3, 1).numpy()
     return ViewerData(
@@ -87,7 +89,9 @@ def _checkpoint_data(path: Path, smpl: str | None, capture: str | None = None) -
     )
 
 
-def load_viewer_data(source: str | None, smpl: str | None = None, capture: str | None = None) -> ViewerData:
+def load_viewer_data(
+    source: str | None, smpl: str | None = None, capture: str | None = None, other_capture: bool = False
+) -> ViewerData:
     """Load what ``texvocab view [SOURCE]`` shows.
 
     Args:
@@ -97,6 +101,8 @@ def load_viewer_data(source: str | None, smpl: str | None = None, capture: str |
             capture).
         smpl: the user's SMPL model file/folder; default the embedded default body.
         capture: for a checkpoint, its capture folder when not where it records it.
+        other_capture: for a checkpoint, accept a capture it was not trained on (one
+            warning line) instead of refusing it.
     """
     if capture is not None and (source is None or Path(source).expanduser().is_dir()):
         raise TexvocabError("--capture applies to a checkpoint SOURCE only")
@@ -107,7 +113,7 @@ def load_viewer_data(source: str | None, smpl: str | None = None, capture: str |
     if path.is_dir():
         return _capture_data(path, smpl)
     if path.is_file():
-        return _checkpoint_data(path, smpl, capture)
+        return _checkpoint_data(path, smpl, capture, other_capture)
     raise TexvocabError(
         f"{source}: no such file or folder; expected a checkpoint .pt written "
         "by 'texvocab train' or a capture folder"

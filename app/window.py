@@ -146,20 +146,22 @@ def run_viewer(
     neural_worker: str = "process",
     neural_processes: int = NEURAL_PROCESSES,
     neural_preview_wait_ms: float = NEURAL_PREVIEW_WAIT_MS,
+    other_capture: bool = False,
 ) -> int:
     """Open the viewer window on ``source`` (checkpoint, capture folder or None) and run
     until it is closed. ``poses``: a pose sequence .npz for the timeline (shown at frame
     0). ``script``: a scripted run of the window (tests, benchmarks; its exit code is
     returned). ``neural_worker``: "process" or "thread"
     (texvocab_viewer.arguments.NEURAL_WORKERS); ``neural_processes``: how many render
-    processes split each view; ``neural_preview_wait_ms``:
+    processes split each view; ``other_capture``: accept a ``capture`` the checkpoint
+    was not trained on (one warning line); ``neural_preview_wait_ms``:
     texvocab_viewer.neural.view.NeuralView.preview_wait."""
     if poses:
         check_pose_file(poses)  # a bad file is refused before the avatar loads
     require_display()
     _choose_gl_platform()
     budget_blas_threads(1)  # the frame's numpy products: no spinning OpenBLAS thread
-    data = load_viewer_data(source, smpl, capture)
+    data = load_viewer_data(source, smpl, capture, other_capture)
     while True:
         viewer = Viewer(data, (int(size[0]), int(size[1])), neural_threads, neural_nice, neural_worker)
         viewer.smpl = smpl

@@ -30,6 +30,12 @@ def flat_dict(s: Settings) -> dict:
     return {**{flat: dotted[name] for flat, name in FLAT_NAMES.items()}, "field": s.to_dict()["field"]}
 
 
+def set_arguments(s: Settings) -> list[str]:
+    """``--set KEY=VALUE`` arguments reproducing ``s`` on the command line (the defaults aside)."""
+    ours, default = s.dotted(), Settings().dotted()
+    return sum((["--set", f"{k}={v}"] for k, v in ours.items() if default[k] != v), [])
+
+
 def tiny_settings(**kw) -> Settings:
     """A tiny model's settings, ``kw`` (flat names, as :func:`flat_settings`) applied."""
     base = dict(

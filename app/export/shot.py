@@ -185,7 +185,7 @@ def cmd_shot(args: argparse.Namespace) -> int:
         raise TexvocabError("--neural needs a checkpoint (SOURCE = checkpoint.pt)")
     if args.size is not None:
         parse_size(args.size)  # a bad size is refused before the avatar loads
-    data = load_viewer_data(args.source, smpl=args.smpl, capture=args.capture)
+    data = load_viewer_data(args.source, args.smpl, args.capture, args.other_capture)
     if args.neural and data.model is None:
         raise TexvocabError(f"--neural: {args.source} is a capture, not a checkpoint")
     state = ViewerState(data)

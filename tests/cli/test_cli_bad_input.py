@@ -11,7 +11,8 @@ import pytest
 import torch
 from bad_capture_cases import CAPTURE_CASES
 from disk_snapshot import snapshot
-from train_cases import tiny_settings
+from identity_cases import identity_cases
+from train_cases import set_arguments, tiny_settings
 
 from texvocab.body import default_body
 from texvocab.capture import open as open_capture
@@ -154,16 +155,8 @@ T = [
 ]
 
 
-def _tiny_sets() -> list[str]:
-    """--set items reproducing the fixture run's settings (the defaults aside)."""
-    from texvocab.pipeline.settings import Settings
-
-    ours, default = tiny_settings(iterations=2, perceptual="off").dotted(), Settings().dotted()
-    items = [f"{k}={v}" for k, v in ours.items() if default[k] != v]
-    return sum((["--set", i] for i in items), [])
-
-
-R = ["train", CAP, "--out", RUN, "--resume"] + _tiny_sets()
+SETS = set_arguments(tiny_settings(iterations=2, perceptual="off"))  # the fixture run's
+R = ["train", CAP, "--out", RUN, "--resume"] + SETS
 # (case id, argv with {cap}/{run}/{base} placeholders or a callable building it, expected
 # words in the error line)
 CASES = [
@@ -379,6 +372,7 @@ CASES = [
     ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
     ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
 ] + CAPTURE_CASES
+CASES += identity_cases(SETS)  # another capture than the checkpoint's
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])

@@ -132,7 +132,7 @@ def _outside_cache(root):
     return {k: v for k, v in snapshot(root).items() if "texvocab_cache" not in k}
 
 
-CKPT_PARTS = ["settings", "vocab", "model", "num_train", "capture", "step"]
+CKPT_PARTS = ["settings", "vocab", "model", "num_train", "capture", "capture_identity", "step"]
 
 
 @FUZZ

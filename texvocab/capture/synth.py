@@ -28,6 +28,7 @@ from texvocab.capture.synth_realism import CameraEffects, noisy_fit
 from texvocab.capture.thuman import ThumanWriter
 from texvocab.capture.zju import ZjuWriter
 from texvocab.errors import AssetError
+from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.io.gl_platform import ensure_offscreen
 
 LAYOUTS = ("zju", "thuman")
@@ -263,8 +264,10 @@ def synthesize(
         if out.exists():
             shutil.rmtree(out)
         tmp.rename(out)
-    except BaseException:
+    except BaseException as e:
         shutil.rmtree(tmp, ignore_errors=True)
+        if is_disk_full(e):
+            raise disk_full_error(out, e, "nothing was written (the partial capture is removed)") from None
         raise
     finally:
         renderer.close()

@@ -10,16 +10,18 @@ import time
 from pathlib import Path
 
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
-from texvocab.cli.method import add_method_parsers, add_train_parsers
+from texvocab.cli.method import add_method_parsers
 from texvocab.cli.render import add_render_parser
+from texvocab.cli.training import add_train_parsers
 from texvocab.errors import TexvocabError
+from texvocab.io.full_disk import disk_full_cause, disk_full_reason
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 # The command line stands above the viewer (an import-linter contract: texvocab_viewer never
 # imports texvocab.cli). The viewer's arguments module is light (no GL, no torch) and builds
 # the `view` parser; the window, `shot` and the demo's viewer are imported inside the
 # commands that run them, so `texvocab --help` loads neither imgui_bundle, moderngl nor torch.
-from texvocab_viewer.arguments import add_view_arguments
+from texvocab_viewer.arguments import add_other_capture, add_view_arguments
 
 
 def _add_smpl(p: argparse.ArgumentParser) -> None:
@@ -162,6 +164,7 @@ def add_viewer_parsers(sub) -> None:
         help="the capture folder a checkpoint was trained on, when it is not where the "
         "checkpoint records it (moved, or another machine)",
     )
+    add_other_capture(p)
     _add_smpl(p)
     p.set_defaults(func=cmd_shot)
 
@@ -231,6 +234,13 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, RuntimeError) as exc:  # a full disk no caller said more of (eval, render)
+        full = disk_full_cause(exc)
+        if full is None:
+            raise
+        where = f"{full.filename}: " if full.filename else ""
+        print(f"error: {where}{disk_full_reason(full)} (texvocab {args.command})", file=sys.stderr)
         return 2
 
 

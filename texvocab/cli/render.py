@@ -7,6 +7,7 @@ import argparse
 import time
 from pathlib import Path
 
+from texvocab.cli.training import add_settings_arguments
 from texvocab.errors import TexvocabError
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
@@ -85,18 +86,15 @@ def add_render_parser(sub, add_smpl) -> None:
         help="the capture the checkpoint was trained on (default: the one it records)",
     )
     p.add_argument(
-        "--preset",
-        choices=("fast", "balanced", "quality"),
-        default=None,
-        help="render preset (render knobs only; the rest is in the checkpoint)",
+        "--other-capture",
+        action="store_true",
+        help="render on a capture the checkpoint was not trained on (other frames, views "
+        "or calibration; refused without it), with one warning line",
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a render knob, e.g. --set render.image_scale=0.5",
+    add_settings_arguments(
+        p,
+        "render preset (render knobs only; the rest is in the checkpoint)",
+        "override a render knob, e.g. --set render.image_scale=0.5",
     )
     p.add_argument(
         "--ray",
@@ -177,7 +175,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if gl:  # the viewer's data: the avatar plus what its 3D view draws
         from texvocab_viewer.state import load_viewer_data  # late: torch, only for GL panels
 
-        data = load_viewer_data(args.checkpoint, args.smpl, args.capture)
+        data = load_viewer_data(args.checkpoint, args.smpl, args.capture, args.other_capture)
         cap, model, trained = data.capture, data.model, data.settings
     else:
         cap = None
@@ -186,7 +184,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             from texvocab.capture import open as open_capture
 
             cap = open_capture(args.capture, body=load_body(args.smpl))
-        avatar = load_avatar(args.checkpoint, cap, smpl=args.smpl)
+        avatar = load_avatar(args.checkpoint, cap, smpl=args.smpl, other_capture=args.other_capture)
         cap, model, trained = avatar.capture, avatar.model, avatar.settings
     if not 0 <= args.camera < cap.num_views:
         raise TexvocabError(f"--camera {args.camera}: the capture has views 0..{cap.num_views - 1}")

@@ -2,7 +2,8 @@
 (tensors and plain Python containers only: loading one never runs code).
 
 Layout (see assets_spec/checkpoint.md): {"format": "texvocab-checkpoint", "version": 2,
-"step": int, "settings": dict, "capture": str, "num_train": int, "model": state_dict,
+"step": int, "settings": dict, "capture": str, "num_train": int, "capture_identity": dict
+(:mod:`texvocab.capture.identity`; absent before it existed), "model": state_dict,
 "optimizer": state_dict, "vocab": {...}, "rng": {"torch": ByteTensor}}. Version 2 stores
 the settings as a dict per group; version 1 stored them flat. Both are read
 (:meth:`texvocab.pipeline.settings.Settings.from_dict`).
@@ -10,6 +11,7 @@ the settings as a dict per group; version 1 stored them flat. Both are read
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import torch
@@ -24,9 +26,18 @@ REQUIRED = ("format", "version", "step", "settings", "model")
 
 
 def save_checkpoint(path: str | Path, payload: dict) -> Path:
-    """Atomically write ``payload`` (plus format/version tags) to ``path``."""
+    """Atomically write ``payload`` (plus format/version tags) to ``path``. Through a
+    Python file, so a full disk is an OSError (ENOSPC) rather than torch's RuntimeError;
+    on any error the temporary file is removed and ``path`` is left as it was."""
     data = {"format": FORMAT, "version": VERSION, **payload}
-    return atomic_write_bytes(path, lambda tmp: torch.save(data, tmp))
+
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as fh:
+            torch.save(data, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    return atomic_write_bytes(path, write)
 
 
 def load_checkpoint(path: str | Path) -> dict:

@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from texvocab.io.full_disk import disk_full_cause
+
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
     """float [0, 1] (H, W[, C]) -> uint8; uint8 passes through."""
@@ -31,7 +33,9 @@ def _umask() -> int:
 
 
 def atomic_write_bytes(path: str | Path, write) -> Path:
-    """Call ``write(tmp_path)`` then rename onto ``path``: never a half-written file."""
+    """Call ``write(tmp_path)`` then rename onto ``path``: never a half-written file. On
+    any error the temporary file is removed and ``path`` is left as it was; a full disk
+    is raised as an OSError naming ``path`` (:mod:`texvocab.io.full_disk`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
@@ -40,8 +44,11 @@ def atomic_write_bytes(path: str | Path, write) -> Path:
     try:
         write(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         Path(tmp).unlink(missing_ok=True)
+        full = disk_full_cause(e)
+        if full is not None:  # a file object's write names no file: say which one
+            raise OSError(full.errno, full.strerror, str(path)) from e
         raise
     return path
 

@@ -37,6 +37,7 @@ from texvocab.capture.camera import sample_image
 from texvocab.capture.frame_digest import frame_digest
 from texvocab.geometry.raster import rasterize_mesh
 from texvocab.geometry.uv import texel_map
+from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.io.images import atomic_write_bytes
 
 log = logging.getLogger("texvocab")
@@ -248,5 +249,13 @@ def prepare_texture_maps(
                 fh.flush()
                 os.fsync(fh.fileno())
 
-        atomic_write_bytes(path, write)
+        try:
+            atomic_write_bytes(path, write)
+        except OSError as e:
+            if not is_disk_full(e):
+                raise
+            done = sum(state[f] == "ok" for f in frames) + todo.index((t, path))
+            raise disk_full_error(
+                path, e, f"{done} of {len(frames)} texture maps are cached, and a new run goes on from them"
+            ) from None
     return paths

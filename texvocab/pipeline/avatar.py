@@ -17,6 +17,7 @@ import torch
 
 from texvocab.body import load_body
 from texvocab.capture import open as open_capture
+from texvocab.capture.identity import check_capture_identity
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint
 from texvocab.method.field import AvatarField
@@ -64,14 +65,21 @@ def _capture_path(ck: dict, checkpoint: str | Path) -> Path:
 
 
 def load_avatar(
-    checkpoint: str | Path, capture=None, smpl: str | None = None, progress: bool = True
+    checkpoint: str | Path,
+    capture=None,
+    smpl: str | None = None,
+    progress: bool = True,
+    other_capture: bool = False,
 ) -> Avatar:
     """Rebuild the avatar of ``checkpoint`` on ``capture`` (the one it was trained on);
     None opens the capture folder the checkpoint records, posed by ``smpl`` (None: the
-    default body). The checkpoint file is read once."""
+    default body). The checkpoint file is read once. A capture other than the one the
+    checkpoint's identity records is refused, or with ``other_capture`` accepted with one
+    warning line (:func:`~texvocab.capture.identity.check_capture_identity`)."""
     ck = load_checkpoint(checkpoint)
     if capture is None:
         capture = open_capture(_capture_path(ck, checkpoint), body=load_body(smpl))
+    check_capture_identity(ck, capture, checkpoint, other_capture)
     try:
         settings = Settings.from_dict(ck["settings"])
     except TexvocabError as e:

@@ -75,7 +75,7 @@ def run_process(job: dict) -> None:
     trainer = Trainer(cap, job["settings"], job["out"], progress=job.get("progress", True))
     attach(trainer)
     if job.get("resume"):
-        trainer.resume()
+        trainer.resume(job.get("other_capture", False))
     trainer.run()
 
 

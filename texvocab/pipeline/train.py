@@ -28,8 +28,10 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from texvocab.capture.identity import IDENTITY_KEY, capture_identity, check_capture_identity
 from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
+from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.method.pose_refinement import PoseRefinement
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
@@ -97,6 +99,7 @@ class Trainer:
         self.optim = torch.optim.Adam(groups, lr=settings.train.lr)
         self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
+        self.saved_step: int | None = None  # the step the checkpoint on disk holds
         self.march = march_settings(settings, training=True)
         self.rays = TrainingRays(capture, settings, self.model, self.march)
         self.progress = progress
@@ -247,6 +250,7 @@ class Trainer:
             "settings": self.s.to_dict(),
             "capture": str(Path(self.capture.root).resolve()),
             "num_train": self.capture.num_train,
+            IDENTITY_KEY: capture_identity(self.capture),
             "model": self.model.state_dict(),
             "optimizer": self.optim.state_dict(),
             "vocab": self.model.pose_feature.vocab.to_dict(),
@@ -255,15 +259,35 @@ class Trainer:
         }
 
     def save(self) -> Path:
+        """Write the checkpoint (rank 0). A full disk stops training with one line saying
+        which step the intact checkpoint holds; the temporary file is removed."""
         if self.rank != 0:
             return self.checkpoint_path
-        return save_checkpoint(self.checkpoint_path, self.state())
+        try:
+            save_checkpoint(self.checkpoint_path, self.state())
+        except (OSError, RuntimeError) as e:  # torch's writer: a RuntimeError from the OSError
+            if not is_disk_full(e):
+                raise
+            raise disk_full_error(self.checkpoint_path, e, self._kept()) from None
+        self.saved_step = self.step
+        return self.checkpoint_path
 
-    def resume(self) -> bool:
-        """Load the last checkpoint in the output folder, if any; True when resumed."""
+    def _kept(self) -> str:
+        """What a failed save leaves: the last checkpoint's step, or that there is none."""
+        if self.saved_step is not None:
+            return f"the last checkpoint (step {self.saved_step}) is intact"
+        if self.checkpoint_path.is_file():  # --overwrite: the run it was to replace
+            return "no step of this run was saved; the checkpoint there is left as it was"
+        return "no checkpoint was written"
+
+    def resume(self, other_capture: bool = False) -> bool:
+        """Load the last checkpoint in the output folder, if any; True when resumed. A
+        checkpoint of another capture is refused unless ``other_capture``
+        (:func:`~texvocab.capture.identity.check_capture_identity`)."""
         if not self.checkpoint_path.is_file():
             return False
         ck = load_checkpoint(self.checkpoint_path)
+        check_capture_identity(ck, self.capture, self.checkpoint_path, other_capture)
         theirs, ours = Settings.from_dict(ck["settings"]).dotted(), self.s.dotted()
         differ = [k for k in ours if k not in SCHEDULE and theirs.get(k) != ours[k]]
         if differ:
@@ -292,7 +316,7 @@ class Trainer:
             self.refine.load(ck["pose_refinement"])
         self.optim.load_state_dict(ck["optimizer"])
         self.gen.set_state(ck["rng"]["torch"])
-        self.step = int(ck["step"])
+        self.step = self.saved_step = int(ck["step"])
         return True
 
     def run(self, until: int | None = None) -> list[dict]:
@@ -319,30 +343,33 @@ class Trainer:
                 "the time budget [{elapsed}<{remaining}{postfix}]",
             )
         t0 = time.perf_counter()
-        while self.step < end:
-            over = budget is not None and time.perf_counter() - t0 > budget
-            if self.agree is not None and budget is not None:
-                over = self.agree(over)
-            if over:
-                log.info("time budget of %.1f min reached at step %d", self.s.train.max_minutes, self.step)
-                break
-            rec = self.train_step()
-            logs.append(rec)
+        try:  # the bar ends its line before any error line
+            while self.step < end:
+                over = budget is not None and time.perf_counter() - t0 > budget
+                if self.agree is not None and budget is not None:
+                    over = self.agree(over)
+                if over:
+                    minutes = self.s.train.max_minutes
+                    log.info("time budget of %.1f min reached at step %d", minutes, self.step)
+                    break
+                rec = self.train_step()
+                logs.append(rec)
+                if bar is not None:
+                    if budget is None:
+                        bar.update(1)
+                    else:
+                        bar.update(min(time.perf_counter() - t0, bar.total) - bar.n)
+                    bar.set_postfix(
+                        step=self.step,
+                        loss=f"{rec['loss']:.4f}",
+                        psnr=f"{rec['psnr']:.2f}",
+                        beta=f"{rec['beta']:.4f}",
+                    )
+                if self.step % self.s.train.checkpoint_every == 0 or self.step == end:
+                    self.save()
+        finally:
             if bar is not None:
-                if budget is None:
-                    bar.update(1)
-                else:
-                    bar.update(min(time.perf_counter() - t0, bar.total) - bar.n)
-                bar.set_postfix(
-                    step=self.step,
-                    loss=f"{rec['loss']:.4f}",
-                    psnr=f"{rec['psnr']:.2f}",
-                    beta=f"{rec['beta']:.4f}",
-                )
-            if self.step % self.s.train.checkpoint_every == 0 or self.step == end:
-                self.save()
-        if bar is not None:
-            bar.close()
+                bar.close()
         if logs and self.step % self.s.train.checkpoint_every:
             self.save()  # stopped by the time budget, or at an end between intervals
         if logs:
