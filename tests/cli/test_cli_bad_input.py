@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 from bad_capture_cases import CAPTURE_CASES
+from bad_output_cases import OUTPUT_CASES
 from disk_snapshot import snapshot
 from train_cases import tiny_settings
 
@@ -379,6 +380,7 @@ CASES = [
     ("capture-missing", ["vocab", "{base}/nope_cap", "--pose", "frame:0"], "nope_cap"),
     ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
 ] + CAPTURE_CASES
+CASES += OUTPUT_CASES  # outputs that cannot be written (bad_output_cases.py)
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])

@@ -13,6 +13,7 @@ from texvocab.cli.capture import add_sheet_parser, add_synth_parser
 from texvocab.cli.method import add_method_parsers, add_train_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.errors import TexvocabError
+from texvocab.io.outputs import check_output
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 # The command line stands above the viewer (an import-linter contract: texvocab_viewer never
@@ -37,6 +38,7 @@ def cmd_demo(args) -> int:
 
     if not 16 <= args.size <= 4096:
         raise TexvocabError(f"--size {args.size}: expected a tile side of 16..4096 pixels")
+    check_output(args.out, "folder")
     t0 = time.perf_counter()
     paths = run_demo(args.out, smpl=args.smpl, size=args.size)
     print(f"rendered the body in {len(paths) - 1} pose views in {time.perf_counter() - t0:.1f} s")
@@ -78,6 +80,7 @@ def cmd_check_assets(args) -> int:
 
 
 def cmd_shot(args) -> int:
+    check_output(args.out, "folder")
     from texvocab_viewer.export.shot import cmd_shot as run_shot  # late: moderngl and torch
 
     return run_shot(args)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from texvocab.errors import TexvocabError
+from texvocab.io.outputs import check_output
 from texvocab.pipeline.run_folder import check_run_folder
 
 
@@ -23,7 +24,8 @@ def add_method_parsers(sub, add_smpl) -> None:
         description="Back-project every training view onto the posed body and "
         "average in UV space (Eq. 2); one texture map and coverage "
         "map per training frame, cached under "
-        "CAPTURE/texvocab_cache/. Resumable: cached frames are kept.",
+        "CAPTURE/texvocab_cache/ (for a read-only capture: the user's cache "
+        "folder, ~/.cache/texvocab/captures/). Resumable: cached frames are kept.",
     )
     p.add_argument("capture", help="capture folder")
     p.add_argument("--texture-size", type=int, default=256, help="texels per side (default 256)")
@@ -290,6 +292,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     settings = Settings().with_overrides(pre + args.overrides + steps)
     out = Path(args.out)
     check_run_folder(out, args.resume, args.overwrite)
+    check_output(out, "folder")
     cap = _open(args)
     if args.ddp is not None or _under_torchrun():
         return _train_parallel(args, settings, out)
@@ -354,6 +357,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     if args.per_set is not None and args.per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {args.per_set}")
+    out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
+    check_output(out, "folder", flag="--out" if args.out else "report folder")
     avatar = load_avatar(args.checkpoint, _open(args))
     model, ck = avatar.model, avatar.checkpoint
     settings = render_overrides(avatar.settings, args.preset, args.overrides)
@@ -362,7 +367,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
     table, records, grids = evaluate_sets(
         model, sets, march_settings(settings), scale=settings.render.image_scale, progress=True
     )
-    out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     paths = write_report(
         out,
         table,
