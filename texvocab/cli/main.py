@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
+from texvocab.cli.interrupts import report_interrupt, stop_signals
 from texvocab.cli.method import add_method_parsers, add_train_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.errors import TexvocabError
@@ -226,15 +227,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    from texvocab.blas import budget_blas_threads
+    """Run a command: a user error is one ``error:`` line and status 2; Ctrl-C (SIGINT)
+    one ``error: interrupted`` line and status 130, SIGTERM ``error: terminated`` and 143
+    (texvocab.cli.interrupts)."""
+    with stop_signals():
+        try:
+            args = build_parser().parse_args(argv)
+            from texvocab.blas import budget_blas_threads
 
-    budget_blas_threads(1)  # torch's threads do the parallel work; OpenBLAS's would spin
-    try:
-        return args.func(args)
-    except TexvocabError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+            budget_blas_threads(1)  # torch's threads do the parallel work; OpenBLAS's would spin
+            return args.func(args)
+        except TexvocabError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as exc:
+            return report_interrupt(exc)
 
 
 if __name__ == "__main__":
