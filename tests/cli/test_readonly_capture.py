@@ -80,6 +80,9 @@ def test_eval_render_and_shot_find_the_maps_there(ro_capture, xdg, capsys):
     _run(render + ["--capture", str(cap)], capsys)
     assert len(list((base / "frames").glob("frame_*.png"))) == 2
     _run(["shot", ckpt, "--capture", str(cap), "--out", str(base / "shots")], capsys)
+    from texvocab_viewer.state import load_viewer_data  # what `texvocab view` opens
+
+    assert load_viewer_data(ckpt, capture=str(cap)).model is not None
     assert _maps(xdg) == maps and snapshot(cap) == before
 
 
