@@ -3,6 +3,9 @@ user's cache folder ($XDG_CACHE_HOME/texvocab/captures/NAME-DIGEST/), said in on
 and nothing is written into the capture. The mount stops root too (readonly_mount.py)."""
 
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -104,3 +107,17 @@ def test_a_cache_that_cannot_be_written_either_is_one_error_line(ro_capture, mon
     assert main(["prepare", str(cap), "--texture-size", "16", "--eval-views", "1"]) == 2
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
     assert len(err) == 1 and "texture-map cache" in err[0] and "read-only file system" in err[0], err
+
+
+def test_the_user_sees_one_line_on_stderr(ro_capture, tmp_path):
+    """The real command line: the warning reaches stderr once, though every frame's map
+    asks where the cache is."""
+    cap, _ = ro_capture
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "xdg")}
+    texvocab = str(Path(sys.executable).parent / "texvocab")
+    argv = [texvocab, "prepare", str(cap), "--texture-size", "16", "--eval-views", "1"]
+    proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    told = [ln for ln in proc.stderr.replace("\r", "\n").splitlines() if "read-only" in ln]
+    assert len(told) == 1, proc.stderr
+    assert told[0].startswith(f"capture {cap} is read-only: texture maps go to {tmp_path}/xdg/texvocab/")
