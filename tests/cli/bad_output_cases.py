@@ -3,17 +3,20 @@ class: an ``--out`` on a read-only mount for each command that writes one, and a
 ``--out`` of the wrong kind (a file where a folder is expected, a folder where a file
 is). Each case is (id, argv builder, words of the error line)."""
 
+import shutil
+
 from readonly_mount import read_only_folder
 
 RO = "read-only file system"
 
 
 def _ro(world) -> str:
-    """world/ro: a read-only folder holding one file and one folder."""
+    """world/ro: a read-only folder holding one file, one folder and a copy of the run."""
 
     def fill(folder):
         (folder / "a_file").write_bytes(b"x")
         (folder / "a_folder.mp4").mkdir()
+        shutil.copytree(world / "run", folder / "run")
 
     return str(read_only_folder(world / "ro", fill))
 
@@ -41,8 +44,13 @@ def _poses(world) -> str:
 OUTPUT_CASES = [
     ("out-ro-synth", lambda w: ["synth", _ro(w) + "/cap", "--frames", "1"], RO),
     ("out-ro-synth-nested", lambda w: ["synth", _ro(w) + "/a/b/cap", "--frames", "1"], RO),
-    ("out-ro-train", lambda w: ["train", str(w / "cap"), "--out", _ro(w) + "/run"], RO),
+    ("out-ro-train", lambda w: ["train", str(w / "cap"), "--out", _ro(w) + "/new_run"], RO),
     ("out-ro-eval", lambda w: ["eval", _ckpt(w), str(w / "cap"), "--out", _ro(w) + "/eval"], RO),
+    (
+        "out-ro-eval-default",
+        lambda w: ["eval", _ro(w) + "/run/checkpoint.pt", str(w / "cap")],
+        "report folder (choose one with --out)",
+    ),
     (
         "out-ro-render-mp4",
         lambda w: ["render", _ckpt(w), "--poses", _poses(w), "--out", _ro(w) + "/clip.mp4"],

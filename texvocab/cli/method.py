@@ -358,7 +358,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.per_set is not None and args.per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {args.per_set}")
     out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
-    check_output(out, "folder", flag="--out" if args.out else "report folder")
+    check_output(out, "folder", flag="--out" if args.out else "report folder (choose one with --out)")
     avatar = load_avatar(args.checkpoint, _open(args))
     model, ck = avatar.model, avatar.checkpoint
     settings = render_overrides(avatar.settings, args.preset, args.overrides)
