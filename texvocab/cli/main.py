@@ -227,21 +227,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run a command: a user error is one ``error:`` line and status 2; Ctrl-C (SIGINT)
-    one ``error: interrupted`` line and status 130, SIGTERM ``error: terminated`` and 143
-    (texvocab.cli.interrupts)."""
+    """Run a command (:func:`run`: a user error is one ``error:`` line and status 2);
+    Ctrl-C (SIGINT) ends it with one ``error: interrupted`` line and status 130, SIGTERM
+    with ``error: terminated`` and 143 (:mod:`texvocab.cli.interrupts`)."""
     with stop_signals():
         try:
-            args = build_parser().parse_args(argv)
-            from texvocab.blas import budget_blas_threads
-
-            budget_blas_threads(1)  # torch's threads do the parallel work; OpenBLAS's would spin
-            return args.func(args)
-        except TexvocabError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+            return run(argv)
         except KeyboardInterrupt as exc:
             return report_interrupt(exc)
+
+
+def run(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from texvocab.blas import budget_blas_threads
+
+    budget_blas_threads(1)  # torch's threads do the parallel work; OpenBLAS's would spin
+    try:
+        return args.func(args)
+    except TexvocabError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
