@@ -119,3 +119,16 @@ def test_synth_sweeps_a_killed_synths_folder(tmp_path, capsys):
     argv = ["synth", str(tmp_path / "cap"), "--frames", "1", "--size", "16", "--texture-size", "16"]
     assert main(argv) == 0
     assert not stale.exists() and keep.is_dir() and (tmp_path / "cap").is_dir()
+
+
+def test_train_interrupted_releases_its_run_folder(capture, tmp_path):
+    sets = ["texture_size=16", "num_keys=2", "k=1", "encoder=small", "rays_per_batch=64", "perceptual=off"]
+    argv = ["train", str(capture), "--out", "run", "--iterations", "100000"]
+    proc = _start(argv + sum((["--set", s] for s in sets), []), tmp_path)
+    lock = tmp_path / "run" / ".texvocab-train.lock"
+    _wait_for(proc, lock.is_file)  # the run folder is taken: training starts
+    time.sleep(1.0)
+    code, err = _stop(proc, signal.SIGINT)
+    assert code == 130, err
+    _one_error_line(err, "error: interrupted")
+    assert not lock.exists() and _temps(tmp_path) == []
