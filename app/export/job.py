@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.pipeline import save_png, write_mp4
+from texvocab.pipeline import save_png, sweep_stale, temp_prefix, write_mp4
 from texvocab_viewer.export.shot import render_neural
 
 EXPORT_DIR = Path("exports")
@@ -112,7 +112,9 @@ class Export:
                 self.done, self.path = 1, out
                 return
             out = fresh_path(self.folder, self.stem, ".mp4")
-            with tempfile.TemporaryDirectory(dir=self.folder, prefix=f".{self.stem}-frames-") as tmp:
+            sweep_stale(self.folder)  # the frames of an export whose viewer was killed
+            frames = temp_prefix(f"{self.stem}-frames")  # named for this process
+            with tempfile.TemporaryDirectory(dir=self.folder, prefix=frames) as tmp:
                 self._partial.append(Path(tmp))
                 paths = []
                 for i in range(self.total):

@@ -41,6 +41,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import pickle
+import signal
 import sys
 import threading
 import time
@@ -82,7 +83,10 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results, 
     level, until told to stop (None) or the viewer's end of ``jobs`` closes. A shard
     after the first starts a job with a preview only once the first shard is past it
     (``previewed``: the last such version): while a slider is dragged each pose is
-    cancelled after its preview, and the other shards' work on it would be wasted."""
+    cancelled after its preview, and the other shards' work on it would be wasted.
+    Ctrl-C in the terminal reaches the whole process group: the viewer answers it (one
+    line, texvocab.cli.interrupts) and this child, ignoring it, ends when its pipe closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if nice:
         try:
             os.nice(nice)

@@ -299,3 +299,21 @@ def test_the_ui_can_wait_for_a_jobs_first_level():
         assert worker.wait_for(4, 0.0)  # an older job's: the newer level counts
     finally:
         assert worker.stop()
+
+
+def test_ctrl_c_in_the_terminal_leaves_the_render_process_to_the_viewer():
+    """SIGINT reaches the whole process group; the child ignores it (no traceback of its
+    own) and keeps serving until the viewer stops it."""
+    import signal
+
+    worker = ProcessWorker(quick_renderer, threads=1)
+    try:
+        worker.submit(job(1))
+        wait(lambda: not worker.busy)
+        os.kill(worker.pid, signal.SIGINT)
+        time.sleep(0.3)
+        assert worker.alive
+        worker.submit(job(2))
+        wait(lambda: (2, 1) in worker.delivered)
+    finally:
+        assert worker.stop()

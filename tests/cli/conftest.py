@@ -1,6 +1,7 @@
 """The front door's shared world: a tiny capture and a 2-step checkpoint on it."""
 
 import pytest
+from readonly_mount import unmount_all
 from train_cases import tiny_settings
 
 from texvocab.body import default_body
@@ -11,9 +12,11 @@ from texvocab.pipeline.train import Trainer
 
 
 @pytest.fixture(scope="module")
-def world(tmp_path_factory):
-    """base/cap (6 views, 64², 5 frames, 4 training), base/run/checkpoint.pt (2 steps)."""
+def world(tmp_path_factory, request):
+    """base/cap (6 views, 64², 5 frames, 4 training), base/run/checkpoint.pt (2 steps);
+    read-only mounts the cases make under base are unmounted after the module."""
     base = tmp_path_factory.mktemp("front_door")
+    request.addfinalizer(unmount_all)
     poses, trans = make_sequence([("walk", 3), ("arm_raise", 2)], seed=5)
     cap = synthesize(
         base / "cap",

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 from bad_capture_cases import CAPTURE_CASES
+from bad_output_cases import OUTPUT_CASES
 from disk_snapshot import snapshot
 from identity_cases import identity_cases
 from train_cases import set_arguments, tiny_settings
@@ -373,6 +374,7 @@ CASES = [
     ("check-assets-missing", ["check-assets", "{base}/nope_cap"], "nope_cap"),
 ] + CAPTURE_CASES
 CASES += identity_cases(SETS)  # another capture than the checkpoint's
+CASES += OUTPUT_CASES  # outputs that cannot be written (bad_output_cases.py)
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from texvocab.capture.zju import ZjuWriter
 from texvocab.errors import AssetError
 from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.io.gl_platform import ensure_offscreen
+from texvocab.io.temp_files import sweep_stale, temp_dir
 
 LAYOUTS = ("zju", "thuman")
 
@@ -221,7 +221,8 @@ def synthesize(
         )
     cameras = cameras or default_cameras(settings)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    sweep_stale(out.parent)  # captures half-made by a killed synth
+    tmp = temp_dir(out)
     renderer = SynthRenderer(body, settings)
     s = settings
     rec_poses, rec_trans = poses, trans

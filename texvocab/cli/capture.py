@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from texvocab.errors import TexvocabError
+from texvocab.io.outputs import check_output, folder_is_writable
 
 
 def add_synth_parser(sub, add_smpl) -> None:
@@ -126,6 +127,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
         raise TexvocabError(f"{flag} {realism[bad[0]]}: expected a value >= 0 (and a sensible size)")
     garment = getattr(args, "garment", "painted")
     garment_spec(garment)  # AssetError (a TexvocabError) for an unknown name
+    check_output(args.out, "folder", flag="", whole=True)  # made beside it, renamed into place
     body = load_body(args.smpl)
     cameras = None
     if args.like:
@@ -200,12 +202,29 @@ def add_sheet_parser(sub) -> None:
     p.set_defaults(func=cmd_sheet)
 
 
+def _sheet_path(args: argparse.Namespace, real: bool) -> Path:
+    """--out, else CAPTURE/contact_sheet.png for a synthetic capture that can be written,
+    else ./contact_sheet_NAME.png: a real capture's folder is the user's (nothing but
+    texvocab's cache is written there), and a read-only one takes nothing."""
+    if args.out:
+        return Path(args.out)
+    here = Path(f"contact_sheet_{Path(args.capture).resolve().name}.png")
+    if real:
+        return here
+    if not folder_is_writable(args.capture):
+        print(f"capture {args.capture} is read-only: the contact sheet goes to {here.resolve()}")
+        return here
+    return Path(args.capture) / "contact_sheet.png"
+
+
 def cmd_sheet(args: argparse.Namespace) -> int:
     # late: torch and PIL; `texvocab --help` stays light (module docstring)
     from texvocab.capture import open as open_capture
     from texvocab.io.images import contact_sheet, save_png
 
     cap = open_capture(args.capture)
+    out = _sheet_path(args, cap.masked)
+    check_output(out, "file")
     if args.frames:
         try:
             frames = [int(f) for f in args.frames.split(",")]
@@ -221,9 +240,6 @@ def cmd_sheet(args: argparse.Namespace) -> int:
     get = (lambda v, t: cap.mask(v, t).astype(np.float32)) if args.masks else cap.image
     rows = [[get(v, t) for t in frames] for v in range(cap.num_views)]
     labels = [f"{'train' if t < cap.num_train else 'novel'} {t}" for t in frames]
-    # a real capture's folder is the user's: nothing but texvocab's cache is written there
-    real = Path(f"contact_sheet_{Path(args.capture).resolve().name}.png")
-    out = Path(args.out) if args.out else real if cap.masked else Path(args.capture) / "contact_sheet.png"
     save_png(out, contact_sheet(rows, [c.name for c in cap.cameras], labels))
     print(f"contact sheet ({cap.num_views} views x {len(frames)} frames): {out.resolve()}")
     return 0

@@ -10,11 +10,13 @@ import time
 from pathlib import Path
 
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
+from texvocab.cli.interrupts import report_interrupt, stop_signals
 from texvocab.cli.method import add_method_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.cli.training import add_train_parsers
 from texvocab.errors import TexvocabError
 from texvocab.io.full_disk import disk_full_cause, disk_full_reason
+from texvocab.io.outputs import check_output
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 # The command line stands above the viewer (an import-linter contract: texvocab_viewer never
@@ -39,6 +41,7 @@ def cmd_demo(args) -> int:
 
     if not 16 <= args.size <= 4096:
         raise TexvocabError(f"--size {args.size}: expected a tile side of 16..4096 pixels")
+    check_output(args.out, "folder")
     t0 = time.perf_counter()
     paths = run_demo(args.out, smpl=args.smpl, size=args.size)
     print(f"rendered the body in {len(paths) - 1} pose views in {time.perf_counter() - t0:.1f} s")
@@ -80,6 +83,7 @@ def cmd_check_assets(args) -> int:
 
 
 def cmd_shot(args) -> int:
+    check_output(args.out, "folder")
     from texvocab_viewer.export.shot import cmd_shot as run_shot  # late: moderngl and torch
 
     return run_shot(args)
@@ -226,6 +230,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run a command (:func:`run`: a user error is one ``error:`` line and status 2);
+    Ctrl-C (SIGINT) ends it with one ``error: interrupted`` line and status 130, SIGTERM
+    with ``error: terminated`` and 143 (:mod:`texvocab.cli.interrupts`)."""
+    with stop_signals():
+        try:
+            return run(argv)
+        except KeyboardInterrupt as exc:
+            return report_interrupt(exc)
+
+
+def run(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from texvocab.blas import budget_blas_threads
 

@@ -23,7 +23,8 @@ def add_method_parsers(sub, add_smpl) -> None:
         description="Back-project every training view onto the posed body and "
         "average in UV space (Eq. 2); one texture map and coverage "
         "map per training frame, cached under "
-        "CAPTURE/texvocab_cache/. Resumable: cached frames are kept.",
+        "CAPTURE/texvocab_cache/ (for a read-only capture: the user's cache "
+        "folder, ~/.cache/texvocab/captures/). Resumable: cached frames are kept.",
     )
     p.add_argument("capture", help="capture folder")
     p.add_argument("--texture-size", type=int, default=256, help="texels per side (default 256)")

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from texvocab.cli.training import add_settings_arguments
 from texvocab.errors import TexvocabError
+from texvocab.io.outputs import check_output
 from texvocab.pipeline.root_choice import ROOT_HELP, ROOTS
 
 
@@ -169,6 +170,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise TexvocabError(f"--poses {args.poses}: no such file")
     if out.suffix.lower() not in ("", ".mp4"):
         raise TexvocabError(f"--out {out}: expected a .mp4 file or a folder for PNG frames")
+    check_output(out, "file" if out.suffix.lower() == ".mp4" else "folder")  # clip.frames/ beside it
     if out.suffix.lower() == ".mp4" and out.exists() and not args.overwrite:
         raise TexvocabError(f"--out {out}: exists; pass --overwrite to replace it")
     data = None

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from texvocab.cli.method import open_from_args
 from texvocab.errors import TexvocabError
+from texvocab.io.outputs import check_output
 from texvocab.pipeline.run_folder import check_run_folder
 
 
@@ -117,6 +118,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     settings = Settings().with_overrides(pre + args.overrides + steps)
     out = Path(args.out)
     check_run_folder(out, args.resume, args.overwrite)
+    check_output(out, "folder")
     cap = open_from_args(args)
     if args.resume and not args.other_capture and (out / "checkpoint.pt").is_file():
         _refuse_other_capture(out / "checkpoint.pt", cap)  # before the texture maps are built
@@ -192,6 +194,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     if args.per_set is not None and args.per_set < 1:
         raise TexvocabError(f"--per-set must be at least 1, got {args.per_set}")
+    out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
+    check_output(out, "folder", flag="--out" if args.out else "report folder (choose one with --out)")
     avatar = load_avatar(args.checkpoint, open_from_args(args), other_capture=args.other_capture)
     model, ck = avatar.model, avatar.checkpoint
     settings = render_overrides(avatar.settings, args.preset, args.overrides)
@@ -200,7 +204,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
     table, records, grids = evaluate_sets(
         model, sets, march_settings(settings), scale=settings.render.image_scale, progress=True
     )
-    out = Path(args.out) if args.out else Path(args.checkpoint).parent / "eval"
     paths = write_report(
         out,
         table,

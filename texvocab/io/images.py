@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
 
 from texvocab.io.full_disk import disk_full_cause
+from texvocab.io.temp_files import sweep_stale, temp_file
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
@@ -33,13 +33,15 @@ def _umask() -> int:
 
 
 def atomic_write_bytes(path: str | Path, write) -> Path:
-    """Call ``write(tmp_path)`` then rename onto ``path``: never a half-written file. On
-    any error the temporary file is removed and ``path`` is left as it was; a full disk
-    is raised as an OSError naming ``path`` (:mod:`texvocab.io.full_disk`)."""
+    """Call ``write(tmp_path)`` then rename onto ``path``: never a half-written file. The
+    temporary file is named for this process (:mod:`texvocab.io.temp_files`), removed on
+    any error or interrupt; the first write into a folder sweeps the temporary files of
+    writers that were killed. A full disk is raised as an OSError naming ``path``
+    (:mod:`texvocab.io.full_disk`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
-    os.close(fd)
+    sweep_stale(path.parent)
+    tmp = temp_file(path)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600; the file gets the user's umask
     try:
         write(tmp)

@@ -33,12 +33,14 @@ import torch
 from scipy import ndimage
 from tqdm import tqdm
 
+from texvocab.capture.cache_folder import capture_cache
 from texvocab.capture.camera import sample_image
 from texvocab.capture.frame_digest import frame_digest
 from texvocab.geometry.raster import rasterize_mesh
 from texvocab.geometry.uv import texel_map
 from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.io.images import atomic_write_bytes
+from texvocab.io.outputs import check_output
 
 log = logging.getLogger("texvocab")
 
@@ -133,7 +135,9 @@ def settings_views(settings: TexmapSettings, capture) -> list[int]:
 
 
 def cache_dir(capture, settings: TexmapSettings) -> Path:
-    """Where ``texvocab prepare`` keeps the texture maps of a capture: keyed by texture
+    """Where every command keeps and finds the texture maps of a capture, under its cache
+    folder (:func:`~texvocab.capture.cache_folder.capture_cache`: inside the capture, or
+    the user's cache folder when the capture is read-only); keyed by texture
     size and by the set of views back-projected, so maps built from other views (a cache
     from before held-out views were excluded, or another train/eval split) are never
     reused; and by the image scale and the body fit (``capture.meta["body_fit"]``) when
@@ -144,11 +148,7 @@ def cache_dir(capture, settings: TexmapSettings) -> Path:
     scaled = "" if scale == 1.0 else f"_x{scale:g}"
     fit = capture.meta.get("body_fit") if isinstance(getattr(capture, "meta", None), dict) else None
     body = f"_body-{fit}" if fit else ""
-    return (
-        Path(capture.root)
-        / "texvocab_cache"
-        / f"texmaps_{settings.size}_views_{views}{weighting}{scaled}{body}"
-    )
+    return capture_cache(capture.root) / f"texmaps_{settings.size}_views_{views}{weighting}{scaled}{body}"
 
 
 def texture_map_path(capture, frame: int, settings: TexmapSettings) -> Path:
@@ -235,6 +235,8 @@ def prepare_texture_maps(
             stale,
             len(frames),
         )
+    if todo:  # a cache that cannot be written is one error line, before any map is built
+        check_output(cache_dir(capture, s), "folder", flag="texture-map cache")
     it = todo
     if progress and todo:
         it = tqdm(todo, desc=f"texture maps {s.size}²", unit="frame")

@@ -77,6 +77,8 @@ _API: dict[str, tuple[str, str]] = {
     "to_uint8": ("texvocab.io.images", "to_uint8"),
     "contact_sheet": ("texvocab.io.images", "contact_sheet"),
     "atomic_write_bytes": ("texvocab.io.images", "atomic_write_bytes"),
+    "temp_prefix": ("texvocab.io.temp_files", "temp_prefix"),
+    "sweep_stale": ("texvocab.io.temp_files", "sweep_stale"),
 }
 
 __all__ = sorted(_API)

@@ -19,6 +19,7 @@ from tqdm import tqdm
 from texvocab.capture.camera import Camera
 from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, save_png
+from texvocab.io.temp_files import sweep_stale, temp_name
 
 KEY_FILE = "clip.json"
 
@@ -159,7 +160,8 @@ def write_mp4(paths: list[Path], out: Path, fps: float) -> Path:
     first = np.asarray(Image.open(paths[0]).convert("RGB"))
     h, w = first.shape[:2]
     H, W = h + h % 2, w + w % 2
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp.mp4")
+    sweep_stale(out.parent)
+    tmp = temp_name(out)
     writer = imageio_ffmpeg.write_frames(
         str(tmp),
         (W, H),

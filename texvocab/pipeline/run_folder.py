@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 
 from texvocab.errors import TexvocabError
+from texvocab.io.temp_files import pid_alive as _alive
 
 LOCK_NAME = ".texvocab-train.lock"
 CHECKPOINT_NAME = "checkpoint.pt"
@@ -31,16 +32,6 @@ def check_run_folder(out: Path, resume: bool, overwrite: bool) -> None:
             f"--out {out}: already holds a trained {CHECKPOINT_NAME}; pass "
             "--resume to continue it or --overwrite to replace it"
         )
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True  # someone else's live process
-    return True
 
 
 class RunLock:
