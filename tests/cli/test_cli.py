@@ -177,3 +177,32 @@ def test_synth_compositional_motion_writes_that_motion(tmp_path):
     want, _, num_train = compositional_motion(0)
     assert np.allclose(got.poses, want[:5], atol=1e-5) and got.num_train == 5 <= num_train
     assert not np.allclose(got.poses, default_motion(0)[0][:5], atol=1e-3)
+
+
+def test_contact_sheet_never_replaces_a_file_that_is_not_a_png(tmp_path):
+    cap = tmp_path / "cap"
+    run(
+        "synth",
+        str(cap),
+        "--frames",
+        "2",
+        "--size",
+        "32",
+        "--ring-views",
+        "1",
+        "--raised-views",
+        "0",
+        check_rc=0,
+    )
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    proc = run("contact-sheet", str(cap), "--out", str(notes), check_rc=2)
+    assert proc.stderr.strip().splitlines() == [
+        f"error: --out {notes}: exists and is not a PNG; expected a new file, or a PNG to replace "
+        "(nothing was changed)"
+    ]
+    assert notes.read_text() == "mine"
+    sheet = tmp_path / "sheet.png"
+    run("contact-sheet", str(cap), "--out", str(sheet), check_rc=0)
+    run("contact-sheet", str(cap), "--out", str(sheet), check_rc=0)  # a PNG is replaced
+    assert sheet.read_bytes()[:4] == b"\x89PNG"

@@ -183,6 +183,20 @@ class SynthRenderer:
             self._renderer = None
 
 
+def _check_replaceable(out: Path, overwrite: bool, while_rendering: bool = False) -> None:
+    """AssetError unless ``out`` is free, or ``overwrite`` and it is a capture texvocab
+    synthesised (or an empty folder). Checked again before the rename, so a folder the user
+    made at ``out`` while the capture rendered is never replaced."""
+    when = " (it appeared while the capture rendered)" if while_rendering else ""
+    if out.exists() and not overwrite:
+        raise AssetError(f"{out} already exists{when}; pass --overwrite to replace it; nothing was changed")
+    if out.exists() and not (out.is_dir() and ((out / SYNTH_META).is_file() or not any(out.iterdir()))):
+        raise AssetError(
+            f"{out}: --overwrite replaces only a capture texvocab synthesised (it "
+            f"holds {SYNTH_META}); this is not one{when}, so nothing was changed"
+        )
+
+
 def synthesize(
     out: str | Path,
     poses: np.ndarray,
@@ -212,13 +226,7 @@ def synthesize(
     if poses.ndim != 3 or poses.shape[1:] != (24, 3) or trans.shape != (len(poses), 3):
         raise AssetError(f"poses must be (T, 24, 3) and trans (T, 3), got {poses.shape} and {trans.shape}")
     body.check_pose(torch.as_tensor(poses), torch.as_tensor(trans))
-    if out.exists() and not overwrite:
-        raise AssetError(f"{out} already exists (pass --overwrite to replace it)")
-    if out.exists() and not (out.is_dir() and ((out / SYNTH_META).is_file() or not any(out.iterdir()))):
-        raise AssetError(
-            f"{out}: --overwrite replaces only a capture texvocab synthesised (it "
-            f"holds {SYNTH_META}); this is not one, so nothing was changed"
-        )
+    _check_replaceable(out, overwrite)
     cameras = cameras or default_cameras(settings)
     out.parent.mkdir(parents=True, exist_ok=True)
     sweep_stale(out.parent)  # captures half-made by a killed synth
@@ -262,6 +270,7 @@ def synthesize(
             meta["true_poses"] = poses.reshape(len(poses), -1).tolist()
             meta["true_trans"] = trans.tolist()
         (tmp / SYNTH_META).write_text(json.dumps(meta, indent=1))
+        _check_replaceable(out, overwrite, while_rendering=True)  # made meanwhile: the user's
         if out.exists():
             shutil.rmtree(out)
         tmp.rename(out)

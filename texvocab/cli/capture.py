@@ -225,6 +225,11 @@ def cmd_sheet(args: argparse.Namespace) -> int:
     cap = open_capture(args.capture)
     out = _sheet_path(args, cap.masked)
     check_output(out, "file")
+    if out.is_file() and out.read_bytes()[:8] != b"\x89PNG\r\n\x1a\n":
+        raise TexvocabError(
+            f"--out {out}: exists and is not a PNG; expected a new file, or a PNG to replace "
+            "(nothing was changed)"
+        )
     if args.frames:
         try:
             frames = [int(f) for f in args.frames.split(",")]
