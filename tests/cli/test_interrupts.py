@@ -132,3 +132,37 @@ def test_train_interrupted_releases_its_run_folder(capture, tmp_path):
     assert code == 130, err
     _one_error_line(err, "error: interrupted")
     assert not lock.exists() and _temps(tmp_path) == []
+
+
+def test_render_interrupted_as_ctrl_c_does_keeps_whole_frames_only(capture, tmp_path):
+    """SIGINT to the render's whole process group (what Ctrl-C in a terminal sends): one
+    line, status 130; the frames already cached are whole PNGs, no temporary file stays."""
+    import numpy as np
+    from tiny_runs import smallest_run
+
+    ckpt = smallest_run(tmp_path / "avatar")
+    poses = np.zeros((200, 24, 3), np.float32)
+    poses[:, 18, 1] = np.radians(np.linspace(-10, -100, 200))
+    np.savez(tmp_path / "walk.npz", poses=poses, trans=np.zeros((200, 3), np.float32))
+    frames = tmp_path / "frames"
+    argv = ["render", str(ckpt), "--poses", str(tmp_path / "walk.npz"), "--out", str(frames)]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [TEXVOCAB, *argv],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    _wait_for(proc, lambda: len(list(frames.glob("*.png"))) >= 2, timeout=180)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    err = err.decode()
+    assert proc.returncode == 130, err
+    _one_error_line(err, "error: interrupted")
+    written = sorted(frames.glob("*.png"))
+    assert 2 <= len(written) < 200 and _temps(tmp_path) == []
+    assert all(
+        p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.read_bytes()[-8:-4] == b"IEND" for p in written
+    )
