@@ -20,10 +20,23 @@ from texvocab.io.temp_files import TEMP_NAME, host_tag
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
 
 
-def _start(argv, cwd):
+def _interactive() -> None:
+    """In the child, before exec: SIGINT as a terminal's foreground job has it. A suite
+    started in the background (``cmd &``, as CI may) hands its children SIGINT ignored,
+    and Python then installs no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _start(argv, cwd, **kwargs):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     return subprocess.Popen(
-        [TEXVOCAB, *argv], cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        [TEXVOCAB, *argv],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        preexec_fn=_interactive,
+        **kwargs,
     )
 
 
@@ -146,15 +159,7 @@ def test_render_interrupted_as_ctrl_c_does_keeps_whole_frames_only(capture, tmp_
     np.savez(tmp_path / "walk.npz", poses=poses, trans=np.zeros((200, 3), np.float32))
     frames = tmp_path / "frames"
     argv = ["render", str(ckpt), "--poses", str(tmp_path / "walk.npz"), "--out", str(frames)]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(
-        [TEXVOCAB, *argv],
-        cwd=tmp_path,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        start_new_session=True,
-    )
+    proc = _start(argv, tmp_path, start_new_session=True)
     _wait_for(proc, lambda: len(list(frames.glob("*.png"))) >= 2, timeout=180)
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
