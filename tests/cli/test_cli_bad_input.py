@@ -311,6 +311,11 @@ CASES = [
     ),
     ("vocab-k-0", ["vocab", CAP, "--pose", "frame:0", "-k", "0"], "k"),
     ("vocab-keys-0", ["vocab", CAP, "--pose", "frame:0", "--keys", "0"], "keys"),
+    (
+        "vocab-k-over-keys",
+        ["vocab", CAP, "--pose", "frame:0", "--keys", "3", "-k", "50"],
+        "number of keys (3)",
+    ),
     ("vocab-frame-abc", ["vocab", CAP, "--pose", "frame:abc"], "frame:abc"),
     ("vocab-frame-999", ["vocab", CAP, "--pose", "frame:999"], "frame"),
     (

@@ -177,11 +177,18 @@ def cmd_vocab(args: argparse.Namespace) -> int:
     cap = open_from_args(args)
     if cap.num_train == 0:
         raise TexvocabError(f"{args.capture}: no training frames to build a vocabulary from")
+    keys = min(args.keys, cap.num_train)  # the keys are training frames
+    if keys < args.keys:
+        print(f"--keys {args.keys}: the capture has {cap.num_train} training frames; using {keys} keys")
+    if args.k > keys:  # K nearest of the M keys (Eq. 4)
+        raise TexvocabError(
+            f"-k {args.k}: expected at most the number of keys ({keys}): K of the M keys per part"
+        )
     pose = parse_pose(args.pose, cap)
     vocab = Vocabulary.build(
         cap.poses[: cap.num_train],
         args.strategy,
-        args.keys,
+        keys,
         args.k,
         args.weighting,
         args.min_distance,
