@@ -85,7 +85,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "unseen": {"mean": [], "nearest": ["unseen_texels=nearest"]},
     "view_frame": {"world": [], "body": ["field.view_frame=body"]},
     "mask": {"λ_m 0.1": [], "λ_m 0.5": ["lambda_mask=0.5"]},
-    "beta": {"β₀ 5 mm": [], "β₀ 2 mm": ["beta_init=0.002"]},
+    "beta": {"β₀ 5 mm": [], "β₀ 2 mm": ["field.beta_init=0.002"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with
