@@ -43,3 +43,14 @@ def test_overwrite_replaces_a_synthesised_capture(tmp_path):
     first = (out / "texvocab_synth.json").stat().st_mtime_ns
     _synth(out, overwrite=True)
     assert (out / "texvocab_synth.json").stat().st_mtime_ns != first
+
+
+def test_overwrite_refuses_a_symbolic_link_and_keeps_its_target(tmp_path):
+    target = tmp_path / "cap"
+    _synth(target)
+    link = tmp_path / "link"
+    link.symlink_to(target)
+    before = sorted(p.name for p in target.iterdir())
+    with pytest.raises(AssetError, match="is a symbolic link .* give the folder itself"):
+        _synth(link, overwrite=True)
+    assert link.is_symlink() and sorted(p.name for p in target.iterdir()) == before

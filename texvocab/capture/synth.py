@@ -8,6 +8,7 @@ from a ring of cameras plus raised ones.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -188,6 +189,11 @@ def _check_replaceable(out: Path, overwrite: bool, while_rendering: bool = False
     synthesised (or an empty folder). Checked again before the rename, so a folder the user
     made at ``out`` while the capture rendered is never replaced."""
     when = " (it appeared while the capture rendered)" if while_rendering else ""
+    if out.is_symlink() and overwrite:
+        raise AssetError(
+            f"{out}: is a symbolic link (to {os.readlink(out)}){when}; --overwrite replaces a folder, "
+            "not a link: give the folder itself; nothing was changed"
+        )
     if out.exists() and not overwrite:
         raise AssetError(f"{out} already exists{when}; pass --overwrite to replace it; nothing was changed")
     if out.exists() and not (out.is_dir() and ((out / SYNTH_META).is_file() or not any(out.iterdir()))):
