@@ -160,13 +160,14 @@ def test_render_interrupted_as_ctrl_c_does_keeps_whole_frames_only(capture, tmp_
     frames = tmp_path / "frames"
     argv = ["render", str(ckpt), "--poses", str(tmp_path / "walk.npz"), "--out", str(frames)]
     proc = _start(argv, tmp_path, start_new_session=True)
-    _wait_for(proc, lambda: len(list(frames.glob("*.png"))) >= 2, timeout=180)
+    # whole frames only: a frame being written is a hidden temporary file ending .png too
+    _wait_for(proc, lambda: len(list(frames.glob("frame_*.png"))) >= 2, timeout=180)
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     err = err.decode()
     assert proc.returncode == 130, err
     _one_error_line(err, "error: interrupted")
-    written = sorted(frames.glob("*.png"))
+    written = sorted(frames.glob("frame_*.png"))
     assert 2 <= len(written) < 200 and _temps(tmp_path) == []
     assert all(
         p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.read_bytes()[-8:-4] == b"IEND" for p in written
