@@ -172,3 +172,26 @@ def test_render_interrupted_as_ctrl_c_does_keeps_whole_frames_only(capture, tmp_
     assert all(
         p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.read_bytes()[-8:-4] == b"IEND" for p in written
     )
+
+
+def test_an_interrupt_wrapped_by_an_extension_is_still_one_line(monkeypatch, capsys):
+    """Ctrl-C landing inside numba's dispatcher comes out as a SystemError raised from the
+    KeyboardInterrupt: still one line and status 130; other errors are not swallowed."""
+    import texvocab.cli.main as cli
+
+    def wrapped(argv):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise SystemError("returned a result with an exception set") from e
+
+    monkeypatch.setattr(cli, "run", wrapped)
+    assert cli.main(["synth", "x"]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["error: interrupted"]
+
+    def broken(argv):
+        raise SystemError("a real bug")
+
+    monkeypatch.setattr(cli, "run", broken)
+    with pytest.raises(SystemError, match="a real bug"):
+        cli.main(["synth", "x"])

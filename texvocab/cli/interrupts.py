@@ -45,3 +45,16 @@ def report_interrupt(exc: KeyboardInterrupt) -> int:
     terminated = isinstance(exc, Terminated)
     print(f"error: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
     return 143 if terminated else 130
+
+
+def interrupt_cause(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt behind ``exc``, if one is in its chain of causes: a signal
+    that lands inside a compiled extension (numba's dispatcher, for one) comes out as a
+    SystemError raised from the KeyboardInterrupt."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from texvocab.cli.capture import add_sheet_parser, add_synth_parser
-from texvocab.cli.interrupts import report_interrupt, stop_signals
+from texvocab.cli.interrupts import interrupt_cause, report_interrupt, stop_signals
 from texvocab.cli.method import add_method_parsers
 from texvocab.cli.render import add_render_parser
 from texvocab.cli.training import add_train_parsers
@@ -238,6 +238,11 @@ def main(argv: list[str] | None = None) -> int:
             return run(argv)
         except KeyboardInterrupt as exc:
             return report_interrupt(exc)
+        except Exception as exc:  # an interrupt that an extension wrapped (a SystemError)
+            cause = interrupt_cause(exc)
+            if cause is None:
+                raise
+            return report_interrupt(cause)
 
 
 def run(argv: list[str] | None = None) -> int:
