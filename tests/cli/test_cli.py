@@ -12,6 +12,9 @@ from texvocab.cli.main import build_parser
 TEXVOCAB = str(Path(sys.executable).parent / "texvocab")
 
 
+ONE_SMALL_VIEW = ("--size", "32", "--ring-views", "1", "--raised-views", "0")  # synth's smallest
+
+
 def run(*args, check_rc=None):
     proc = subprocess.run([TEXVOCAB, *args], capture_output=True, text=True, timeout=120)
     if check_rc is not None:
@@ -163,12 +166,7 @@ def test_synth_compositional_motion_writes_that_motion(tmp_path):
         "compositional",
         "--frames",
         "5",
-        "--size",
-        "32",
-        "--ring-views",
-        "1",
-        "--raised-views",
-        "0",
+        *ONE_SMALL_VIEW,
         "--texture-size",
         "64",
         check_rc=0,
@@ -181,19 +179,7 @@ def test_synth_compositional_motion_writes_that_motion(tmp_path):
 
 def test_contact_sheet_never_replaces_a_file_that_is_not_a_png(tmp_path):
     cap = tmp_path / "cap"
-    run(
-        "synth",
-        str(cap),
-        "--frames",
-        "2",
-        "--size",
-        "32",
-        "--ring-views",
-        "1",
-        "--raised-views",
-        "0",
-        check_rc=0,
-    )
+    run("synth", str(cap), "--frames", "2", *ONE_SMALL_VIEW, check_rc=0)
     notes = tmp_path / "notes.txt"
     notes.write_text("mine")
     proc = run("contact-sheet", str(cap), "--out", str(notes), check_rc=2)

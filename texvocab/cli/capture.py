@@ -217,6 +217,12 @@ def _sheet_path(args: argparse.Namespace, real: bool) -> Path:
     return Path(args.capture) / "contact_sheet.png"
 
 
+def _is_png(path: Path) -> bool:
+    """Whether ``path`` starts with the PNG signature (its first 8 bytes read)."""
+    with open(path, "rb") as fh:
+        return fh.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
 def cmd_sheet(args: argparse.Namespace) -> int:
     # late: torch and PIL; `texvocab --help` stays light (module docstring)
     from texvocab.capture import open as open_capture
@@ -225,7 +231,7 @@ def cmd_sheet(args: argparse.Namespace) -> int:
     cap = open_capture(args.capture)
     out = _sheet_path(args, cap.masked)
     check_output(out, "file")
-    if out.is_file() and out.read_bytes()[:8] != b"\x89PNG\r\n\x1a\n":
+    if out.is_file() and not _is_png(out):
         raise TexvocabError(
             f"--out {out}: exists and is not a PNG; expected a new file, or a PNG to replace "
             "(nothing was changed)"
