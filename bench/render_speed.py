@@ -18,14 +18,17 @@ same field, for the ratio.
         [--variant "12+4:coarse_samples=12,fine_samples=4"] [--reference 1]
     .venv/bin/python bench/render_speed.py CKPT --compare [--frames 3] [--save DIR]
 
-``--compare`` renders the same frames four ways in one run — ``new``: the surface-guided
-marcher (guide=raster) at the ``fast`` preset's knobs; ``previous``: the shell marcher
-(guide=shell) at the ``fast`` preset; ``quality``: the shell marcher at the ``quality``
-preset; ``reference``: the uniform 64+32 marcher in the body's box — and prints per path
-seconds, field evaluations, PSNR against the truth and against the reference, and as its
-last line ``summary: new_s=… previous_s=… reference_s=… new_evals=… reference_evals=…
-psnr_delta_vs_quality_db=…`` (per-frame means; the new path's PSNR against the truth
-minus the quality preset's).
+``--compare`` renders the same frames five ways in one run — ``new``: the default render
+path as it is now (the surface-guided marcher, guide=raster, at the ``fast`` preset's
+knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default);
+``previous``: the same path with the MLPs in float32 (the default path before the
+precision knob); ``shell``: the shell marcher (guide=shell) at the ``fast`` preset;
+``quality``: the shell marcher at the ``quality`` preset; ``reference``: the uniform
+64+32 marcher in the body's box — and prints per path seconds, field evaluations, PSNR
+against the truth and against the reference, and as its last line ``summary: new_s=…
+previous_s=… reference_s=… new_evals=… previous_evals=… reference_evals=… speedup=…
+psnr_delta_vs_quality_db=… psnr_delta_db=…`` (per-frame means; speedup = previous_s /
+new_s; psnr_delta_db = the new path's PSNR against the truth minus the previous path's).
 
 CKPT's capture is the one recorded in the checkpoint unless --capture is given. Without
 CKPT and --capture a small synthetic capture (6 frames, 4 views, 256²) is made in a
@@ -184,7 +187,7 @@ def timed_render(model, item, march):
         shell = prepare_shell(march, ctx.vertices, model.body.faces, index=ctx.index)
         t2 = time.perf_counter()
         out = render_image(
-            Timed(model.for_pose(ctx), spent),
+            Timed(model.for_pose(ctx, march.precision), spent),
             cam,
             ctx.vertices,
             model.body.faces,
@@ -227,8 +230,10 @@ def reference_render(model, item, coarse: int, fine: int):
     }
 
 
-def compare(model, settings, items, what: str, repeats: int = 1, save: Path | None = None) -> int:
-    """The four-way comparison of ``--compare``; prints a table and the summary line. With
+def compare(
+    model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "bfloat16"
+) -> int:
+    """The five-way comparison of ``--compare``; prints a table and the summary line. With
     ``save``, each path's images go there as ``<path>_<frame>.npy`` (float32 (H, W, 3)) and
     the field evaluations per path and frame as ``evals.json``, so two runs (e.g. before and
     after a change to the marchers) can be compared exactly."""
@@ -236,14 +241,15 @@ def compare(model, settings, items, what: str, repeats: int = 1, save: Path | No
     from texvocab.metrics.image import crop_to_bbox, mask_bbox
     from texvocab.pipeline.settings import PRESETS, march_settings
 
-    def march(preset: str, guide: str):
+    def march(preset: str, guide: str, *extra: str):
         knobs = [f"{k}={v}" for k, v in PRESETS[preset].items() if k != "image_scale"]
-        return march_settings(settings.with_overrides(knobs + [f"guide={guide}"]))
+        return march_settings(settings.with_overrides(knobs + [f"guide={guide}", *extra]))
 
     paths = {
-        "new": march("fast", "raster"),
-        "previous": march("fast", "shell"),
-        "quality": march("quality", "shell"),
+        "new": march("fast", "raster", f"precision={precision}"),
+        "previous": march("fast", "raster", "precision=float32"),
+        "shell": march("fast", "shell", "precision=float32"),
+        "quality": march("quality", "shell", "precision=float32"),
     }
     print(
         f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
@@ -287,15 +293,18 @@ def compare(model, settings, items, what: str, repeats: int = 1, save: Path | No
             f"- {n}: {sec:.3f} s/frame, {ev:,.0f} field evaluations, PSNR {p_gt:.3f} dB vs "
             f"truth, {min(p_ref, 99.0):.2f} dB vs reference"
         )
+    speedup = mean["previous"][0] / mean["new"][0]
     print(
-        f"- previous / new: {mean['previous'][0] / mean['new'][0]:.2f}x time; reference / "
-        f"new: {mean['reference'][1] / mean['new'][1]:.1f}x field evaluations"
+        f"- previous / new: {speedup:.2f}x time; shell / new: "
+        f"{mean['shell'][0] / mean['new'][0]:.2f}x; reference / new: "
+        f"{mean['reference'][1] / mean['new'][1]:.1f}x field evaluations"
     )
     print(
         f"summary: new_s={mean['new'][0]:.3f} previous_s={mean['previous'][0]:.3f} "
         f"reference_s={mean['reference'][0]:.3f} new_evals={mean['new'][1]:.0f} "
-        f"reference_evals={mean['reference'][1]:.0f} "
-        f"psnr_delta_vs_quality_db={mean['new'][2] - mean['quality'][2]:+.3f}"
+        f"previous_evals={mean['previous'][1]:.0f} reference_evals={mean['reference'][1]:.0f} "
+        f"speedup={speedup:.2f} psnr_delta_vs_quality_db={mean['new'][2] - mean['quality'][2]:+.3f} "
+        f"psnr_delta_db={mean['new'][2] - mean['previous'][2]:+.3f}"
     )
     return 0
 
@@ -343,8 +352,14 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--compare",
         action="store_true",
-        help="new (guided, fast knobs) vs previous (shell, fast) vs quality vs "
-        "the uniform 64+32 reference; ends with a summary line",
+        help="new (guided, fast knobs, --new-precision) vs previous (the same in float32) vs "
+        "shell (fast) vs quality vs the uniform 64+32 reference; ends with a summary line",
+    )
+    ap.add_argument(
+        "--new-precision",
+        default="bfloat16",
+        choices=("float32", "bfloat16"),
+        help="with --compare: the new path's render.precision (default bfloat16)",
     )
     ap.add_argument(
         "--save",
@@ -360,7 +375,8 @@ def main(argv=None) -> int:
         model, settings, cap, what = load(args)
         if args.save is not None:
             args.save.mkdir(parents=True, exist_ok=True)
-        return compare(model, settings, items_of(cap, settings, args.frames), what, args.repeats, args.save)
+        items = items_of(cap, settings, args.frames)
+        return compare(model, settings, items, what, args.repeats, args.save, args.new_precision)
 
     from texvocab.metrics import evaluate_pair
     from texvocab.pipeline.settings import march_settings

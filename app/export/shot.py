@@ -115,7 +115,7 @@ def render_neural(model, march, pose, trans, camera, background, cancelled=None)
         ctx = model.pose_feature.context(pose, trans)
         shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
         out = render_image(
-            model.for_pose(ctx),
+            model.for_pose(ctx, march.precision),
             camera,
             ctx.vertices,
             model.body.faces,

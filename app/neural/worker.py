@@ -117,7 +117,7 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             # for its residual rays, the grid if a ray falls back to marching) after the
             # first, preview level; the shell marcher needs it at once (its render path)
             shell = prepare_shell(m, ctx.vertices, model.body.faces, ctx.index)
-            field = model.for_pose(ctx)
+            field = model.for_pose(ctx, m.precision)
         for i, out in enumerate(
             progressive_shard(
                 field,

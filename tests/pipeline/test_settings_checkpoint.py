@@ -12,7 +12,7 @@ from texvocab.body.parts import STRATEGIES
 from texvocab.errors import AssetError, TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.method.encoder import ENCODER_NAMES
-from texvocab.method.field import FieldSettings
+from texvocab.method.field import PRECISIONS, FieldSettings
 from texvocab.method.pose_refinement import POSE_REFINEMENTS
 from texvocab.method.texmap import VIEW_WEIGHTINGS
 from texvocab.method.unseen_texels import UNSEEN_TEXELS
@@ -24,6 +24,7 @@ from texvocab.pipeline.settings import (
     Encoder,
     Guide,
     PoseRefinementMode,
+    Precision,
     RenderSettings,
     Settings,
     Strategy,
@@ -128,6 +129,7 @@ def test_choices_are_the_methods_own_and_every_knob_says_what_it_does():
         (Weighting, WEIGHTINGS),
         (Encoder, ENCODER_NAMES),
         (Guide, GUIDES),
+        (Precision, PRECISIONS),
     ):
         assert set(get_args(hint)) == set(names)
     for group in GROUPS.values():

@@ -83,6 +83,45 @@ def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
     assert (fast.alpha - slow.alpha).abs().max() < 1e-4
 
 
+def test_bfloat16_field_is_near_float32_and_keeps_its_outputs_float32(field):
+    """render.precision=bfloat16: the MLPs' products in bf16, the body distance and the
+    outputs float32; SDF and colour within bf16's rounding of the float32 ones."""
+    ctx = field.pose_feature.context(*preset("walk"))
+    pts, dirs = _points(ctx)
+    with torch.no_grad():
+        sdf, rgb = field.for_pose(ctx).sdf_rgb(pts, dirs)
+        sdf16, rgb16 = field.for_pose(ctx, "bfloat16").sdf_rgb(pts, dirs)
+        proj = field.pose_feature(ctx, pts, field.settings.shell_width)
+    assert sdf16.dtype == rgb16.dtype == torch.float32
+    inside = proj.valid
+    residual = (sdf - proj.distance)[inside]
+    assert inside.sum() > 100 and residual.abs().max() > 1e-3  # the residual is not trivial
+    assert torch.equal(sdf16[~inside], sdf[~inside])  # no MLP beyond the shell
+    assert 0 < (sdf16 - sdf)[inside].abs().max() < 0.02 * residual.abs().max()
+    assert 0 < (rgb16 - rgb).abs().max() < 0.01
+    with pytest.raises(ValueError, match="precision 'float16': expected one of float32, bfloat16"):
+        field.for_pose(ctx, "float16")
+
+
+def test_bfloat16_render_is_near_the_float32_image(field):
+    pose, trans = preset("squat")
+    cam = default_cameras(SynthSettings(size=256))[1].scaled(1 / 4)
+    settings = MarchSettings.from_flat(guide="raster")
+    with torch.no_grad():
+        ctx = field.pose_feature.context(pose, trans)
+        images = [
+            render_image(
+                field.for_pose(ctx, p), cam, ctx.vertices, field.body.faces, settings, index=ctx.index
+            )
+            for p in ("float32", "bfloat16")
+        ]
+    a, b = images
+    assert a.alpha.max() > 0.5 and b.rgb.dtype == torch.float32
+    err = (a.rgb - b.rgb).abs()
+    assert err.max() > 0  # bf16 changed something: the path was taken
+    assert err.mean() < 2e-3 and (a.alpha - b.alpha).abs().mean() < 2e-3
+
+
 @pytest.mark.parametrize("n", [1, 2])
 def test_field_call_with_one_or_two_points_matches_the_batch(field, n):
     """A marcher chunk may hold a single point (the last sample of one ray)."""

@@ -28,6 +28,8 @@ from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
 
 VIEW_FRAMES = ("world", "body")
+#: the number formats the field's MLPs can be evaluated in at render time (name -> dtype)
+PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
 
 @dataclass
@@ -164,11 +166,16 @@ class AvatarField(nn.Module):
         # contiguous copies: row-aligned operands keep BLAS results bitwise reproducible
         return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))
 
-    def sdf_and_color(self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor):
+    def sdf_and_color(
+        self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor, precision: str = "float32"
+    ):
         """SDF (N,), RGB (N, 3), valid (N,) for world points (N, 3) and unit dirs (N, 3).
 
         Gradients of the SDF w.r.t. ``points`` are exact (the body distance contributes its
-        analytic gradient), so the eikonal term can use autograd.
+        analytic gradient), so the eikonal term can use autograd. ``precision``: the
+        number format of the MLPs' products and activations (:data:`PRECISIONS`); the
+        body distance, the projection and the inputs' encodings stay float32, and so do
+        the outputs. "bfloat16" is for rendering (AMX matrix units on CPUs that have them).
         """
         s = self.settings
         out = self.pose_feature(ctx, points, max_distance=s.shell_width)
@@ -187,38 +194,43 @@ class AvatarField(nn.Module):
             x_c, d = self.canonicalize(ctx, x, out.skin_weights, d)
         else:
             x_c = self.canonicalize(ctx, x, out.skin_weights)
-        feat = self.feature_proj(out.features.to(points.dtype))
-        h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat], -1))
-        sdf = d_body + h[:, 0] * valid
-        color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs), feat], -1)
-        rgb = torch.sigmoid(self.color_net(color_in))
+        low = PRECISIONS[precision] != torch.float32
+        with torch.autocast("cpu", dtype=PRECISIONS[precision], enabled=low):
+            feat = self.feature_proj(out.features.to(points.dtype))
+            h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat.to(x_c)], -1))
+            color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs).to(h), feat.to(h)], -1)
+            rgb = torch.sigmoid(self.color_net(color_in).float())
+        sdf = d_body + h[:, 0].float() * valid
         return sdf, rgb, valid
 
-    def forward(self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor):
+    def forward(self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor, precision: str = "float32"):
         """(density (N,), rgb (N, 3)): the callable the ray marcher integrates."""
-        sdf, rgb, valid = self.sdf_and_color(ctx, points, dirs)
+        sdf, rgb, valid = self.sdf_and_color(ctx, points, dirs, precision)
         density = laplace_density(sdf, self.beta) * valid
         return density, rgb
 
-    def for_pose(self, ctx: PoseContext) -> PoseField:
-        """The field at one pose, as the marchers call it."""
-        return PoseField(self, ctx)
+    def for_pose(self, ctx: PoseContext, precision: str = "float32") -> PoseField:
+        """The field at one pose, as the marchers call it, its MLPs evaluated in
+        ``precision`` (:data:`PRECISIONS`; the ``render.precision`` knob)."""
+        return PoseField(self, ctx, precision)
 
 
 class PoseField:
     """The avatar field at one pose: ``field(points, dirs) -> (density, rgb)`` for the
     shell marcher, ``field.sdf_rgb(points, dirs) -> (sdf, rgb)`` and ``field.beta`` for the
     surface-guided one (points more than the shell width from the body read SDF =
-    shell width: no density)."""
+    shell width: no density); ``precision`` as :meth:`AvatarField.sdf_and_color`'s."""
 
-    def __init__(self, model: AvatarField, ctx: PoseContext):
-        self.model, self.ctx = model, ctx
+    def __init__(self, model: AvatarField, ctx: PoseContext, precision: str = "float32"):
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision {precision!r}: expected one of {', '.join(PRECISIONS)}")
+        self.model, self.ctx, self.precision = model, ctx, precision
 
     def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
-        return self.model(self.ctx, points, dirs)
+        return self.model(self.ctx, points, dirs, self.precision)
 
     def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
-        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs)
+        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs, self.precision)
         return torch.where(valid, sdf, self.model.settings.shell_width), rgb
 
     @property

@@ -18,6 +18,7 @@ Strategy = Literal["part", "joint", "global", "none"]  # body.parts.STRATEGIES
 Weighting = Literal["paper", "inverse"]  # method.vocab.WEIGHTINGS
 Encoder = Literal["auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid"]
 Guide = Literal["raster", "shell"]  # render.GUIDES
+Precision = Literal["float32", "bfloat16"]  # method.field.PRECISIONS
 TrainResidual = Literal["hits", "all", "off"]
 Perceptual = Literal["auto", "lpips-vgg", "inception", "off"]
 PoseRefinementMode = Literal["off", "root", "joints"]  # method.pose_refinement.POSE_REFINEMENTS
@@ -139,6 +140,11 @@ class RenderSettings:
         True,
         doc="guide raster: band rays from the probe, the Newton "
         "point and one point behind it (false: band_samples samples)",
+    )
+    precision: Precision = knob(
+        "float32",
+        doc="the number format of the field's MLPs at render time: bfloat16 runs their "
+        "products on the CPU's bf16 units (AMX), float32 everywhere else (training is float32)",
     )
 
     def __post_init__(self) -> None:

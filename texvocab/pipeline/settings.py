@@ -29,6 +29,7 @@ from texvocab.pipeline.setting_groups import (  # noqa: F401  re-exported: the g
     Perceptual,
     PoseCondition,
     PoseRefinementMode,
+    Precision,
     RenderSettings,
     Strategy,
     TrainResidual,
@@ -249,6 +250,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
         fine_samples=r.fine_samples,
         early_stop_eps=r.early_stop_eps,
         guide=r.guide,
+        precision=r.precision,
         residual_rays=r.residual_rays,
         band_newton=r.band_newton,
     )
@@ -258,6 +260,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
             max_coarse=TRAIN_MAX_COARSE,
             scout_threshold=None,
             guide="shell",
+            precision="float32",
             coarse_samples=t.coarse_samples or r.coarse_samples,
             residual_rays=t.residual != "off" and t.guide == "raster",
             band_newton=t.band_newton,

@@ -149,9 +149,13 @@ class ChunkSettings:
 class MarchSettings:
     """Knobs of the render paths. ``guide`` names the path (:mod:`texvocab.render.paths`):
     "shell" marches every ray through the shell front to back, "raster" is the
-    surface-guided marcher (band, residual rays, the rest marched)."""
+    surface-guided marcher (band, residual rays, the rest marched). ``precision`` is the
+    number format the field's MLPs are evaluated in when an image is rendered
+    (``AvatarField.for_pose``; "float32" or "bfloat16"); the marchers themselves compute
+    in float32."""
 
     guide: str = "shell"
+    precision: str = "float32"
     shell: ShellSettings = field(default_factory=ShellSettings)
     band: BandSettings = field(default_factory=BandSettings)
     residual: ResidualSettings = field(default_factory=ResidualSettings)
@@ -203,6 +207,7 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "chunk_rays": ("chunks", "rays"),
     "chunk_points": ("chunks", "points"),
     "guide": ("", "guide"),
+    "precision": ("", "precision"),
     "band_samples": ("band", "samples"),
     "band_spacing": ("band", "spacing"),
     "band_leftover": ("band", "leftover"),
