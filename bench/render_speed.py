@@ -20,9 +20,10 @@ same field, for the ratio.
 
 ``--compare`` renders the same frames five ways in one run — ``new``: the default render
 path as it is now (the surface-guided marcher, guide=raster, at the ``fast`` preset's
-knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default);
-``previous``: the same path with the MLPs in float32 (the default path before the
-precision knob); ``shell``: the shell marcher (guide=shell) at the ``fast`` preset;
+knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default, and its
+activations free of subnormal numbers, ``NormalSoftplus``); ``previous``: the same path
+as it was, the MLPs in float32 with torch's nn.Softplus; the other paths also run with
+torch's nn.Softplus — ``shell``: the shell marcher (guide=shell) at the ``fast`` preset;
 ``quality``: the shell marcher at the ``quality`` preset; ``reference``: the uniform
 64+32 marcher in the body's box — and prints per path seconds, field evaluations, PSNR
 against the truth and against the reference, and as its last line ``summary: new_s=…
@@ -40,6 +41,7 @@ waiting made a frame ~10x slower (measured 22-28 s instead of 2.7 s per frame).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import tempfile
@@ -230,6 +232,30 @@ def reference_render(model, item, coarse: int, fine: int):
     }
 
 
+@contextlib.contextmanager
+def plain_softplus(model, plain: bool):
+    """With ``plain``, the field's activations are torch's own nn.Softplus(β = 100) for the
+    duration, as the field computed before :class:`~texvocab.method.field.NormalSoftplus`
+    (the same function to float32 rounding, with subnormal numbers): today's paths as they
+    were, beside the new one in the same run."""
+    from torch import nn
+
+    from texvocab.method.field import NormalSoftplus
+
+    swapped = []
+    if plain:
+        for net in (model.sdf_net, model.color_net):
+            for i, m in enumerate(net):
+                if isinstance(m, NormalSoftplus):
+                    net[i] = nn.Softplus(beta=m.beta, threshold=m.threshold)
+                    swapped.append((net, i, m))
+    try:
+        yield
+    finally:
+        for net, i, m in swapped:
+            net[i] = m
+
+
 def compare(
     model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "bfloat16"
 ) -> int:
@@ -267,7 +293,8 @@ def compare(
         for name, march in paths.items():
             best = None
             for _ in range(max(repeats, 1)):
-                img, row = timed_render(model, item, march)
+                with plain_softplus(model, name != "new"):
+                    img, row = timed_render(model, item, march)
                 if best is None or row["total"] < best[1]["total"]:
                     best = (img, row)
             results[name] = best

@@ -11,7 +11,7 @@ from texvocab.capture.synth import SynthSettings, default_cameras
 from texvocab.geometry.rotations import rotvec_to_quat
 from texvocab.method.encoder import build_encoder
 from texvocab.method.feature import PoseFeature
-from texvocab.method.field import AvatarField, FieldSettings
+from texvocab.method.field import AvatarField, FieldSettings, NormalSoftplus
 from texvocab.method.vocab import Vocabulary
 from texvocab.render import MarchSettings, ShellGeometry, render_image
 
@@ -83,6 +83,23 @@ def test_folded_pose_layer_renders_the_same_image(field, monkeypatch):
     assert (fast.alpha - slow.alpha).abs().max() < 1e-4
 
 
+def test_normal_softplus_is_torch_softplus_to_float32_rounding_values_and_gradients():
+    """The field's activation floors βx at -25 so no subnormal float appears: across the
+    range a trained field's pre-activations cover (βx from -300 to 300) its values and
+    gradients equal nn.Softplus(β=100)'s to 1e-12 absolute and float32 rounding relative."""
+    x = torch.linspace(-3.0, 3.0, 200_001, dtype=torch.float32)
+    a, b = x.clone().requires_grad_(), x.clone().requires_grad_()
+    ya, yb = NormalSoftplus(beta=100)(a), torch.nn.Softplus(beta=100)(b)
+    (ya.sum()).backward()
+    (yb.sum()).backward()
+    err = (ya - yb).abs()
+    assert err.max() < 1e-12 and (err / yb.abs().clamp(min=1e-6)).max() < 1e-6
+    assert (a.grad - b.grad).abs().max() < 1e-10
+    assert torch.equal(ya[x > -0.2], yb[x > -0.2])  # above the floor: the same numbers
+    assert not (ya != 0).logical_and(ya.abs() < torch.finfo(torch.float32).tiny).any()  # no subnormals
+    assert (yb.abs() < torch.finfo(torch.float32).tiny).logical_and(yb != 0).any()  # torch's has them
+
+
 def test_bfloat16_field_is_near_float32_and_keeps_its_outputs_float32(field):
     """render.precision=bfloat16: the MLPs' products in bf16, the body distance and the
     outputs float32; SDF and colour within bf16's rounding of the float32 ones."""
@@ -99,7 +116,7 @@ def test_bfloat16_field_is_near_float32_and_keeps_its_outputs_float32(field):
     assert torch.equal(sdf16[~inside], sdf[~inside])  # no MLP beyond the shell
     assert 0 < (sdf16 - sdf)[inside].abs().max() < 0.02 * residual.abs().max()
     assert 0 < (rgb16 - rgb).abs().max() < 0.01
-    with pytest.raises(ValueError, match="precision 'float16': expected one of float32, bfloat16"):
+    with pytest.raises(ValueError, match="precision 'float16': expected one of float32, bfloat16, auto"):
         field.for_pose(ctx, "float16")
 
 

@@ -28,8 +28,31 @@ from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
 
 VIEW_FRAMES = ("world", "body")
-#: the number formats the field's MLPs can be evaluated in at render time (name -> dtype)
-PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+#: the number formats the field's MLPs can be evaluated in at render time (name -> dtype;
+#: "auto": bfloat16 where the CPU multiplies it natively, else float32)
+PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16, "auto": None}
+
+
+def native_bfloat16() -> bool:
+    """Whether this CPU multiplies bfloat16 natively (AMX or AVX512-BF16, from Linux's
+    /proc/cpuinfo; False where it cannot be read): elsewhere bf16 products are emulated
+    and slower than float32."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            flags = set(f.read().split())
+    except OSError:
+        return False
+    return bool(flags & {"amx_bf16", "avx512_bf16"})
+
+
+def resolve_precision(name: str) -> torch.dtype:
+    """The dtype of a :data:`PRECISIONS` name; ValueError naming the choices otherwise."""
+    if name not in PRECISIONS:
+        raise ValueError(f"precision {name!r}: expected one of {', '.join(PRECISIONS)}")
+    dtype = PRECISIONS[name]
+    if dtype is None:
+        return torch.bfloat16 if native_bfloat16() else torch.float32
+    return dtype
 
 
 @dataclass
@@ -105,10 +128,26 @@ def pose_input(pose: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
     return torch.where((key < 0)[..., None], -q, q)
 
 
+class NormalSoftplus(nn.Softplus):
+    """Softplus_β(x) = log(1 + exp(βx)) / β with βx floored at -``FLOOR``: the same function
+    to float32 rounding (the floor changes a value of at most e^-25 / β = 1.4e-13 / β into
+    that, and the gradient there from at most 1.4e-11 into 0), without its subnormal
+    numbers. Below βx ≈ -87, exp(βx) and the log1p after it compute with subnormal floats,
+    which this CPU handles in microcode: a trained field's pre-activations reach there
+    often enough that the activation took 4x its time (9.5 against 2.3 ms for 10k × 128
+    values, forward; 2x with the backward pass). Weights keep their meaning: it has no
+    parameters, and nn.Softplus(beta=100) checkpoints load unchanged."""
+
+    FLOOR = 25.0
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return F.softplus(x.clamp(min=-self.FLOOR / self.beta), self.beta, self.threshold)
+
+
 def _mlp(d_in: int, hidden: int, layers: int, d_out: int) -> nn.Sequential:
     mods: list[nn.Module] = []
     for i in range(layers):
-        mods += [nn.Linear(d_in if i == 0 else hidden, hidden), nn.Softplus(beta=100)]
+        mods += [nn.Linear(d_in if i == 0 else hidden, hidden), NormalSoftplus(beta=100)]
     mods.append(nn.Linear(hidden if layers else d_in, d_out))
     return nn.Sequential(*mods)
 
@@ -194,8 +233,8 @@ class AvatarField(nn.Module):
             x_c, d = self.canonicalize(ctx, x, out.skin_weights, d)
         else:
             x_c = self.canonicalize(ctx, x, out.skin_weights)
-        low = PRECISIONS[precision] != torch.float32
-        with torch.autocast("cpu", dtype=PRECISIONS[precision], enabled=low):
+        dtype = resolve_precision(precision)
+        with torch.autocast("cpu", dtype=dtype, enabled=dtype != torch.float32):
             feat = self.feature_proj(out.features.to(points.dtype))
             h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat.to(x_c)], -1))
             color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs).to(h), feat.to(h)], -1)
@@ -222,8 +261,7 @@ class PoseField:
     shell width: no density); ``precision`` as :meth:`AvatarField.sdf_and_color`'s."""
 
     def __init__(self, model: AvatarField, ctx: PoseContext, precision: str = "float32"):
-        if precision not in PRECISIONS:
-            raise ValueError(f"precision {precision!r}: expected one of {', '.join(PRECISIONS)}")
+        resolve_precision(precision)  # a ValueError for an unknown name, here
         self.model, self.ctx, self.precision = model, ctx, precision
 
     def __call__(self, points: torch.Tensor, dirs: torch.Tensor):

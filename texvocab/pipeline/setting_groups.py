@@ -18,7 +18,7 @@ Strategy = Literal["part", "joint", "global", "none"]  # body.parts.STRATEGIES
 Weighting = Literal["paper", "inverse"]  # method.vocab.WEIGHTINGS
 Encoder = Literal["auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid"]
 Guide = Literal["raster", "shell"]  # render.GUIDES
-Precision = Literal["float32", "bfloat16"]  # method.field.PRECISIONS
+Precision = Literal["float32", "bfloat16", "auto"]  # method.field.PRECISIONS
 TrainResidual = Literal["hits", "all", "off"]
 Perceptual = Literal["auto", "lpips-vgg", "inception", "off"]
 PoseRefinementMode = Literal["off", "root", "joints"]  # method.pose_refinement.POSE_REFINEMENTS
@@ -144,7 +144,8 @@ class RenderSettings:
     precision: Precision = knob(
         "float32",
         doc="the number format of the field's MLPs at render time: bfloat16 runs their "
-        "products on the CPU's bf16 units (AMX), float32 everywhere else (training is float32)",
+        "products on the CPU's bf16 units (AMX), auto takes bfloat16 where the CPU has them "
+        "(else float32); the marchers and training compute in float32",
     )
 
     def __post_init__(self) -> None:

@@ -198,7 +198,13 @@ RENDER_KNOBS = tuple(f.name for f in fields(RenderSettings))
 
 # Render knob -> value, chosen from bench/tradeoff.py on the default synthetic capture.
 PRESETS: dict[str, dict] = {
-    "fast": {"shell_width": 0.025, "coarse_samples": 6, "fine_samples": 2, "early_stop_eps": 1e-2},
+    "fast": {
+        "shell_width": 0.025,
+        "coarse_samples": 6,
+        "fine_samples": 2,
+        "early_stop_eps": 1e-2,
+        "precision": "auto",
+    },
     "balanced": {"shell_width": 0.025, "coarse_samples": 8, "fine_samples": 4},
     # quality also marches the guided marcher's hard rays and takes the 4-sample band:
     # 1.7x the default's time, 1 dB nearer the 64+32 reference
