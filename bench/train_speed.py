@@ -36,6 +36,7 @@ from texvocab.blas import blas_threads, budget_blas_threads
 EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
 SHELL = ["encoder=pyramid", "perceptual=off", "train_guide=shell", "train_shell_voxel=0.01"]
 UNBUDGETED = "reference, numpy's BLAS on every core (before texvocab/blas.py)"
+PLAIN_SOFTPLUS = "defaults with torch's nn.Softplus (before NormalSoftplus)"
 VARIANTS = {
     "reference (pyramid, no perceptual, shell marcher)": SHELL,
     UNBUDGETED: SHELL,
@@ -55,16 +56,21 @@ VARIANTS = {
     "Newton band, residual rays everywhere (train_residual=all)": ["train_residual=all"],
     "defaults at train_shell_voxel 0.01": ["train_shell_voxel=0.01"],
     "defaults (Newton band, residual rays inside the mask)": [],
+    PLAIN_SOFTPLUS: [],
 }
 
 
-def measure(capture, overrides: list[str], steps: int, warmup: int) -> dict:
+def measure(capture, overrides: list[str], steps: int, warmup: int, plain_softplus: bool = False) -> dict:
+    from render_speed import plain_softplus as plain  # bench/ sibling
+
     from texvocab.pipeline.settings import Settings, TrainSettings
     from texvocab.pipeline.train import Trainer
 
     s = Settings(train=TrainSettings(iterations=steps + warmup)).with_overrides(overrides)
     t0 = time.perf_counter()
     trainer = Trainer(capture, s, Path("/tmp/texvocab_train_speed"), progress=False)
+    swap = plain(trainer.model, plain_softplus)  # the activation has no parameters to optimise
+    swap.__enter__()
     pf = trainer.model.pose_feature
     if not getattr(pf.encoder, "trainable", True):
         pf.feature_maps(torch.arange(capture.num_train))
@@ -76,6 +82,7 @@ def measure(capture, overrides: list[str], steps: int, warmup: int) -> dict:
     for _ in range(steps):
         evals += trainer.train_step()["evals"]
     wall = time.perf_counter() - t0
+    swap.__exit__(None, None, None)
     per_step = wall / steps
     steady = (wall - (trainer.cache_seconds - cache0)) / steps
     return {
@@ -114,7 +121,7 @@ def main(argv=None) -> int:
             else contextlib.nullcontext()
         )
         with blas:
-            r = measure(cap, overrides, args.steps, args.warmup)
+            r = measure(cap, overrides, args.steps, args.warmup, name == PLAIN_SOFTPLUS)
         rows.append((name, r))
         print(f"{name}: {r['step_s']:.3f} s/step, {r['steady_s']:.3f} without cache builds", flush=True)
     ref, ref_steady = rows[0][1]["step_s"], rows[0][1]["steady_s"]

@@ -282,7 +282,7 @@ def stub_model(make_field, calls=None, contexts=None):
                 return ctx
 
         @staticmethod
-        def for_pose(ctx):
+        def for_pose(ctx, precision="float32"):
             return make_field()
 
     return Model

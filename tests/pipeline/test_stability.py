@@ -442,6 +442,35 @@ def test_camera_inside_or_at_the_surface(body, avatar, where, path):
     assert_param_grads(avatar)
 
 
+@pytest.mark.parametrize("case", ["inside", "surface_in", "miss", "limits_high"])
+def test_bfloat16_field_renders_stay_finite_at_the_extremes(body, avatar, case):
+    """render.precision=bfloat16 on both render paths: the camera inside the body or at
+    its surface looking in, rays that miss, joints at their limits."""
+    pose = extreme_pose("limits_high") if case == "limits_high" else np.zeros((24, 3))
+    ctx = avatar.pose_feature.context(pose)
+    cam = front_camera(ctx.vertices, 8) if case in ("miss", "limits_high") else camera_at(body, ctx, case, 8)
+    if case == "miss":
+        away = 2 * cam.center - ctx.vertices.detach().double().mean(0).numpy()
+        cam = look_at(away, cam.center, 8)
+    for guide in ("raster", "shell"):
+        march = MARCH.replace(guide=guide)
+        with torch.no_grad():
+            ref, image = (
+                render_image(avatar.for_pose(ctx, p), cam, ctx.vertices, body.faces, march, index=ctx.index)
+                for p in ("float32", "bfloat16")
+            )
+        assert_finite(rgb=image.rgb, alpha=image.alpha, depth=image.depth)
+        assert (image.alpha >= 0).all() and (image.alpha <= 1 + 1e-6).all()
+        assert (image.rgb >= 0).all() and (image.rgb <= 1 + 1e-6).all()
+        assert (image.alpha - ref.alpha).abs().max() < 0.05 and (image.rgb - ref.rgb).abs().mean() < 0.01
+        if case == "miss":
+            assert image.stats.field_evals == 0 and (image.alpha == 0).all()
+        elif case in ("inside", "surface_in"):
+            assert float(image.alpha.min()) > 0.5, guide  # in the body
+        else:
+            assert image.stats.field_evals > 0 and float(image.alpha.max()) > 0.05, guide
+
+
 # --- extreme joint angles -------------------------------------------------------------
 
 

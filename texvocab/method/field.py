@@ -238,8 +238,8 @@ class AvatarField(nn.Module):
             feat = self.feature_proj(out.features.to(points.dtype))
             h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat.to(x_c)], -1))
             color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs).to(h), feat.to(h)], -1)
-            rgb = torch.sigmoid(self.color_net(color_in).float())
-        sdf = d_body + h[:, 0].float() * valid
+            rgb = torch.sigmoid(self.color_net(color_in).to(points.dtype))
+        sdf = d_body + h[:, 0].to(points.dtype) * valid
         return sdf, rgb, valid
 
     def forward(self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor, precision: str = "float32"):
