@@ -31,6 +31,7 @@ def test_the_bench_runs_on_a_humannerf_capture(tmp_path, capsys):
 
     body = default_body()
     root = write_standin(tmp_path / "subject", body, make_truth(body))
-    assert mask_registration.main([str(root), "--frames", "2"]) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
-    assert last.startswith("summary: shift_x=") and last.endswith("frames=2")
+    for extra in ([], ["--body"]):
+        assert mask_registration.main([str(root), "--frames", "2", *extra]) == 0
+        last = capsys.readouterr().out.strip().splitlines()[-1]
+        assert last.startswith("summary: shift_x=") and last.endswith("frames=2")
