@@ -35,3 +35,6 @@ def test_the_bench_runs_on_a_humannerf_capture(tmp_path, capsys):
         assert mask_registration.main([str(root), "--frames", "2", *extra]) == 0
         last = capsys.readouterr().out.strip().splitlines()[-1]
         assert last.startswith("summary: shift_x=") and last.endswith("frames=2")
+    readings = dict(kv.split("=") for kv in last.split()[1:])
+    # the stand-in's masks are this body's own silhouettes: no shift, no growth
+    assert all(abs(float(readings[k])) < 0.1 for k in ("shift_x", "shift_y", "grow_x", "grow_y"))
