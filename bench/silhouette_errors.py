@@ -11,9 +11,14 @@ Per frame (the capture's held-out frames, spread; rendered with the checkpoint's
   that is too fat or too thin scores better against one of them);
 - the best IoU over whole-pixel shifts of the render up to ``--max-shift`` px, and that
   shift (a calibration or pixel-centre offset shows as the same shift in every frame);
+- the sub-pixel move of the render that best puts its outline on the mask's, from the
+  outline's four sides separately (``edge_dx``, ``edge_dy``; :func:`mask_registration.side_offsets`):
+  unlike the whole-pixel search it does not mistake a shape error on one side (a missing
+  hood) for an offset, and the render's being fatter or thinner cancels out;
 - precision and recall of the rendered silhouette.
 
-The last line printed is ``summary: iou=… iou_soft_spread=… iou_best_shift=… frames=…``
+The last line printed is ``summary: iou=… iou_soft_spread=… iou_best_shift=… edge_dx=…
+edge_dy=… frames=…``
 (means over frames).
 """
 
@@ -23,6 +28,7 @@ import argparse
 import sys
 
 import numpy as np
+from mask_registration import side_offsets
 from scipy import ndimage
 
 from texvocab.pipeline.avatar import load_avatar
@@ -49,6 +55,9 @@ def silhouette_row(alpha: np.ndarray, mask: np.ndarray, max_shift: int) -> dict:
             if score > best[0]:
                 best = (score, dx, dy)
     row["best_shift_iou"], row["dx"], row["dy"] = best
+    sides = side_offsets(alpha, mask)  # where the render's outline lies outward of the mask's
+    row["edge_dx"] = (sides["left"] - sides["right"]) / 2
+    row["edge_dy"] = (sides["top"] - sides["bottom"]) / 2
     row["precision"] = float((pred & mask).sum() / max(pred.sum(), 1))
     row["recall"] = float((pred & mask).sum() / max(mask.sum(), 1))
     return row
@@ -78,14 +87,22 @@ def main(argv=None) -> int:
         rows.append(row)
         print(
             f"| {t} | "
-            + " | ".join(f"{row[k]:.3f}" if k not in ("dx", "dy") else str(row[k]) for k in keys)
+            + " | ".join(
+                str(row[k])
+                if k in ("dx", "dy")
+                else f"{row[k]:+.2f}"
+                if k.startswith("edge_")
+                else f"{row[k]:.3f}"
+                for k in keys
+            )
             + " |"
         )
     mean = {k: float(np.mean([r[k] for r in rows])) for k in keys}
     print("| mean | " + " | ".join(f"{mean[k]:.3f}" for k in keys) + " |")
     print(
         f"summary: iou={mean['iou@0.5']:.3f} iou_soft_spread={mean['iou@0.3'] - mean['iou@0.7']:.3f} "
-        f"iou_best_shift={mean['best_shift_iou']:.3f} frames={len(rows)}"
+        f"iou_best_shift={mean['best_shift_iou']:.3f} edge_dx={mean['edge_dx']:+.2f} "
+        f"edge_dy={mean['edge_dy']:+.2f} frames={len(rows)}"
     )
     return 0
 

@@ -23,6 +23,20 @@ def test_a_shifted_render_is_found_at_its_shift():
     assert (row["dx"], row["dy"]) == (2, -3) and row["best_shift_iou"] == 1.0 > row["iou@0.5"]
 
 
+def _soft_disk(cx, cy, r, size=64, k=8):
+    """Pixel coverage (size, size) of a disk, pixel centres at integers."""
+    ys, xs = (np.mgrid[: size * k, : size * k] + 0.5) / k - 0.5
+    inside = (xs - cx) ** 2 + (ys - cy) ** 2 <= r * r
+    return inside.reshape(size, k, size, k).mean((1, 3))
+
+
+def test_a_sub_pixel_shift_of_a_fat_render_is_read_from_its_outline():
+    """The render 1.5 px too fat and (-0.5, +0.75) px off: the outline's sides give the
+    move that puts it on the mask, which no whole-pixel shift can."""
+    row = silhouette_errors.silhouette_row(_soft_disk(29.5, 30.75, 13.5), _disk(30, 30, 12), 2)
+    assert abs(row["edge_dx"] - 0.5) < 0.15 and abs(row["edge_dy"] + 0.75) < 0.15
+
+
 def test_a_fat_render_scores_best_against_the_dilated_mask():
     mask = _disk(30, 30, 12)
     row = silhouette_errors.silhouette_row(_disk(30, 30, 14).astype(float), mask, 2)
