@@ -267,6 +267,7 @@ class Viewer(CameraControls, FileControls, ExportControls):
             blit_image(fbo.glo, rects)
             fbo.release()
             self.preview_blits += 1
+            nv.on_screen = nv.frame
         self.ctx.screen.use()
 
     def submit_neural(self, force: bool = False, poll: bool = True) -> None:

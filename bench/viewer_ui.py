@@ -11,6 +11,8 @@ running). Prints tables (per render, their spread, frames, panels) and a last li
     summary: worker=… idle_ui_cpu_share=… window_full_s=… shot_s=… window_over_shot=…
              first_level_ms=… dragging_frame_ms=… renders=… first_level_p75_ms=…
              first_within_target=k/N full_within_target=k/N preview_in_pose_frame=k/N
+             drag_preview_age_frames_p95=… drag_frames_within_1=k/N drag_frame_ms_p95=…
+             after_drag_full_s=…
 
 (medians over the renders, for the first worker run; issue targets: idle share <= 0.10
 of a core, window / shot <= 1.5, first level <= 50 ms, full level <= 0.5 s, UI frames
@@ -37,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab_viewer.testing.bench import RENDERS  # pose changes timed per worker
+from texvocab_viewer.testing.bench import RENDERS, drag_stats  # pose changes timed per worker
 
 ROOT = Path(__file__).resolve().parent.parent
 FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # the viewer's targets: first level, full level
@@ -275,6 +277,18 @@ def panel_table(reps: dict) -> str:
     return "\n".join(lines)
 
 
+def _drag_keys(rep: dict) -> str:
+    """The dragging phase's summary keys (texvocab_viewer.testing.bench.drag_stats)."""
+    d = drag_stats(rep)
+    full = d["after_drag_full_s"]
+    return (
+        f"drag_preview_age_frames_p95={d['drag_preview_age_frames_p95']:.1f} "
+        f"drag_frames_within_1={d['drag_frames_within_1'][0]}/{d['drag_frames_within_1'][1]} "
+        f"drag_frame_ms_p95={d['drag_frame_ms_p95']:.1f} "
+        f"after_drag_full_s={'none' if full is None else f'{full:.2f}'}"
+    )
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("checkpoint", help="checkpoint.pt (its capture must exist)")
@@ -417,8 +431,9 @@ def main() -> int:
         f"renders={len(first)} first_level_p75_ms={np.percentile(first, 75):.0f} "
         f"first_within_target={sum(f <= FIRST_TARGET_MS for f in first)}/{len(first)} "
         f"full_within_target={sum(f <= FULL_TARGET_S for f in full)}/{len(full)} "
-        f"preview_in_pose_frame={in_pose_frame(runs[w])}/{len(first)}"
+        f"preview_in_pose_frame={in_pose_frame(runs[w])}/{len(first)} {_drag_keys(reps[w])}"
     )
+
     return 0
 
 

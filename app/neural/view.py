@@ -81,6 +81,9 @@ class NeuralView:
         self.canvas: dict | None = None
         #: where late_draw put the image this frame: x0, y0, x1, y1 (None: not drawn)
         self.image_rect: tuple[float, float, float, float] | None = None
+        #: the level this frame draws (late_draw's, or the preview drawn over it before
+        #: the swap): what is on screen once the frame is swapped
+        self.on_screen: RenderFrame | None = None
 
     @property
     def busy(self) -> bool:
