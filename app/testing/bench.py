@@ -63,6 +63,7 @@ class BenchDriver(Driver):
         self.drag_age: list[int] = []
         self._pose_frame: dict[int, int] = {}  # pose version -> the dragging frame that set it
         self._last_drag_swap = None  # when the last dragged frame was swapped
+        self._drag_seconds = None  # how long the drag lasted
         self.renders: list[dict] = []
         self._mark = None  # (wall, process CPU, worker CPU) at a phase's start
         self._last = None
@@ -132,14 +133,14 @@ class BenchDriver(Driver):
         if self.phase == "after":
             self._after_tick(now)
             return
-        rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
-        if self.phase == "settle":
+        if self.phase == "settle":  # the window idles as the viewer lets it (a level wakes it)
             if now - self.t0 > SETTLE_MAX:
                 self.report["after_drag_full_s"] = None
                 self._done(rp)
             return
+        rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
         if now - self.t0 > self.seconds:  # the drag stops: the pose set last frame stays
-            self.phase, self.t0 = "settle", now
+            self.phase, self.t0, self._drag_seconds = "settle", now, now - self.t0
             return
         shown = v.neural.frame
         if shown is not None and shown is not self._drag_shown:
@@ -269,7 +270,7 @@ class BenchDriver(Driver):
             "levels_shown": self.drag_levels,
             "preview_age_frames": self.drag_age,
             "panel_cpu_ms": self.drag_panels,
-            "seconds": time.perf_counter() - self.t0,
+            "seconds": self._drag_seconds or time.perf_counter() - self.t0,
         }
         self.report["window"] = list(v.size)
         if v.neural is not None:
