@@ -243,10 +243,11 @@ class Viewer(CameraControls, FileControls, ExportControls):
 
     def before_swap(self) -> None:
         """After ImGui drew the frame, before the swap: when this frame changed the pose
-        after a pause, llvmpipe rasterises the frame while the UI waits for the pose's
-        preview (NeuralView.wait_preview), which is then drawn over the panel's image, so
-        the 3D view and the preview reach the screen together. Not with a popup open (it
-        could lie over the image)."""
+        (after a pause, or under a dragged slider), llvmpipe rasterises the frame while the
+        UI waits for the pose's preview (NeuralView.wait_preview; while dragging, at most
+        until DRAG_FRAME_MS after the frame began), which is then drawn over the panel's
+        image, so the 3D view and the preview reach the screen together. Not with a popup
+        open (it could lie over the image)."""
         nv = self.neural
         if nv is not None and not self._warmed:
             colour = hello_imgui.get_runner_params().imgui_window_params.background_color
@@ -259,7 +260,7 @@ class Viewer(CameraControls, FileControls, ExportControls):
             nv.cancel_wait()
             return
         gl_flush()  # the frame so far rasterises while the render process finishes
-        if not nv.wait_preview():
+        if not nv.wait_preview(self._last_frame[0] if self._last_frame else -np.inf):
             return
         rects = image_rects(rect, nv.texture.size, *window_framebuffer())
         if rects is not None:
