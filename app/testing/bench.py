@@ -58,6 +58,7 @@ class BenchDriver(Driver):
         self.drag_process_ms: list[float] = []  # the window process: UI thread + GL threads
         self.drag_panels: list[dict] = []  # UI-thread CPU ms per panel, per dragging frame
         self.drag_levels: list[int] = []  # the level of each new image shown while dragging
+        self.drag_level_ms: list[float] = []  # and ms from its job's start to its delivery
         self._drag_shown = None
         #: per dragging frame, the age in UI frames of the pose the neural panel shows
         self.drag_age: list[int] = []
@@ -146,6 +147,7 @@ class BenchDriver(Driver):
         if shown is not None and shown is not self._drag_shown:
             self._drag_shown = shown
             self.drag_levels.append(int(shown.level))
+            self.drag_level_ms.append(shown.elapsed * 1000)
         dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
         process = self._clock()[1]  # the window process's CPU outside a render thread
         dp, self._last_process = (
@@ -213,6 +215,7 @@ class BenchDriver(Driver):
         if self.phase == "settle":
             if shown is not None and shown.level == 1 and key is not None and key[0] == pose:
                 self.report["after_drag_full_s"] = now - self._last_drag_swap
+                self.report["after_drag_render_s"] = shown.elapsed  # of that, the job's own
                 self._done(hello_imgui.get_runner_params())
             return
         if not self._nudge:  # the pose has not moved yet
@@ -269,6 +272,7 @@ class BenchDriver(Driver):
             "process_cpu_ms": self.drag_process_ms,
             "levels_shown": self.drag_levels,
             "preview_age_frames": self.drag_age,
+            "level_ms": self.drag_level_ms,
             "panel_cpu_ms": self.drag_panels,
             "seconds": self._drag_seconds or time.perf_counter() - self.t0,
         }
