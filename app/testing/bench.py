@@ -140,6 +140,8 @@ class BenchDriver(Driver):
                 self._done(rp)
             return
         rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
+        if not self._nudge:  # the drag starts in this frame
+            self.t0 = now
         if now - self.t0 > self.seconds:  # the drag stops: the pose set last frame stays
             self.phase, self.t0, self._drag_seconds = "settle", now, now - self.t0
             return
@@ -258,6 +260,7 @@ class BenchDriver(Driver):
             }
             self.phase, self.t0 = "dragging", now
             self._drag_shown = self.viewer.neural.frame
+            hello_imgui.get_runner_params().fps_idling.enable_idling = False  # the next frame at once
 
     def _done(self, rp, error: str | None = None) -> None:
         v = self.viewer

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from PIL import Image
 from tiny_runs import tiny_run
-from texvocab_viewer.testing.bench import drag_stats
 from window_runs import PYTHON, ROOT, run_window
+
+from texvocab_viewer.testing.bench import drag_stats
 
 pytestmark = pytest.mark.slow  # Xvfb windows
 
