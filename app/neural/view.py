@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from texvocab.pipeline import march_settings, render_overrides
-from texvocab_viewer.arguments import DRAG_FRAME_MS, NEURAL_PREVIEW_WAIT_MS
+from texvocab_viewer.arguments import NEURAL_PREVIEW_WAIT_MS
 from texvocab_viewer.neural.render_process import ProcessWorker
 from texvocab_viewer.neural.worker import ProgressiveWorker, RenderFrame, RenderJob, model_renderer
 
@@ -23,8 +23,9 @@ PLAYBACK_SECONDS = 0.5
 #: a submission follows a pause when the one before is at least this many seconds older:
 #: its frame waits for the preview (NeuralView.preview_wait) and the job renders every
 #: level. Poses that stream in faster, as under a dragged slider, are rendered as
-#: previews alone, each frame waiting for its own until DRAG_FRAME_MS after it began; the
-#: first frame without a change submits the full render of the pose it rests at.
+#: previews alone, each frame waiting for its own until it must end (Viewer.before_swap,
+#: DRAG_FRAME_MS); the first frame without a change submits the full render of the pose
+#: it rests at.
 PREVIEW_PAUSE = 0.25
 
 
@@ -216,19 +217,19 @@ class NeuralView:
         """This frame does not wait for its preview (it shows a frame later)."""
         self._await = None
 
-    def wait_preview(self, frame_started: float = -np.inf) -> bool:
+    def wait_preview(self, drag_until: float = -np.inf) -> bool:
         """After ImGui drew the frame, before the swap: if :attr:`awaiting`, wait for the
         pose's preview until ``preview_wait`` seconds after its submission (while a slider
-        is dragged: until ``DRAG_FRAME_MS`` after ``frame_started``, the frame's
-        perf_counter start) and take it. True when a level to draw over the frame was
-        taken: one of the pose, or while dragging any newer than the frame drew (the
-        previous pose's preview, one frame old, rather than none)."""
+        is dragged: until ``drag_until``, a perf_counter time the frame must end by) and
+        take it. True when a level to draw over the frame was taken: one of the pose, or
+        while dragging any newer than the frame drew (the previous pose's preview, one
+        frame old, rather than none)."""
         if not self.awaiting:
             self._await = None
             return False
         (version, deadline, dragged), self._await = self._await, None
         if dragged:
-            deadline = frame_started + DRAG_FRAME_MS / 1000
+            deadline = drag_until
         start = time.perf_counter()
         came = self.worker.wait_for(version, deadline - start)
         self.waits.append((version, time.perf_counter() - start, came))

@@ -323,8 +323,8 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     """NeuralView.wait_preview (Viewer.before_swap, after ImGui drew the frame): a pose
     submitted after a pause makes its frame wait for that job's first level, at most
     ``preview_wait`` from the submission, and take it; poses streaming in (a dragged
-    slider) are previews alone, each frame waiting for its own until DRAG_FRAME_MS after
-    the frame began, and the first frame without a change submits the resting pose's
+    slider) are previews alone, each frame waiting for its own until it must end
+    (Viewer.drag_until), and the first frame without a change submits the resting pose's
     full render; no frame waits with ``preview_wait`` 0, for a preview that came while
     the frame was built (late_poll took it) or after a cancelled wait (a popup)."""
     import texvocab_viewer.neural.view as pn
@@ -386,7 +386,7 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
         v.submit_neural()
         clock[0] += 0.005  # the panels
         nv.late_poll()
-        assert nv.awaiting and nv.wait_preview(started)
+        assert nv.awaiting and nv.wait_preview(started + DRAG_FRAME_MS / 1000)
         assert worker.waits[-1] == (nv.version, pytest.approx(DRAG_FRAME_MS / 1000 - 0.005))
         assert worker.jobs[-1].preview_only and nv.frame.version == nv.version
     assert len(worker.waits) == 4 and len(worker.jobs) == 4
@@ -443,3 +443,20 @@ def test_the_preview_blit_rectangles():
     assert image_rects((10.0, 20.0, 10.0, 70.0), (32, 17), (1280, 800)) is None
     assert image_rects((1200.0, 20.0, 1300.0, 70.0), (32, 17), (1280, 800)) is None
     assert image_rects((10.0, 780.0, 110.0, 810.0), (32, 17), (1280, 800)) is None
+
+
+def test_a_dragged_frame_ends_its_wait_before_its_swap_would_pass_33_ms():
+    """Viewer.drag_until: a dragged frame waits for its preview until DRAG_FRAME_MS after
+    the frame began, less what recent frames took after their wait (the swap, input)."""
+    from texvocab_viewer.arguments import DRAG_FRAME_MS
+    from texvocab_viewer.state import load_viewer_data
+    from texvocab_viewer.viewer import Viewer
+
+    v = Viewer(load_viewer_data(None))
+    v._last_frame = (50.0, 0.0)  # the frame began at perf_counter 50 s
+    assert v.drag_until() == pytest.approx(50.0 + DRAG_FRAME_MS / 1000 - 0.004)
+    v.wait_tails.extend([0.002] * 32)
+    assert v.drag_until() == pytest.approx(50.0 + DRAG_FRAME_MS / 1000 - 0.002)
+    v.wait_tails.extend([0.009] * 8)  # slower swaps: the wait ends earlier
+    assert v.drag_until() == pytest.approx(50.0 + DRAG_FRAME_MS / 1000 - 0.009)
+    assert DRAG_FRAME_MS < 33
