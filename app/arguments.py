@@ -38,7 +38,7 @@ PREVIEW_WAIT_MAX_MS = 200.0
 #: preview until this many milliseconds after the frame began, less what recent frames
 #: took after their wait (the swap, input): the frame stays within 33 ms (30 frames per
 #: second); unless --neural-preview-wait is 0 (texvocab_viewer.viewer.Viewer.before_swap)
-DRAG_FRAME_MS = 31.0
+DRAG_FRAME_MS = 28.0
 
 #: smallest window the docked panels fit in; smallest offscreen image
 WINDOW_MIN = (320, 240)
