@@ -34,6 +34,11 @@ NEURAL_PROCESSES = min(2, os.cpu_count() or 1)
 NEURAL_PREVIEW_WAIT_MS = 40.0
 #: the longest wait accepted: a frame held longer would feel like a stall
 PREVIEW_WAIT_MAX_MS = 200.0
+#: while a slider is dragged, the frame that changes the pose waits for that pose's
+#: preview until this many milliseconds after the frame began, less what recent frames
+#: took after their wait (the swap, input): the frame stays within 33 ms (30 frames per
+#: second); unless --neural-preview-wait is 0 (texvocab_viewer.viewer.Viewer.before_swap)
+DRAG_FRAME_MS = 28.0
 
 #: smallest window the docked panels fit in; smallest offscreen image
 WINDOW_MIN = (320, 240)
@@ -126,7 +131,8 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         help=f"after a pause, the frame that changes the pose waits up to MS "
         f"milliseconds from the change for the neural preview, so the 3D view "
         f"and the preview show together (default {NEURAL_PREVIEW_WAIT_MS:g}; "
-        "0: never wait; never while a slider is dragged; bench/viewer_ui.py)",
+        "0: never wait, not even while a slider is dragged, when a frame "
+        f"waits up to {DRAG_FRAME_MS:g} ms from its start, less its swap; bench/viewer_ui.py)",
     )
     p.add_argument(
         "--neural-worker",

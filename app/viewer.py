@@ -14,7 +14,7 @@ import numpy as np
 from imgui_bundle import hello_imgui, imgui
 
 from texvocab.pipeline import march_settings
-from texvocab_viewer.arguments import NEURAL_NICE
+from texvocab_viewer.arguments import DRAG_FRAME_MS, NEURAL_NICE
 from texvocab_viewer.controls.camera import CameraControls
 from texvocab_viewer.controls.exports import ExportControls, follow_cameras
 from texvocab_viewer.controls.files import FileControls
@@ -95,6 +95,8 @@ class Viewer(CameraControls, FileControls, ExportControls):
         self.panel_cpu_ms: dict[str, float] = {}  # per panel: UI-thread CPU of its last draw
         self.idling_log: deque[tuple] = deque(maxlen=2000)  # (busy, playing, idling) per frame
         self._last_frame = None
+        self._waited_at = None  # when this frame's wait for a preview ended
+        self.wait_tails: deque[float] = deque(maxlen=32)  # seconds from a wait's end to the next frame
         self._scene_key = None
         self._scene_tex = None
         self.drawn_keys: dict[str, list[tuple[int, int, float]]] = {}
@@ -213,6 +215,9 @@ class Viewer(CameraControls, FileControls, ExportControls):
             self.frame_ms.append((now - self._last_frame[0]) * 1000)
             self.frame_cpu_ms.append((cpu - self._last_frame[1]) * 1000)
         self._last_frame = (now, cpu)
+        if self._waited_at is not None:  # the last frame waited for a preview: its tail
+            self.wait_tails.append(now - self._waited_at)
+            self._waited_at = None
         self.view_blit = None  # the 3D view panel sets it if it draws this frame
         self.poll_dialogs()
         self.follow_window_size()
@@ -243,10 +248,11 @@ class Viewer(CameraControls, FileControls, ExportControls):
 
     def before_swap(self) -> None:
         """After ImGui drew the frame, before the swap: when this frame changed the pose
-        after a pause, llvmpipe rasterises the frame while the UI waits for the pose's
-        preview (NeuralView.wait_preview), which is then drawn over the panel's image, so
-        the 3D view and the preview reach the screen together. Not with a popup open (it
-        could lie over the image)."""
+        (after a pause, or under a dragged slider), llvmpipe rasterises the frame while the
+        UI waits for the pose's preview (NeuralView.wait_preview; while dragging, at most
+        until DRAG_FRAME_MS after the frame began), which is then drawn over the panel's
+        image, so the 3D view and the preview reach the screen together. Not with a popup
+        open (it could lie over the image)."""
         nv = self.neural
         if nv is not None and not self._warmed:
             colour = hello_imgui.get_runner_params().imgui_window_params.background_color
@@ -259,7 +265,9 @@ class Viewer(CameraControls, FileControls, ExportControls):
             nv.cancel_wait()
             return
         gl_flush()  # the frame so far rasterises while the render process finishes
-        if not nv.wait_preview():
+        waited = nv.wait_preview(self.drag_until())
+        self._waited_at = time.perf_counter()
+        if not waited:
             return
         rects = image_rects(rect, nv.texture.size, *window_framebuffer())
         if rects is not None:
@@ -267,7 +275,17 @@ class Viewer(CameraControls, FileControls, ExportControls):
             blit_image(fbo.glo, rects)
             fbo.release()
             self.preview_blits += 1
+            nv.on_screen = nv.frame
         self.ctx.screen.use()
+
+    def drag_until(self) -> float:
+        """When a dragged frame's wait for its preview must end (perf_counter):
+        DRAG_FRAME_MS after the frame began, less the time recent frames took after their
+        wait (the swap, input; the 90th percentile of the last 32, 4 ms before any)."""
+        if self._last_frame is None:
+            return -np.inf
+        tail = float(np.percentile(self.wait_tails, 90)) if self.wait_tails else 0.004
+        return self._last_frame[0] + DRAG_FRAME_MS / 1000 - tail
 
     def submit_neural(self, force: bool = False, poll: bool = True) -> None:
         """Hand a changed pose or camera to the neural render worker (and, with ``poll``,

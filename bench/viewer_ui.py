@@ -11,6 +11,8 @@ running). Prints tables (per render, their spread, frames, panels) and a last li
     summary: worker=… idle_ui_cpu_share=… window_full_s=… shot_s=… window_over_shot=…
              first_level_ms=… dragging_frame_ms=… renders=… first_level_p75_ms=…
              first_within_target=k/N full_within_target=k/N preview_in_pose_frame=k/N
+             drag_preview_age_frames_p95=… drag_frames_within_1=k/N drag_frame_ms_p95=…
+             after_drag_full_s=…
 
 (medians over the renders, for the first worker run; issue targets: idle share <= 0.10
 of a core, window / shot <= 1.5, first level <= 50 ms, full level <= 0.5 s, UI frames
@@ -36,8 +38,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from empty_window import run_empty
 
-from texvocab_viewer.testing.bench import RENDERS  # pose changes timed per worker
+from texvocab_viewer.testing.bench import RENDERS, drag_stats  # pose changes timed per worker
 
 ROOT = Path(__file__).resolve().parent.parent
 FIRST_TARGET_MS, FULL_TARGET_S = 50.0, 0.5  # the viewer's targets: first level, full level
@@ -88,69 +91,6 @@ def run_window(
         if not report.is_file():
             sys.exit(f"error: the window wrote no report (rc {proc.returncode}):\n{proc.stderr[-3000:]}")
         return json.loads(report.read_text())
-
-
-def empty_window_child(size: str, seconds: float, out: str) -> None:
-    """Frame times of an empty hello_imgui window (one text line), idling off: what this
-    machine's GL and X server cost per frame before the viewer draws anything."""
-    import time
-
-    from imgui_bundle import hello_imgui, imgui, immapp
-
-    wall, cpu, process, t0 = [], [], [], time.perf_counter()
-
-    def gui():
-        wall.append(time.perf_counter())
-        cpu.append(time.thread_time())
-        process.append(time.process_time())  # with Mesa's raster threads
-        imgui.text("empty window")
-        if wall[-1] - t0 > seconds + 1:
-            hello_imgui.get_runner_params().app_shall_exit = True
-
-    rp = hello_imgui.RunnerParams()
-    rp.app_window_params.window_geometry.size = tuple(int(v) for v in size.split("x"))
-    rp.callbacks.show_gui = gui
-    rp.ini_disable = True
-    rp.fps_idling.enable_idling = False
-    from texvocab_viewer.window import WINDOW_MSAA_SAMPLES  # the viewer's framebuffer, not hello_imgui's 8x
-
-    rp.renderer_backend_options.open_gl_options.anti_aliasing_samples = WINDOW_MSAA_SAMPLES
-    immapp.run(rp)
-    keep = [i for i, t in enumerate(wall) if t - t0 > 1][1:]  # skip the first second
-    Path(out).write_text(
-        json.dumps(
-            {
-                "wall": [(wall[i] - wall[i - 1]) * 1000 for i in keep],
-                "cpu": [(cpu[i] - cpu[i - 1]) * 1000 for i in keep],
-                "process_cpu": [(process[i] - process[i - 1]) * 1000 for i in keep],
-            }
-        )
-    )
-
-
-def run_empty(size: str, seconds: float) -> dict:
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "empty.json"
-        subprocess.run(
-            [
-                shutil.which("xvfb-run"),
-                "-a",
-                "-s",
-                "-screen 0 1920x1200x24",
-                sys.executable,
-                __file__,
-                "--empty-window-child",
-                out.as_posix(),
-                "--size",
-                size,
-                "--seconds",
-                str(seconds),
-                "x",
-            ],
-            check=True,
-            capture_output=True,
-        )
-        return json.loads(out.read_text())
 
 
 def run_shot(checkpoint: str, pose: str, size: tuple[int, int]) -> float:
@@ -275,6 +215,18 @@ def panel_table(reps: dict) -> str:
     return "\n".join(lines)
 
 
+def _drag_keys(rep: dict) -> str:
+    """The dragging phase's summary keys (texvocab_viewer.testing.bench.drag_stats)."""
+    d = drag_stats(rep)
+    full = d["after_drag_full_s"]
+    return (
+        f"drag_preview_age_frames_p95={d['drag_preview_age_frames_p95']:.1f} "
+        f"drag_frames_within_1={d['drag_frames_within_1'][0]}/{d['drag_frames_within_1'][1]} "
+        f"drag_frame_ms_p95={d['drag_frame_ms_p95']:.1f} "
+        f"after_drag_full_s={'none' if full is None else f'{full:.2f}'}"
+    )
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("checkpoint", help="checkpoint.pt (its capture must exist)")
@@ -317,11 +269,7 @@ def main() -> int:
         action="store_true",
         help="skip the empty-window row (what GL and X cost with nothing drawn)",
     )
-    p.add_argument("--empty-window-child", default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
-    if args.empty_window_child:
-        empty_window_child(args.size, args.seconds, args.empty_window_child)
-        return 0
     empty = None if args.no_baseline else run_empty(args.size, args.seconds)
     workers = ("process", "thread") if args.worker == "both" else (args.worker,)
     reps = {}
@@ -394,13 +342,19 @@ def main() -> int:
                 f"{np.median(d['cpu_ms']):.1f} | "
                 f"{np.median(proc) if proc else float('nan'):.1f} |"
             )
-    print("\n| worker | dragging s | neural images shown while dragging | per second | levels |")
-    print("|---|---|---|---|---|")
+    print(
+        "\n| worker | dragging s | neural images shown while dragging | per second | levels | "
+        "ms from a job's start to its image (median) | shown pose's age in frames: median (p95) |"
+    )
+    print("|---|---|---|---|---|---|---|")
     for w, rep in reps.items():
         d = rep["dragging"]
-        shown = d.get("levels_shown", [])
-        secs = d.get("seconds", float("nan"))
-        print(f"| {w} | {secs:.1f} | {len(shown)} | {len(shown) / secs:.1f} | {sorted(set(shown))} |")
+        shown, secs = d.get("levels_shown", []), d.get("seconds", float("nan"))
+        took, age = d.get("level_ms") or [np.nan], d.get("preview_age_frames") or [np.nan]
+        print(
+            f"| {w} | {secs:.1f} | {len(shown)} | {len(shown) / secs:.1f} | {sorted(set(shown))} | "
+            f"{np.median(took):.0f} | {np.median(age):.0f} ({np.percentile(age, 95):.0f}) |"
+        )
     print("\nwhere a dragging frame's UI-thread CPU goes (median ms per frame):\n")
     print(panel_table(reps))
     if args.json:
@@ -417,8 +371,9 @@ def main() -> int:
         f"renders={len(first)} first_level_p75_ms={np.percentile(first, 75):.0f} "
         f"first_within_target={sum(f <= FIRST_TARGET_MS for f in first)}/{len(first)} "
         f"full_within_target={sum(f <= FULL_TARGET_S for f in full)}/{len(full)} "
-        f"preview_in_pose_frame={in_pose_frame(runs[w])}/{len(first)}"
+        f"preview_in_pose_frame={in_pose_frame(runs[w])}/{len(first)} {_drag_keys(reps[w])}"
     )
+
     return 0
 
 

@@ -33,7 +33,8 @@ The same protocol as the thread worker, over two pipes and one shared integer:
   while the UI holds one core the preview's shard gets most of the other; and they
   start a job only once its preview is sent (``after_preview``). bench/render_worker.py
   (no window, 1 torch thread per process, 256x132): a full level in 0.577 s in one
-  process, 0.412 s in two.
+  process, 0.412 s in two. A preview-only job (``RenderJob.preview_only``, a dragged
+  slider's) goes to the first shard alone.
 """
 
 from __future__ import annotations
@@ -227,10 +228,12 @@ class ProcessWorker(DeliveredLevels):
                 return
             self._version, self._busy = job.version, True
             size = None if n == 1 else (job.camera.height, job.camera.width)
-            self._merge = {"size": size, "canvas": None, "got": {}, "sent": set(), "done": set()}
-        self._newest.value = job.version
+            if job.preview_only:  # the preview is the first shard's alone (module docstring)
+                n = 1
+            self._merge = {"size": size, "canvas": None, "got": {}, "sent": set(), "done": set(), "shards": n}
+        self._newest.value = job.version  # the other shards drop what they were doing
         try:
-            for k, jobs in enumerate(self._jobs):
+            for k, jobs in enumerate(self._jobs[:n]):
                 jobs.send(
                     job
                     if n == 1
@@ -315,7 +318,7 @@ class ProcessWorker(DeliveredLevels):
             if kind == "done":
                 if current:
                     self._merge["done"].add(shard)
-                    self._busy = len(self._merge["done"]) < n
+                    self._busy = len(self._merge["done"]) < self._merge["shards"]
                     self._arrived.notify_all()  # a UI waiting for a level stops waiting
                 return current and not self._busy
             _, _, level, image, seconds, elapsed, preview, owned = message

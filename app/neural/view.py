@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 
@@ -20,8 +21,11 @@ from texvocab_viewer.neural.worker import ProgressiveWorker, RenderFrame, Render
 #: frame took under half this many seconds, a coarser one when it took more
 PLAYBACK_SECONDS = 0.5
 #: a submission follows a pause when the one before is at least this many seconds older:
-#: only then does its frame wait for the preview (NeuralView.preview_wait). Poses that
-#: stream in, as under a dragged slider, never hold a frame.
+#: its frame waits for the preview (NeuralView.preview_wait) and the job renders every
+#: level. Poses that stream in faster, as under a dragged slider, are rendered as
+#: previews alone, each frame waiting for its own until it must end (Viewer.before_swap,
+#: DRAG_FRAME_MS); the first frame without a change submits the full render of the pose
+#: it rests at.
 PREVIEW_PAUSE = 0.25
 
 
@@ -75,12 +79,18 @@ class NeuralView:
         #: (version, seconds waited, whether the preview came) per waiting frame
         self.waits: deque[tuple[int, float, bool]] = deque(maxlen=200)
         self._submitted_at = -np.inf  # perf_counter of the last submission
-        self._await: tuple[int, float] | None = None  # (version, deadline) for late_poll
+        #: (version, deadline, while dragging) of the preview this frame waits for
+        self._await: tuple[int, float, bool] | None = None
+        self._last_job: tuple[tuple, RenderJob] | None = None  # (view, job) submitted last
+        self._changed = False  # a job was submitted in this frame (before late_poll)
         self._playing = False
         #: where draw_neural_panel left room for the status line and the image (late_draw)
         self.canvas: dict | None = None
         #: where late_draw put the image this frame: x0, y0, x1, y1 (None: not drawn)
         self.image_rect: tuple[float, float, float, float] | None = None
+        #: the level this frame draws (late_draw's, or the preview drawn over it before
+        #: the swap): what is on screen once the frame is swapped
+        self.on_screen: RenderFrame | None = None
 
     @property
     def busy(self) -> bool:
@@ -119,39 +129,61 @@ class NeuralView:
         # while playing, a playback render in progress is let finish (a full render from
         # before Play is cancelled at once)
         wait = playing and self.worker.busy and self._playback_job and not force
+        now = time.perf_counter()
         if changed and not wait:
             self._key = key
             self._playback_job = playing
-            self.version += 1
-            self.labels[self.version] = self._current_label
-            self.keys[self.version] = view  # pose, camera, size, preset, background
-            for old in [v for v in self.labels if v < self.version - 64]:
-                del self.labels[old], self.keys[old]
-            levels = (self.playback_level,) if playing else None
-            now = time.perf_counter()
-            paused = now - self._submitted_at >= PREVIEW_PAUSE
-            self._await = (
-                (self.version, now + self.preview_wait)
-                if paused and not playing and self.preview_wait > 0
-                else None
-            )
+            dragged = not playing and not force and now - self._submitted_at < PREVIEW_PAUSE
             self._submitted_at = now
-            # playback renders one level and is never cancelled by the timeline anyway
-            self.worker.submit(
-                RenderJob(
-                    self.version,
-                    state.pose.copy(),
-                    state.trans.copy(),
-                    camera.to_texvocab_camera(w, h),
-                    self.march,
-                    levels,
-                    tuple(background),
-                    finish_preview=not playing,
-                )
-            )
+            waits = not playing and self.preview_wait > 0
+            deadline = now + self.preview_wait if not dragged else np.inf  # dragged: the frame's
+            wait = (deadline, dragged) if waits else None
+            self._submit(view, self._job(state, camera, w, h, view, playing, dragged), wait)
         self._playing = playing
         if poll:
             self._take(self.worker.poll())
+
+    def _job(self, state, camera, w: int, h: int, view: tuple, playing: bool, dragged: bool) -> RenderJob:
+        """The job of ``view``: playback's one level, a dragged pose's preview alone, or
+        every level; its version is set by :meth:`_submit`."""
+        return RenderJob(
+            0,
+            state.pose.copy(),
+            state.trans.copy(),
+            camera.to_texvocab_camera(w, h),
+            self.march,
+            (self.playback_level,) if playing else None,
+            view[5],
+            # playback renders one level and is never cancelled by the timeline anyway
+            finish_preview=not playing,
+            preview_only=dragged,
+        )
+
+    def _submit(self, view: tuple, job: RenderJob, wait: tuple[float, bool] | None) -> None:
+        """Submit ``job`` (of ``view``) as a new version; ``wait``: (deadline, while
+        dragging) of this frame's wait for its preview, or None."""
+        self.version += 1
+        self.labels[self.version] = self._current_label
+        self.keys[self.version] = view  # pose, camera, size, preset, background
+        for old in [v for v in self.labels if v < self.version - 64]:
+            del self.labels[old], self.keys[old]
+        self._await = None if wait is None else (self.version, *wait)
+        self._last_job = (view, replace(job, version=self.version))
+        self._changed = True
+        self.worker.submit(self._last_job[1])
+
+    def _rest(self) -> None:
+        """Once per frame (late_poll): when the last job is a dragged pose's preview alone
+        and this frame changed nothing, the pose rests (the slider was let go, or holds
+        still): submit its full render. Its preview is not finished if a newer pose
+        comes: that pose's preview is on screen or on its way."""
+        changed, self._changed = self._changed, False
+        last = self._last_job
+        if changed or last is None or not last[1].preview_only or not self.live or self._playing:
+            return
+        if last[0] != self._current:
+            return  # the view moved on without a submission
+        self._submit(last[0], replace(last[1], preview_only=False, finish_preview=False), None)
 
     def _take(self, frame: RenderFrame | None) -> None:
         if frame is not None:
@@ -163,6 +195,7 @@ class NeuralView:
         """After the frame's panels, before ImGui draws: take the newest level, so one
         that arrived while the frame was built is in it (:func:`late_draw`). A preview this
         frame was to wait for that came so counts as a wait of 0 s."""
+        self._rest()
         self._take(self.worker.poll())
         pending = self._await
         if pending is not None and self.frame is not None and self.frame.version >= pending[0]:
@@ -184,20 +217,25 @@ class NeuralView:
         """This frame does not wait for its preview (it shows a frame later)."""
         self._await = None
 
-    def wait_preview(self) -> bool:
+    def wait_preview(self, drag_until: float = -np.inf) -> bool:
         """After ImGui drew the frame, before the swap: if :attr:`awaiting`, wait for the
-        pose's preview until ``preview_wait`` seconds after its submission and take it.
-        True when a level of the pose was taken (the caller draws it over the frame)."""
+        pose's preview until ``preview_wait`` seconds after its submission (while a slider
+        is dragged: until ``drag_until``, a perf_counter time the frame must end by) and
+        take it. True when a level to draw over the frame was taken: one of the pose, or
+        while dragging any newer than the frame drew (the previous pose's preview, one
+        frame old, rather than none)."""
         if not self.awaiting:
             self._await = None
             return False
-        pending, self._await = self._await, None
+        (version, deadline, dragged), self._await = self._await, None
+        if dragged:
+            deadline = drag_until
         start = time.perf_counter()
-        came = self.worker.wait_for(pending[0], pending[1] - start)
-        self.waits.append((pending[0], time.perf_counter() - start, came))
+        came = self.worker.wait_for(version, deadline - start)
+        self.waits.append((version, time.perf_counter() - start, came))
         frame = self.worker.poll()
         self._take(frame)
-        return frame is not None and frame.version >= pending[0]
+        return frame is not None and (frame.version >= version or dragged)
 
     def _adapt_playback_level(self, frame: RenderFrame) -> None:
         if frame.elapsed < PLAYBACK_SECONDS / 2 and self.playback_level > 1:

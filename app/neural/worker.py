@@ -8,7 +8,8 @@ submission cancels the job in progress once its first level (the preview) is sho
 version is checked between levels and between ray chunks, and a finer level is
 delivered only if its version is still the newest. The preview of a superseded job is
 still shown (the panel labels it stale), so a dragged slider shows poses as it goes
-instead of none until it stops (``RenderJob.finish_preview``).
+instead of none until it stops (``RenderJob.finish_preview``); while it is dragged the
+viewer asks for the preview alone (``RenderJob.preview_only``).
 
 Torch in the worker runs with few intra-op threads (``threads``, default 1) so the UI
 thread keeps a core for drawing on small machines.
@@ -74,6 +75,10 @@ class RenderJob:
     shards: int = 1
     #: a shard after the first starts once the first has sent this job's preview
     after_preview: bool = False
+    #: render the first level (the preview) and stop: while a slider is dragged each pose
+    #: is superseded a frame later, and a finer level of it would only delay the next
+    #: pose's preview (NeuralView submits the full render once the pose rests)
+    preview_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -134,6 +139,8 @@ def model_renderer(model, march, levels=(8, 4, 2, 1)) -> LevelRenderer:
             )
         ):
             yield out
+            if job.preview_only:
+                return
             if i + 1 < count:  # a finer level follows: it searches this pose's own split
                 ctx.index.relayout()
 

@@ -135,6 +135,7 @@ def late_draw(viewer) -> None:
         banner = ""
         if nv.texture is not None:
             nv.image_rect, banner = _draw_image(draw, nv, *canvas["image"], line)
+            nv.on_screen = nv.frame
     finally:
         draw.pop_clip_rect()
     tooltip = nv.stale_tooltip() if banner and canvas.get("hovered") else ""

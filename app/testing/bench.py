@@ -17,8 +17,14 @@ Phases, in order:
 - ``after``: 1.5 s after the last render: how many frames the window drew (a delivered
   level wakes it for one frame, app/neural/wake.py).
 - ``dragging``: the left shoulder moves every frame as under a dragged slider, with the
-  window at full speed (input keeps it awake): UI frame times and CPU per frame, and
-  the neural images shown meanwhile (each pose's preview is finished, app/neural/worker.py).
+  window at full speed (input keeps it awake): UI frame times and CPU per frame, the
+  neural images shown meanwhile, and per frame the age of the pose the neural panel
+  shows, in UI frames (0: the pose this frame set, 1: the previous frame's, ...; a pose
+  from before the drag counts as older than its first frame).
+- ``settle``: the drag has stopped (the pose no longer changes); measured: seconds from
+  the swap of the last dragged frame to the swap of the first frame that shows the full
+  level of its pose (``after_drag_full_s``; None if it did not come within
+  ``SETTLE_MAX`` seconds).
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ RENDER_POSES = ("walk", "squat")
 RENDERS = 12  # default; alternating RENDER_POSES (bench:SECONDS:RES:RENDERS)
 AFTER = 1.5  # seconds watched after the last render ("after" phase)
 SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default --camera
+SETTLE_MAX = 10.0  # seconds the "settle" phase waits for the full level
 
 
 class BenchDriver(Driver):
@@ -51,7 +58,13 @@ class BenchDriver(Driver):
         self.drag_process_ms: list[float] = []  # the window process: UI thread + GL threads
         self.drag_panels: list[dict] = []  # UI-thread CPU ms per panel, per dragging frame
         self.drag_levels: list[int] = []  # the level of each new image shown while dragging
+        self.drag_level_ms: list[float] = []  # and ms from its job's start to its delivery
         self._drag_shown = None
+        #: per dragging frame, the age in UI frames of the pose the neural panel shows
+        self.drag_age: list[int] = []
+        self._pose_frame: dict[int, int] = {}  # pose version -> the dragging frame that set it
+        self._last_drag_swap = None  # when the last dragged frame was swapped
+        self._drag_seconds = None  # how long the drag lasted
         self.renders: list[dict] = []
         self._mark = None  # (wall, process CPU, worker CPU) at a phase's start
         self._last = None
@@ -90,6 +103,8 @@ class BenchDriver(Driver):
         rp = hello_imgui.get_runner_params()
         now = time.perf_counter()
         self.count += 1
+        if self.phase == "done":  # the app exits after this frame
+            return
         if self.phase == "warmup":
             rp.fps_idling.enable_idling = False
             delivered = 0 if v.neural is None else len(v.neural.worker.delivered)
@@ -119,11 +134,22 @@ class BenchDriver(Driver):
         if self.phase == "after":
             self._after_tick(now)
             return
+        if self.phase == "settle":  # the window idles as the viewer lets it (a level wakes it)
+            if now - self.t0 > SETTLE_MAX:
+                self.report["after_drag_full_s"] = None
+                self._done(rp)
+            return
         rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
+        if not self._nudge:  # the drag starts in this frame
+            self.t0 = now
+        if now - self.t0 > self.seconds:  # the drag stops: the pose set last frame stays
+            self.phase, self.t0, self._drag_seconds = "settle", now, now - self.t0
+            return
         shown = v.neural.frame
         if shown is not None and shown is not self._drag_shown:
             self._drag_shown = shown
             self.drag_levels.append(int(shown.level))
+            self.drag_level_ms.append(shown.elapsed * 1000)
         dt, self._last = (None if self._last is None else (now - self._last) * 1000), now
         process = self._clock()[1]  # the window process's CPU outside a render thread
         dp, self._last_process = (
@@ -138,8 +164,6 @@ class BenchDriver(Driver):
         self._nudge += 1
         z = -60.0 + 50.0 * abs((self._nudge % 60) / 30.0 - 1.0)  # sweep -60..-10 deg
         v.state.set_joint(16, (0.0, 0.0, z))
-        if now - self.t0 > self.seconds:
-            self._done(rp)
 
     def _start_render(self, now: float) -> None:
         v = self.viewer
@@ -163,9 +187,12 @@ class BenchDriver(Driver):
         """After a frame is on screen: the levels it showed for the first time (uploaded in
         this frame, before or while the panels drew) are on screen now."""
         nv, r = self.viewer.neural, self._render
+        now = time.perf_counter()
+        if self.phase in ("dragging", "settle"):
+            self._drag_swapped(now)
+            return
         if self.phase != "render" or r is None:
             return
-        now = time.perf_counter()
         r.setdefault("pose_frame_s", now - r["start"])  # the frame that changed the pose
         history = list(nv.history)
         for version, level, ms, elapsed, shape in history[r["seen"] :]:
@@ -180,6 +207,26 @@ class BenchDriver(Driver):
                     }
                 )
         r["seen"] = len(history)
+
+    def _drag_swapped(self, now: float) -> None:
+        """After a dragging frame's swap: the age of the pose the neural panel shows; in
+        the settle phase, whether the last pose's full level is on screen."""
+        nv, pose = self.viewer.neural, self.viewer.state.version
+        shown = nv.on_screen
+        key = None if shown is None else nv.keys.get(shown.version)
+        if self.phase == "settle":
+            if shown is not None and shown.level == 1 and key is not None and key[0] == pose:
+                self.report["after_drag_full_s"] = now - self._last_drag_swap
+                self.report["after_drag_render_s"] = shown.elapsed  # of that, the job's own
+                self._done(hello_imgui.get_runner_params())
+            return
+        if not self._nudge:  # the pose has not moved yet
+            return
+        i = len(self.drag_age)
+        self._pose_frame.setdefault(pose, i)
+        born = None if key is None else self._pose_frame.get(key[0])
+        self.drag_age.append(i - born if born is not None else i + 1)
+        self._last_drag_swap = now
 
     def _render_tick(self, now: float) -> None:
         nv = self.viewer.neural
@@ -213,9 +260,11 @@ class BenchDriver(Driver):
             }
             self.phase, self.t0 = "dragging", now
             self._drag_shown = self.viewer.neural.frame
+            hello_imgui.get_runner_params().fps_idling.enable_idling = False  # the next frame at once
 
     def _done(self, rp, error: str | None = None) -> None:
         v = self.viewer
+        self.phase = "done"
         self.report["ok"] = error is None
         if error:
             self.report["error"] = error
@@ -225,8 +274,10 @@ class BenchDriver(Driver):
             "cpu_ms": self.drag_cpu_ms,
             "process_cpu_ms": self.drag_process_ms,
             "levels_shown": self.drag_levels,
+            "preview_age_frames": self.drag_age,
+            "level_ms": self.drag_level_ms,
             "panel_cpu_ms": self.drag_panels,
-            "seconds": time.perf_counter() - self.t0,
+            "seconds": self._drag_seconds or time.perf_counter() - self.t0,
         }
         self.report["window"] = list(v.size)
         if v.neural is not None:
@@ -239,3 +290,17 @@ class BenchDriver(Driver):
             self.report["render_pid"] = getattr(v.neural.worker, "pid", os.getpid())
             self.report["errors"] = list(v.neural.worker.errors)
         rp.app_shall_exit = True
+
+
+def drag_stats(report: dict) -> dict:
+    """The dragging measurement's summary: p95 of the shown pose's age in UI frames, how
+    many dragging frames showed a pose at most one frame old, p95 of the frame times (ms),
+    and seconds from the drag's stop to the full level on screen (None: it did not come)."""
+    age = np.asarray(report["dragging"].get("preview_age_frames", []))
+    ms = np.asarray(report["dragging"]["frame_ms"])
+    return {
+        "drag_preview_age_frames_p95": float(np.percentile(age, 95)) if len(age) else float("nan"),
+        "drag_frames_within_1": (int((age <= 1).sum()), len(age)),
+        "drag_frame_ms_p95": float(np.percentile(ms, 95)) if len(ms) else float("nan"),
+        "after_drag_full_s": report.get("after_drag_full_s"),
+    }

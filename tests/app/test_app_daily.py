@@ -323,9 +323,12 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     """NeuralView.wait_preview (Viewer.before_swap, after ImGui drew the frame): a pose
     submitted after a pause makes its frame wait for that job's first level, at most
     ``preview_wait`` from the submission, and take it; poses streaming in (a dragged
-    slider) never make a frame wait, nor does ``preview_wait`` 0, a preview that came
-    while the frame was built (late_poll took it) or a cancelled wait (a popup)."""
+    slider) are previews alone, each frame waiting for its own until it must end
+    (Viewer.drag_until), and the first frame without a change submits the resting pose's
+    full render; no frame waits with ``preview_wait`` 0, for a preview that came while
+    the frame was built (late_poll took it) or after a cancelled wait (a popup)."""
     import texvocab_viewer.neural.view as pn
+    from texvocab_viewer.arguments import DRAG_FRAME_MS
     from texvocab_viewer.neural.view import NeuralView
     from texvocab_viewer.neural.worker import RenderFrame
     from texvocab_viewer.state import load_viewer_data
@@ -375,13 +378,26 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     assert worker.waits == [(nv.version, pytest.approx(0.03))]
     assert nv.frame.version == nv.version and nv.texture.size == (6, 4)  # shown this frame
     assert nv.waits[-1][0] == nv.version and nv.waits[-1][2] and not nv.awaiting
-    for step in range(3):  # a dragged slider: a pose every 20 ms
+    assert not worker.jobs[-1].preview_only and worker.jobs[-1].finish_preview
+    for step in range(3):  # a dragged slider: a pose every 20 ms, its preview alone
         clock[0] += 0.02
+        started = clock[0]  # the frame's start
         v.state.set_joint(16, (0.0, 0.0, -10.0 * (step + 1)))
         v.submit_neural()
+        clock[0] += 0.005  # the panels
         nv.late_poll()
-        assert not nv.awaiting and not nv.wait_preview()
-    assert len(worker.waits) == 1 and len(worker.jobs) == 4
+        assert nv.awaiting and nv.wait_preview(started + DRAG_FRAME_MS / 1000)
+        assert worker.waits[-1] == (nv.version, pytest.approx(DRAG_FRAME_MS / 1000 - 0.005))
+        assert worker.jobs[-1].preview_only and nv.frame.version == nv.version
+    assert len(worker.waits) == 4 and len(worker.jobs) == 4
+    nv.late_poll()  # a frame that changes nothing: the resting pose's full render
+    rest = worker.jobs[-1]
+    assert len(worker.jobs) == 5 and rest.version == nv.version and not nv.awaiting
+    assert not rest.preview_only and not rest.finish_preview and rest.levels is None
+    np.testing.assert_array_equal(rest.pose, worker.jobs[-2].pose)
+    assert nv.keys[nv.version] == nv.keys[nv.version - 1]
+    nv.late_poll()
+    assert len(worker.jobs) == 5  # once
     clock[0] += 0.3  # the slider rests, then moves again
     v.state.set_joint(16, (0.0, 0.0, 20.0))
     v.submit_neural()
@@ -389,25 +405,25 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     assert nv.awaiting and nv.wait_preview()
     assert worker.waits[-1] == (nv.version, pytest.approx(0.02))
     assert not nv.wait_preview()  # the next frame does not wait again
-    assert len(worker.waits) == 2
+    assert len(worker.waits) == 5
     clock[0] += 1.0  # a preview that comes while the frame is built: no wait, counted
     v.state.set_joint(16, (0.0, 0.0, 25.0))
     v.submit_neural()
     worker.frame = RenderFrame(nv.version, 8, np.zeros((4, 6, 3), np.float32), 0.01, 0.01)
     nv.late_poll()
     assert not nv.awaiting and not nv.wait_preview()
-    assert len(worker.waits) == 2 and nv.waits[-1] == (nv.version, 0.0, True)
+    assert len(worker.waits) == 5 and nv.waits[-1] == (nv.version, 0.0, True)
     clock[0] += 1.0  # a popup could lie over the image: the frame does not wait
     v.state.set_joint(16, (0.0, 0.0, 27.0))
     v.submit_neural()
     nv.cancel_wait()
-    assert not nv.awaiting and not nv.wait_preview() and len(worker.waits) == 2
+    assert not nv.awaiting and not nv.wait_preview() and len(worker.waits) == 5
     nv.preview_wait = 0.0
     clock[0] += 1.0
     v.state.set_joint(16, (0.0, 0.0, 30.0))
     v.submit_neural()
     assert not nv.awaiting and not nv.wait_preview()
-    assert len(worker.waits) == 2 and len(worker.jobs) == 8
+    assert len(worker.waits) == 5 and len(worker.jobs) == 9
 
 
 def test_the_preview_blit_rectangles():
@@ -427,3 +443,20 @@ def test_the_preview_blit_rectangles():
     assert image_rects((10.0, 20.0, 10.0, 70.0), (32, 17), (1280, 800)) is None
     assert image_rects((1200.0, 20.0, 1300.0, 70.0), (32, 17), (1280, 800)) is None
     assert image_rects((10.0, 780.0, 110.0, 810.0), (32, 17), (1280, 800)) is None
+
+
+def test_a_dragged_frame_ends_its_wait_before_its_swap_would_pass_33_ms():
+    """Viewer.drag_until: a dragged frame waits for its preview until DRAG_FRAME_MS after
+    the frame began, less what recent frames took after their wait (the swap, input)."""
+    from texvocab_viewer.arguments import DRAG_FRAME_MS
+    from texvocab_viewer.state import load_viewer_data
+    from texvocab_viewer.viewer import Viewer
+
+    v = Viewer(load_viewer_data(None))
+    v._last_frame = (50.0, 0.0)  # the frame began at perf_counter 50 s
+    assert v.drag_until() == pytest.approx(50.0 + DRAG_FRAME_MS / 1000 - 0.004)
+    v.wait_tails.extend([0.002] * 32)
+    assert v.drag_until() == pytest.approx(50.0 + DRAG_FRAME_MS / 1000 - 0.002)
+    v.wait_tails.extend([0.009] * 8)  # slower swaps: the wait ends earlier
+    assert v.drag_until() == pytest.approx(50.0 + DRAG_FRAME_MS / 1000 - 0.009)
+    assert DRAG_FRAME_MS < 33

@@ -15,6 +15,8 @@ from PIL import Image
 from tiny_runs import tiny_run
 from window_runs import PYTHON, ROOT, run_window
 
+from texvocab_viewer.testing.bench import drag_stats
+
 pytestmark = pytest.mark.slow  # Xvfb windows
 
 
@@ -169,6 +171,12 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(tiny_
     # those that came after ImGui drew the frame were drawn over it just before the swap
     # (as were other pauses' previews: the bench's resolution change, its dragging's start)
     assert rep["preview_blits"] >= sum(1 for r in waited if r["preview_wait"][0] > 0)
+    # while the slider is dragged, each frame shows the preview of its own pose or of the
+    # previous frame's (the bench's dragging measurement; the render processes', a thread
+    # shares the UI's interpreter), and the full level follows once the drag stops
+    within, frames = drag_stats(rep)["drag_frames_within_1"]
+    assert frames > 10 and (worker == "thread" or within >= 0.9 * frames), drag["preview_age_frames"]
+    assert rep["after_drag_full_s"] is not None
     # the levels' wakes leave the window idling
     assert rep["after_render"]["seconds"] >= 1.5 and rep["after_render"]["frames"] <= 6
     assert rep["idle"]["frames"] <= 4  # 1 s idle at 1 frame per second

@@ -92,6 +92,8 @@ def shard_renderer():
             mine |= now
             image[now] = 1 + job.shard
             yield level, image[::level, ::level].copy(), 0.001, mine[::level, ::level].copy()
+            if job.preview_only:
+                return
 
     return render
 
@@ -169,7 +171,8 @@ def test_later_shards_wait_for_the_preview_and_skip_jobs_superseded_by_then(tmp_
     """While a slider is dragged each pose is cancelled after its preview: the second
     shard starts a job only once the first has sent that preview, so it neither slows
     the preview nor works on poses already left. A playback job (no preview) starts on
-    both at once."""
+    both at once; a preview-only job (a dragged pose's) goes to the first alone, and is
+    done when it is."""
     monkeypatch.setenv("TEXVOCAB_TEST_SHARDS", str(tmp_path))  # the children inherit it
 
     def mark(name):
@@ -194,6 +197,10 @@ def test_later_shards_wait_for_the_preview_and_skip_jobs_superseded_by_then(tmp_
         submit(4, finish_preview=False)  # as a playback render: no preview to wait for
         wait(lambda: not worker.busy)
         assert mark("start-4-1") < mark("preview-4")
+        submit(5, preview_only=True)
+        wait(lambda: not worker.busy)
+        assert [lv for v, lv in worker.delivered if v == 5] == [8]
+        assert (tmp_path / "start-5-0").exists() and not (tmp_path / "start-5-1").exists()
     finally:
         assert worker.stop()
 
