@@ -132,7 +132,8 @@ def load(args):
 def items_of(cap, settings, frames: int):
     """[(label, pose, trans, camera, gt (H, W, 3), mask (H, W))]: held-out views of novel
     (else training) frames, plus generated preset poses on a synthetic capture."""
-    views = list(settings.data.eval_views)[:2]
+    # a single-camera capture holds out frames, not views: its frames are seen from view 0
+    views = [v for v in settings.data.eval_views if v < cap.num_views][:2] or [0]
     pool = list(cap.novel_frames) or list(cap.train_frames)
     picks = sorted({pool[int(i)] for i in np.linspace(0, len(pool) - 1, max(frames - 1, 1))})
     items = [
