@@ -69,20 +69,18 @@ def measure(capture, overrides: list[str], steps: int, warmup: int, plain_softpl
     s = Settings(train=TrainSettings(iterations=steps + warmup)).with_overrides(overrides)
     t0 = time.perf_counter()
     trainer = Trainer(capture, s, Path("/tmp/texvocab_train_speed"), progress=False)
-    swap = plain(trainer.model, plain_softplus)  # the activation has no parameters to optimise
-    swap.__enter__()
     pf = trainer.model.pose_feature
     if not getattr(pf.encoder, "trainable", True):
         pf.feature_maps(torch.arange(capture.num_train))
     setup = time.perf_counter() - t0
-    for _ in range(warmup):
-        trainer.train_step()
-    t0, cache0 = time.perf_counter(), trainer.cache_seconds
-    evals = 0
-    for _ in range(steps):
-        evals += trainer.train_step()["evals"]
-    wall = time.perf_counter() - t0
-    swap.__exit__(None, None, None)
+    with plain(trainer.model, plain_softplus):  # the activation has no parameters to optimise
+        for _ in range(warmup):
+            trainer.train_step()
+        t0, cache0 = time.perf_counter(), trainer.cache_seconds
+        evals = 0
+        for _ in range(steps):
+            evals += trainer.train_step()["evals"]
+        wall = time.perf_counter() - t0
     per_step = wall / steps
     steady = (wall - (trainer.cache_seconds - cache0)) / steps
     return {

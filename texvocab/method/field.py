@@ -16,6 +16,7 @@ density (Yariv et al. 2021).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass
 from typing import ClassVar
 
@@ -33,10 +34,11 @@ VIEW_FRAMES = ("world", "body")
 PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16, "auto": None}
 
 
+@functools.cache
 def native_bfloat16() -> bool:
     """Whether this CPU multiplies bfloat16 natively (AMX or AVX512-BF16, from Linux's
-    /proc/cpuinfo; False where it cannot be read): elsewhere bf16 products are emulated
-    and slower than float32."""
+    /proc/cpuinfo, read once; False where it cannot be read): elsewhere bf16 products are
+    emulated and slower than float32."""
     try:
         with open("/proc/cpuinfo") as f:
             flags = set(f.read().split())

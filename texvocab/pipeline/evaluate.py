@@ -58,15 +58,8 @@ def render_view_rgba(model, pose, trans, camera, march, scale: float = 1.0):
         ctx = model.pose_feature.context(pose, trans)
         shell = prepare_shell(march, ctx.vertices, model.body.faces, ctx.index)  # its path's
         cam = camera if scale == 1.0 else camera.scaled(scale)
-        out = render_image(
-            model.for_pose(ctx, march.precision),
-            cam,
-            ctx.vertices,
-            model.body.faces,
-            march,
-            shell=shell,
-            index=ctx.index,
-        )
+        field = model.for_pose(ctx, march.precision)
+        out = render_image(field, cam, ctx.vertices, model.body.faces, march, shell=shell, index=ctx.index)
         rgba = torch.cat([out.rgb, out.alpha[..., None]], -1)
         if scale != 1.0:
             rgba = (

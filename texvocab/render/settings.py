@@ -151,7 +151,7 @@ class MarchSettings:
     "shell" marches every ray through the shell front to back, "raster" is the
     surface-guided marcher (band, residual rays, the rest marched). ``precision`` is the
     number format the field's MLPs are evaluated in when an image is rendered
-    (``AvatarField.for_pose``; "float32" or "bfloat16"); the marchers themselves compute
+    (``AvatarField.for_pose``; "float32", "bfloat16" or "auto"); the marchers themselves compute
     in float32."""
 
     guide: str = "shell"
