@@ -3,8 +3,10 @@ mask of held-out frames, read several ways to tell a soft edge, a bias in or out
 offset from the shape errors that remain.
 
     .venv/bin/python bench/silhouette_errors.py CKPT [--frames 4] [--view 0] [--max-shift 5]
+        [--split held-out|training]
 
-Per frame (the capture's held-out frames, spread; rendered with the checkpoint's knobs):
+Per frame (the capture's held-out frames, or with ``--split training`` its training
+frames at their recorded poses, spread; rendered with the checkpoint's knobs):
 
 - IoU of opacity > 0.3, 0.5 and 0.7 against the mask (a soft edge moves these apart);
 - IoU of opacity > 0.5 against the mask eroded and dilated by 1 and 2 px (a silhouette
@@ -69,12 +71,19 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=4)
     ap.add_argument("--view", type=int, default=0)
     ap.add_argument("--max-shift", type=int, default=5)
+    ap.add_argument(
+        "--split",
+        choices=("held-out", "training"),
+        default="held-out",
+        help="which frames: a shape error of the held-out segment shows there only, a learned offset in both",
+    )
     args = ap.parse_args(argv)
     avatar = load_avatar(args.checkpoint, progress=False)
     model, cap = avatar.model, avatar.capture
     march = march_settings(avatar.settings)
-    frames = spread(list(range(cap.num_train, cap.num_frames)), args.frames)
-    print(f"β = {float(model.beta.detach()) * 1000:.2f} mm; view {args.view}; held-out frames {frames}\n")
+    pool = range(cap.num_train, cap.num_frames) if args.split == "held-out" else range(cap.num_train)
+    frames = spread(list(pool), args.frames)
+    print(f"β = {float(model.beta.detach()) * 1000:.2f} mm; view {args.view}; {args.split} frames {frames}\n")
     keys = None
     rows = []
     for t in frames:
