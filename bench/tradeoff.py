@@ -77,6 +77,8 @@ GUIDED_KNOBS = {
 def march_of(knobs: dict, base: MarchSettings) -> MarchSettings:
     keys = {"coarse_samples", "fine_samples", "early_stop_eps", "shell_width", "guide"} | GUIDED_KNOBS
     m = base.replace(**{k: v for k, v in knobs.items() if k in keys})
+    if "shell_scale" in knobs and "shell_width" not in knobs:  # a preset's share of the field's shell
+        m = m.replace(shell_width=knobs["shell_scale"] * base.shell_width)
     if m.guide == "shell" and base.guide != "shell":  # the shell marcher's own shell grid
         m = m.replace(shell_voxel=ShellSettings.voxel, shell_exact=ShellSettings.exact)
     return m

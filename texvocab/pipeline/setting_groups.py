@@ -123,7 +123,16 @@ class RenderSettings:
         1e-3, within(0, 1, open_high=True), doc="a ray stops once its transmittance is below this"
     )
     shell_width: float | None = knob(
-        None, within(0, 1, open_low=True, unit=" m"), doc="the marcher's δ (m); none: field.shell_width"
+        None,
+        within(0, 1, open_low=True, unit=" m"),
+        doc="the marcher's δ (m); none: render.shell_scale × field.shell_width",
+    )
+    shell_scale: float = knob(
+        1.0,
+        within(0, 1, open_low=True),
+        doc="where render.shell_width is none, the marcher's δ as a fraction of the field's "
+        "shell: narrower is faster and cuts off surface the field grew farther from the "
+        "body than δ (an avatar trained with a wider shell keeps its share)",
     )
     guide: Guide = knob(
         "raster",
