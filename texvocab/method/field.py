@@ -80,7 +80,16 @@ class FieldSettings:
     shell_width: float = knob(
         0.04,
         within(0, 1, open_low=True, unit=" m"),
-        doc="points farther from the body count as empty space (m)",
+        doc="points farther from the body count as empty space (m); with shell_coverage "
+        "the narrowest shell, widened at the start of training to reach the masks",
+    )
+    shell_coverage: float | None = knob(
+        0.97,
+        within(0, 1, open_low=True),
+        doc="a new run widens shell_width (in 1 cm steps, up to 12 cm) until this share of "
+        "the training masks' pixels see the posed body within it, so clothing and hair off "
+        "the body (or a fit centimetres off) stay inside the field; none: shell_width as "
+        "given (texvocab.pipeline.shell_fit)",
     )
     view_frame: str = knob(
         "world",

@@ -128,6 +128,7 @@ LEGACY: dict[str, object] = {
     "train.band_newton": False,
     "train.shell_voxel": 0.01,
     "vocab.pose_condition": "global",
+    "field.shell_coverage": None,
 }
 
 

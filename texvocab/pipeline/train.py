@@ -38,6 +38,7 @@ from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures, train_views
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
+from texvocab.pipeline.shell_fit import fit_shell
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
 from texvocab.render import render_rays_banded
 
@@ -85,6 +86,9 @@ class Trainer:
             raise TexvocabError(f"--out {out_dir}: is a file; expected a run folder")
         self.views = train_views(capture, settings)
         capture.check_image_sizes(capture.train_frames, self.views)
+        # the shell from the data (field.shell_coverage), before anything reads its width
+        settings, self.shell_fit = fit_shell(capture, settings, self.views)
+        self.s = settings
         self.textures = load_textures(capture, settings, progress)
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
             torch.manual_seed(settings.train.seed)
