@@ -127,7 +127,7 @@ def staged(stages: Stages):
     pf = field_mod.PoseField
     call, sdf_rgb = pf.__call__, pf.sdf_rgb
     pf.__call__ = lambda self, p, d: stages.field_call(lambda: call(self, p, d), p)
-    pf.sdf_rgb = lambda self, p, d: stages.field_call(lambda: sdf_rgb(self, p, d), p)
+    pf.sdf_rgb = lambda self, p, d, **kw: stages.field_call(lambda: sdf_rgb(self, p, d, **kw), p)
     try:
         yield stages
     finally:
@@ -136,16 +136,18 @@ def staged(stages: Stages):
             setattr(owner, attr, fn)
 
 
-def frame_stages(model, settings, capture, frames: int, repeats: int):
-    """Per-frame means of each stage of the default render path (guided, ``fast`` knobs)."""
-    from render_speed import items_of  # bench/ sibling
+def frame_stages(model, settings, capture, frames: int, repeats: int, *extra: str, size: int | None = None):
+    """Per-frame means of each stage of the default render path (guided, ``fast`` knobs,
+    with the render knobs ``extra`` as ``name=value``: MarchSettings' flat names)."""
+    from render_speed import _value, items_of, resized  # bench/ sibling
 
     from texvocab.pipeline.settings import PRESETS, march_settings
     from texvocab.render import render_image
 
     knobs = [f"{k}={v}" for k, v in PRESETS["fast"].items() if k != "image_scale"]
     march = march_settings(settings.with_overrides(knobs + ["guide=raster"]))
-    items = items_of(capture, settings, frames)
+    march = march.replace(**{k: _value(v) for k, v in (e.split("=", 1) for e in extra)})
+    items = resized(items_of(capture, settings, frames), size)
     best = None
     for _ in range(max(repeats, 1)):
         st = Stages()
@@ -154,7 +156,12 @@ def frame_stages(model, settings, capture, frames: int, repeats: int):
             for _, pose, trans, cam, _, _ in items:
                 ctx = st.wrap("pose context", model.pose_feature.context)(pose, trans)
                 st.wrap("render other", render_image)(
-                    model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march, index=ctx.index
+                    model.for_pose(ctx, march.precision),
+                    cam,
+                    ctx.vertices,
+                    model.body.faces,
+                    march,
+                    index=ctx.index,
                 )
             total = time.perf_counter() - t0
         if best is None or total < best[0]:
@@ -230,6 +237,14 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=40, help="untimed training steps first")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--gemm-seconds", type=float, default=0.6, help="time spent on each GEMM rate")
+    p.add_argument(
+        "--before",
+        default=None,
+        metavar="KNOB=VALUE,...",
+        help="also time the frame with these render knobs (e.g. surface_reuse=false), in the same "
+        "run, passes alternating: a before and after table",
+    )
+    p.add_argument("--size", type=int, default=None, help="render at N x N (the cameras scaled)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     budget_blas_threads(1)
@@ -247,9 +262,25 @@ def main(argv=None) -> int:
     print(f"| sgemm 23000×128 · 128×128 (the MLPs' shape) | {limits['sgemm_mlp']:.0f} |")
     print(f"| bf16 23000×128 · 128×128 | {limits['bf16_mlp']:.0f} |\n")
     print(f"The field's MLPs: {flop / 1e6:.3f} MFLOP per point.\n")
-    st, total, n, what = frame_stages(model, av.settings, av.capture, args.frames, args.repeats)
-    print(f"## a frame ({what}; guided marcher, `fast` knobs; per frame)\n")
-    table(st, total, n, flop, limits)
+    if args.before:
+        before = args.before.split(",")
+        best = {}
+        for _ in range(max(args.repeats, 1)):  # alternate, so both see the same machine
+            for name, extra in (("before", before), ("after", [])):
+                got = frame_stages(model, av.settings, av.capture, args.frames, 1, *extra, size=args.size)
+                if name not in best or got[1] < best[name][1]:
+                    best[name] = got
+        for name, extra in (("before", before), ("after", [])):
+            st, total, n, what = best[name]
+            knobs = ", ".join(extra) or "the defaults"
+            print(f"## a frame, {name} ({what}; guided marcher, `fast` knobs, {knobs}; per frame)\n")
+            table(st, total, n, flop, limits)
+    else:
+        st, total, n, what = frame_stages(
+            model, av.settings, av.capture, args.frames, args.repeats, size=args.size
+        )
+        print(f"## a frame ({what}; guided marcher, `fast` knobs; per frame)\n")
+        table(st, total, n, flop, limits)
     frame_s = total / n
     rates = f"sgemm_gflops={limits['sgemm']:.0f} bf16_gflops={limits['bf16']:.0f}"
     if args.steps:

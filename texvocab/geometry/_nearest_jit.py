@@ -2,15 +2,16 @@
 of each query point, by depth-first search of the implicit box hierarchy.
 
 :func:`nearest_faces` (then :func:`closest_and_distance` and :func:`interpolate` for the
-fields of the result), compiled by numba (``nogil``, so the index's thread
-pool runs chunks truly in parallel; ``cache``, so a process loads the machine code from
-``__pycache__`` instead of compiling it again, about 3 s the first time). Per point:
-the best squared distance starts at the search bound; nodes are visited nearest box
-first (children pushed farthest first), and a node is dropped when the distance from
-the point to its box exceeds the best so far. A box contains every face below it, so no
-face that could be the closest is ever dropped: the result is exact. The triangle test
-is Ericson's closest-point region test (Real-Time Collision Detection, 5.1.5), the same
-formulas as ``texvocab.geometry.surface._closest_vw``, with zero-area faces tested as their three
+fields of the result; :func:`on_faces` where the closest face is known already), compiled
+by numba (``nogil``, so the index's thread pool runs chunks truly in parallel; ``cache``,
+so a process loads the machine code from ``__pycache__`` instead of compiling it again,
+about 3 s the first time). Per point: the best squared distance starts at the search
+bound; nodes are visited nearest box first (children pushed farthest first), and a node is
+dropped when the distance from the point to its box exceeds the best so far. A box
+contains every face below it, so no face that could be the closest is ever dropped: the
+result is exact. The triangle test is Ericson's closest-point region test (Real-Time
+Collision Detection, 5.1.5), the same formulas as
+``texvocab.geometry.surface._closest_vw``, with zero-area faces tested as their three
 edges.
 """
 
@@ -157,6 +158,18 @@ def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_ou
                 sp += 1
         slot[i] = best_slot
         v_out[i], w_out[i], d2_out[i] = bv, bw, best
+
+
+@njit(cache=True, nogil=True)
+def on_faces(x, known, bound2, table, slot, v_out, w_out, d2_out):
+    """The closest point of each point x (M, 3) on its known closest face slot known (M,)
+    (no search: a point on that face, as a rasterised hit, or one an earlier query
+    answered): v, w, d² as :func:`nearest_faces` writes them, slot -1 beyond squared
+    distance ``bound2``."""
+    for i in range(x.shape[0]):
+        v, w, d2 = _closest_on_face(x[i, 0], x[i, 1], x[i, 2], table, known[i])
+        slot[i] = known[i] if d2 <= bound2 else -1
+        v_out[i], w_out[i], d2_out[i] = v, w, d2
 
 
 @njit(cache=True, nogil=True)
