@@ -136,10 +136,20 @@ def staged(stages: Stages):
             setattr(owner, attr, fn)
 
 
-def frame_stages(model, settings, capture, frames: int, repeats: int, *extra: str, size: int | None = None):
+def frame_stages(
+    model,
+    settings,
+    capture,
+    frames: int,
+    repeats: int,
+    *extra: str,
+    size: int | None = None,
+    plain: bool = False,
+):
     """Per-frame means of each stage of the default render path (guided, ``fast`` knobs,
-    with the render knobs ``extra`` as ``name=value``: MarchSettings' flat names)."""
-    from render_speed import _value, items_of, resized  # bench/ sibling
+    with the render knobs ``extra`` as ``name=value``: MarchSettings' flat names; ``plain``:
+    the closest-face search's kernel as it was, render_speed.plain_search)."""
+    from render_speed import _value, items_of, plain_search, resized  # bench/ sibling
 
     from texvocab.pipeline.settings import PRESETS, march_settings
     from texvocab.render import render_image
@@ -151,7 +161,7 @@ def frame_stages(model, settings, capture, frames: int, repeats: int, *extra: st
     best = None
     for _ in range(max(repeats, 1)):
         st = Stages()
-        with staged(st), torch.no_grad():
+        with staged(st), torch.no_grad(), plain_search(plain):
             t0 = time.perf_counter()
             for _, pose, trans, cam, _, _ in items:
                 ctx = st.wrap("pose context", model.pose_feature.context)(pose, trans)
@@ -241,8 +251,9 @@ def main(argv=None) -> int:
         "--before",
         default=None,
         metavar="KNOB=VALUE,...",
-        help="also time the frame with these render knobs (e.g. surface_reuse=false), in the same "
-        "run, passes alternating: a before and after table",
+        help="also time the frame with these render knobs (e.g. surface_reuse=false) and the "
+        "closest-face kernel as it was, in the same run, passes alternating: a before and an "
+        "after table",
     )
     p.add_argument("--size", type=int, default=None, help="render at N x N (the cameras scaled)")
     args = p.parse_args(argv)
@@ -267,7 +278,16 @@ def main(argv=None) -> int:
         best = {}
         for _ in range(max(args.repeats, 1)):  # alternate, so both see the same machine
             for name, extra in (("before", before), ("after", [])):
-                got = frame_stages(model, av.settings, av.capture, args.frames, 1, *extra, size=args.size)
+                got = frame_stages(
+                    model,
+                    av.settings,
+                    av.capture,
+                    args.frames,
+                    1,
+                    *extra,
+                    size=args.size,
+                    plain=name == "before",
+                )
                 if name not in best or got[1] < best[name][1]:
                     best[name] = got
         for name, extra in (("before", before), ("after", [])):

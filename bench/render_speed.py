@@ -23,17 +23,18 @@ path as it is now (the surface-guided marcher, guide=raster, at the ``fast`` pre
 knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default, activations free
 of subnormal numbers, ``NormalSoftplus``, and ``surface_reuse``: the field's projection
 takes the closest faces the raster and the residual rays' mesh queries found);
-``previous``: the same path before that reuse and the two changes beside it (``BEFORE``:
+``previous``: the same path before that reuse and the changes beside it (``BEFORE``:
 ``surface_reuse=false``, every point searched; ``residual_groups=1``, the residual rays'
-quadrature in one padded array; ``fallback_segment=8``); the other paths run with torch's
-nn.Softplus and float32 — ``shell``: the shell marcher (guide=shell) at the ``fast``
-preset; ``quality``: the shell marcher at the ``quality`` preset; ``reference``: the
-uniform 64+32 marcher in the body's box — and prints per path seconds, field evaluations,
-PSNR against the truth and against the reference, and as its last line ``summary: new_s=…
-previous_s=… reference_s=… new_evals=… previous_evals=… reference_evals=… speedup=…
-psnr_delta_vs_quality_db=… psnr_delta_db=…`` (per-frame means; speedup = previous_s /
-new_s; psnr_delta_db = the new path's PSNR against the truth minus the previous path's).
-``--size N`` renders at N×N (the capture's cameras scaled).
+quadrature in one padded array; ``fallback_segment=8``; and the closest-face search's
+kernel as it was, ``nearest_faces_plain``, :func:`plain_search`); the other paths run with
+torch's nn.Softplus and float32 — ``shell``: the shell marcher (guide=shell) at the
+``fast`` preset; ``quality``: the shell marcher at the ``quality`` preset; ``reference``:
+the uniform 64+32 marcher in the body's box — and prints per path seconds, field
+evaluations, PSNR against the truth and against the reference, and as its last line
+``summary: new_s=… previous_s=… reference_s=… new_evals=… previous_evals=…
+reference_evals=… speedup=… psnr_delta_vs_quality_db=… psnr_delta_db=…`` (per-frame means;
+speedup = previous_s / new_s; psnr_delta_db = the new path's PSNR against the truth minus
+the previous path's). ``--size N`` renders at N×N (the capture's cameras scaled).
 
 CKPT's capture is the one recorded in the checkpoint unless --capture is given. Without
 CKPT and --capture a small synthetic capture (6 frames, 4 views, 256²) is made in a
@@ -287,6 +288,20 @@ def plain_softplus(model, plain: bool):
             net[i] = m
 
 
+@contextlib.contextmanager
+def plain_search(plain: bool):
+    """With ``plain``, the mesh queries search with the closest-face kernel as it was
+    (:func:`~texvocab.geometry._nearest_jit.nearest_faces_plain`: the same answers bit for
+    bit, slower) for the duration: the ``previous`` path."""
+    from texvocab.geometry import _nearest_jit, surface
+
+    surface.nearest_faces = _nearest_jit.nearest_faces_plain if plain else _nearest_jit.nearest_faces
+    try:
+        yield
+    finally:
+        surface.nearest_faces = _nearest_jit.nearest_faces
+
+
 def compare(
     model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "bfloat16"
 ) -> int:
@@ -324,7 +339,7 @@ def compare(
         for name, march in paths.items():
             best = None
             for _ in range(max(repeats, 1)):
-                with plain_softplus(model, name not in ("new", "previous")):
+                with plain_softplus(model, name not in ("new", "previous")), plain_search(name == "previous"):
                     img, row = timed_render(model, item, march)
                 if best is None or row["total"] < best[1]["total"]:
                     best = (img, row)

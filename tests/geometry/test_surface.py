@@ -342,3 +342,27 @@ def test_known_faces_give_the_searched_projection(body, posed):
     far = verts[:5] + np.array([0.0, 0.0, 0.5])
     out = index.project(far, max_distance=0.03, known=np.zeros(5, dtype=np.int64))
     assert (out.face == -1).all() and np.isinf(out.distance).all()
+
+
+def test_the_search_kernel_matches_the_plain_one_bit_for_bit(posed):
+    """nearest_faces (children beyond the best never pushed, sorted as measured) visits
+    and drops what nearest_faces_plain does: the same slots, v, w and d² for points on,
+    near and far from the body, with and without a search bound."""
+    from texvocab.geometry._nearest_jit import nearest_faces, nearest_faces_plain
+
+    verts, _, index = posed
+    rng = np.random.default_rng(5)
+    base = verts[rng.integers(0, len(verts), 300)]
+    d = rng.normal(size=(300, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    along = base[:, None] + np.linspace(-0.04, 0.04, 9)[None, :, None] * d[:, None]  # along rays
+    x = np.concatenate([along.reshape(-1, 3), rng.uniform(verts.min(0) - 0.2, verts.max(0) + 0.2, (500, 3))])
+    tables = (index._box_lo, index._box_hi, index._box_offset, index._table, index._slot_face)
+    for bound in (0.025, np.inf):
+        outs = []
+        for search in (nearest_faces, nearest_faces_plain):
+            out = np.empty(len(x), np.int64), np.empty(len(x)), np.empty(len(x)), np.empty(len(x))
+            search(np.ascontiguousarray(x), bound * bound, *tables, *out)
+            outs.append(out)
+        assert all(np.array_equal(a, b) for a, b in zip(*outs)), bound
+        assert (outs[0][0] >= 0).any() and ((outs[0][0] < 0).any() or bound == np.inf)
