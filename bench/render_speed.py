@@ -326,8 +326,8 @@ def compare(
     print(
         f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
         f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
-        f"{max(repeats, 1)} per frame, incl. pose context and shell; PSNR in the mask's "
-        "bounding box.\n"
+        f"{max(repeats, 1)} per frame (the paths in turn), incl. pose context and shell; PSNR "
+        "in the mask's bounding box.\n"
     )
     print("| path | frame | seconds | field evals | PSNR vs truth | PSNR vs reference |")
     print("|---|---|---|---|---|---|")
@@ -336,14 +336,14 @@ def compare(
         box = mask_bbox(item[5])
         ref_img, ref_row = reference_render(model, item, 64, 32)
         results = {"reference": (ref_img, ref_row)}
-        for name, march in paths.items():
-            best = None
-            for _ in range(max(repeats, 1)):
+        # the repeats take the paths in turn, so that each path's best sees the same load
+        # on a shared machine (the paths one after the other drifted by 10-20 %)
+        for _ in range(max(repeats, 1)):
+            for name, march in paths.items():
                 with plain_softplus(model, name not in ("new", "previous")), plain_search(name == "previous"):
                     img, row = timed_render(model, item, march)
-                if best is None or row["total"] < best[1]["total"]:
-                    best = (img, row)
-            results[name] = best
+                if name not in results or row["total"] < results[name][1]["total"]:
+                    results[name] = (img, row)
         for name, (img, row) in results.items():
             p_gt = evaluate_pair(img, item[4], item[5])["psnr_bbox"]
             p_ref = psnr(crop_to_bbox(img, box), crop_to_bbox(ref_img, box))

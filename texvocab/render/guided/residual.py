@@ -129,7 +129,9 @@ def _refine(index, origin, dirs, t_c, d_c, f_c, low, first, end, cap: float):
     d = d_c[:, :-1, None].expand_as(t).clone()
     f = f_c[:, :-1, None].expand_as(t).clone()
     new = keep & (k > 0)
-    d[new], f[new] = mesh_distance_faces(index, points_along(origin, dirs, t)[new], cap)
+    r, c, j = torch.nonzero(new, as_tuple=True)  # the new samples' points only
+    at = points_along(origin if origin.dim() == 1 else origin[r], dirs[r], t[r, c, j])
+    d[new], f[new] = mesh_distance_faces(index, at, cap)
     t = torch.cat([t.reshape(R, -1), t_c.gather(1, end[:, None])], 1)
     d = torch.cat([d.reshape(R, -1), d_c.gather(1, end[:, None])], 1)
     f = torch.cat([f.reshape(R, -1), f_c.gather(1, end[:, None])], 1)
