@@ -84,14 +84,21 @@ class Stages:
         self.current: list[str] = []
 
     def wrap(self, name: str, fn):
+        """``fn`` timed as stage ``name``, exclusive of the stages called inside it (whose
+        time the stage around them loses: the fallback march builds the shell bounds, the
+        render calls every stage)."""
+
         def timed(*args, **kwargs):
             self.current.append(name)
             t0 = time.perf_counter()
             try:
                 return fn(*args, **kwargs)
             finally:
-                self.seconds[name] += time.perf_counter() - t0
+                spent = time.perf_counter() - t0
+                self.seconds[name] += spent
                 self.current.pop()
+                if self.current:
+                    self.seconds[self.current[-1]] -= spent
 
         return timed
 
@@ -204,15 +211,14 @@ def step_stages(capture, settings, steps: int, warmup: int, out_dir: str):
 
 
 def table(st: Stages, total: float, n: int, flop: float, limits: dict, backward: bool = False) -> None:
-    """Print the stage table, per frame (or step): nested stages are subtracted."""
+    """Print the stage table, per frame (or step); each stage's time excludes the stages
+    nested in it (Stages.wrap)."""
     order = [k for k in st.seconds] + [k for k in st.field_s if k not in st.seconds]
-    inner = {"render other": ("probe", "band", "residual", "plan (raster)", "shell bounds", "fallback march")}
-    inner["forward other"] = (*inner["render other"], "eikonal (its points uncounted)")
     print("| stage | ms | field ms | field points | GFLOP | ms at sgemm / bf16 | × sgemm limit |")
     print("|---|---|---|---|---|---|---|")
     rate32, rate16 = limits["sgemm_mlp"] * 1e9, limits["bf16_mlp"] * 1e9
     for name in order:
-        sec = st.seconds.get(name, 0.0) - sum(st.seconds.get(c, 0.0) for c in inner.get(name, ()))
+        sec = st.seconds.get(name, 0.0)  # exclusive of the stages inside it
         pts = st.points.get(name, 0) / n
         # the backward pass of a step multiplies the forward's products by about 2
         fl = (
