@@ -84,14 +84,21 @@ class Stages:
         self.current: list[str] = []
 
     def wrap(self, name: str, fn):
+        """``fn`` timed as stage ``name``, exclusive of the stages called inside it (whose
+        time the stage around them loses: the fallback march builds the shell bounds, the
+        render calls every stage)."""
+
         def timed(*args, **kwargs):
             self.current.append(name)
             t0 = time.perf_counter()
             try:
                 return fn(*args, **kwargs)
             finally:
-                self.seconds[name] += time.perf_counter() - t0
+                spent = time.perf_counter() - t0
+                self.seconds[name] += spent
                 self.current.pop()
+                if self.current:
+                    self.seconds[self.current[-1]] -= spent
 
         return timed
 
@@ -127,7 +134,7 @@ def staged(stages: Stages):
     pf = field_mod.PoseField
     call, sdf_rgb = pf.__call__, pf.sdf_rgb
     pf.__call__ = lambda self, p, d: stages.field_call(lambda: call(self, p, d), p)
-    pf.sdf_rgb = lambda self, p, d: stages.field_call(lambda: sdf_rgb(self, p, d), p)
+    pf.sdf_rgb = lambda self, p, d, **kw: stages.field_call(lambda: sdf_rgb(self, p, d, **kw), p)
     try:
         yield stages
     finally:
@@ -136,25 +143,42 @@ def staged(stages: Stages):
             setattr(owner, attr, fn)
 
 
-def frame_stages(model, settings, capture, frames: int, repeats: int):
-    """Per-frame means of each stage of the default render path (guided, ``fast`` knobs)."""
-    from render_speed import items_of  # bench/ sibling
+def frame_stages(
+    model,
+    settings,
+    capture,
+    frames: int,
+    repeats: int,
+    *extra: str,
+    size: int | None = None,
+    plain: bool = False,
+):
+    """Per-frame means of each stage of the default render path (guided, ``fast`` knobs,
+    with the render knobs ``extra`` as ``name=value``: MarchSettings' flat names; ``plain``:
+    the closest-face search's kernel as it was, render_speed.plain_search)."""
+    from render_speed import _value, items_of, plain_search, resized  # bench/ sibling
 
     from texvocab.pipeline.settings import PRESETS, march_settings
     from texvocab.render import render_image
 
     knobs = [f"{k}={v}" for k, v in PRESETS["fast"].items() if k != "image_scale"]
     march = march_settings(settings.with_overrides(knobs + ["guide=raster"]))
-    items = items_of(capture, settings, frames)
+    march = march.replace(**{k: _value(v) for k, v in (e.split("=", 1) for e in extra)})
+    items = resized(items_of(capture, settings, frames), size)
     best = None
     for _ in range(max(repeats, 1)):
         st = Stages()
-        with staged(st), torch.no_grad():
+        with staged(st), torch.no_grad(), plain_search(plain):
             t0 = time.perf_counter()
             for _, pose, trans, cam, _, _ in items:
                 ctx = st.wrap("pose context", model.pose_feature.context)(pose, trans)
                 st.wrap("render other", render_image)(
-                    model.for_pose(ctx), cam, ctx.vertices, model.body.faces, march, index=ctx.index
+                    model.for_pose(ctx, march.precision),
+                    cam,
+                    ctx.vertices,
+                    model.body.faces,
+                    march,
+                    index=ctx.index,
                 )
             total = time.perf_counter() - t0
         if best is None or total < best[0]:
@@ -187,15 +211,14 @@ def step_stages(capture, settings, steps: int, warmup: int, out_dir: str):
 
 
 def table(st: Stages, total: float, n: int, flop: float, limits: dict, backward: bool = False) -> None:
-    """Print the stage table, per frame (or step): nested stages are subtracted."""
+    """Print the stage table, per frame (or step); each stage's time excludes the stages
+    nested in it (Stages.wrap)."""
     order = [k for k in st.seconds] + [k for k in st.field_s if k not in st.seconds]
-    inner = {"render other": ("probe", "band", "residual", "plan (raster)", "shell bounds", "fallback march")}
-    inner["forward other"] = (*inner["render other"], "eikonal (its points uncounted)")
     print("| stage | ms | field ms | field points | GFLOP | ms at sgemm / bf16 | × sgemm limit |")
     print("|---|---|---|---|---|---|---|")
     rate32, rate16 = limits["sgemm_mlp"] * 1e9, limits["bf16_mlp"] * 1e9
     for name in order:
-        sec = st.seconds.get(name, 0.0) - sum(st.seconds.get(c, 0.0) for c in inner.get(name, ()))
+        sec = st.seconds.get(name, 0.0)  # exclusive of the stages inside it
         pts = st.points.get(name, 0) / n
         # the backward pass of a step multiplies the forward's products by about 2
         fl = (
@@ -230,6 +253,15 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=40, help="untimed training steps first")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--gemm-seconds", type=float, default=0.6, help="time spent on each GEMM rate")
+    p.add_argument(
+        "--before",
+        default=None,
+        metavar="KNOB=VALUE,...",
+        help="also time the frame with these render knobs (e.g. surface_reuse=false) and the "
+        "closest-face kernel as it was, in the same run, passes alternating: a before and an "
+        "after table",
+    )
+    p.add_argument("--size", type=int, default=None, help="render at N x N (the cameras scaled)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     budget_blas_threads(1)
@@ -247,9 +279,34 @@ def main(argv=None) -> int:
     print(f"| sgemm 23000×128 · 128×128 (the MLPs' shape) | {limits['sgemm_mlp']:.0f} |")
     print(f"| bf16 23000×128 · 128×128 | {limits['bf16_mlp']:.0f} |\n")
     print(f"The field's MLPs: {flop / 1e6:.3f} MFLOP per point.\n")
-    st, total, n, what = frame_stages(model, av.settings, av.capture, args.frames, args.repeats)
-    print(f"## a frame ({what}; guided marcher, `fast` knobs; per frame)\n")
-    table(st, total, n, flop, limits)
+    if args.before:
+        before = args.before.split(",")
+        best = {}
+        for _ in range(max(args.repeats, 1)):  # alternate, so both see the same machine
+            for name, extra in (("before", before), ("after", [])):
+                got = frame_stages(
+                    model,
+                    av.settings,
+                    av.capture,
+                    args.frames,
+                    1,
+                    *extra,
+                    size=args.size,
+                    plain=name == "before",
+                )
+                if name not in best or got[1] < best[name][1]:
+                    best[name] = got
+        for name, extra in (("before", before), ("after", [])):
+            st, total, n, what = best[name]
+            knobs = ", ".join(extra) or "the defaults"
+            print(f"## a frame, {name} ({what}; guided marcher, `fast` knobs, {knobs}; per frame)\n")
+            table(st, total, n, flop, limits)
+    else:
+        st, total, n, what = frame_stages(
+            model, av.settings, av.capture, args.frames, args.repeats, size=args.size
+        )
+        print(f"## a frame ({what}; guided marcher, `fast` knobs; per frame)\n")
+        table(st, total, n, flop, limits)
     frame_s = total / n
     rates = f"sgemm_gflops={limits['sgemm']:.0f} bf16_gflops={limits['bf16']:.0f}"
     if args.steps:

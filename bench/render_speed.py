@@ -20,16 +20,21 @@ same field, for the ratio.
 
 ``--compare`` renders the same frames five ways in one run — ``new``: the default render
 path as it is now (the surface-guided marcher, guide=raster, at the ``fast`` preset's
-knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default, and its
-activations free of subnormal numbers, ``NormalSoftplus``); ``previous``: the same path
-as it was, the MLPs in float32 with torch's nn.Softplus; the other paths also run with
-torch's nn.Softplus — ``shell``: the shell marcher (guide=shell) at the ``fast`` preset;
-``quality``: the shell marcher at the ``quality`` preset; ``reference``: the uniform
-64+32 marcher in the body's box — and prints per path seconds, field evaluations, PSNR
-against the truth and against the reference, and as its last line ``summary: new_s=…
-previous_s=… reference_s=… new_evals=… previous_evals=… reference_evals=… speedup=…
-psnr_delta_vs_quality_db=… psnr_delta_db=…`` (per-frame means; speedup = previous_s /
-new_s; psnr_delta_db = the new path's PSNR against the truth minus the previous path's).
+knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default, activations free
+of subnormal numbers, ``NormalSoftplus``, and ``surface_reuse``: the field's projection
+takes the closest faces the raster and the residual rays' mesh queries found);
+``previous``: the same path before that reuse and the changes beside it (``BEFORE``:
+``surface_reuse=false``, every point searched; ``residual_groups=1``, the residual rays'
+quadrature in one padded array; ``fallback_segment=8``; and the closest-face search's
+kernel as it was, ``nearest_faces_plain``, :func:`plain_search`); the other paths run with
+torch's nn.Softplus and float32 — ``shell``: the shell marcher (guide=shell) at the
+``fast`` preset; ``quality``: the shell marcher at the ``quality`` preset; ``reference``:
+the uniform 64+32 marcher in the body's box — and prints per path seconds, field
+evaluations, PSNR against the truth and against the reference, and as its last line
+``summary: new_s=… previous_s=… reference_s=… new_evals=… previous_evals=…
+reference_evals=… speedup=… psnr_delta_vs_quality_db=… psnr_delta_db=…`` (per-frame means;
+speedup = previous_s / new_s; psnr_delta_db = the new path's PSNR against the truth minus
+the previous path's). ``--size N`` renders at N×N (the capture's cameras scaled).
 
 CKPT's capture is the one recorded in the checkpoint unless --capture is given. Without
 CKPT and --capture a small synthetic capture (6 frames, 4 views, 256²) is made in a
@@ -54,6 +59,10 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from texvocab.blas import budget_blas_threads  # noqa: E402
+
+#: the render knobs that give the default path as it was before the surface reuse, the
+#: quadrature's ray groups and the fallback's 64-scout steps (``previous`` of --compare)
+BEFORE = {"surface_reuse": False, "residual_groups": 1, "fallback_segment": 8}
 
 
 def parse_variant(text: str):
@@ -154,6 +163,24 @@ def items_of(cap, settings, frames: int):
     return items[: max(frames, 1)]
 
 
+def resized(items, size: int | None):
+    """The items at size x size: cameras scaled, the truth and the mask resampled
+    (bilinear, nearest), so paths compare at that resolution."""
+    if not size:
+        return items
+    import torch.nn.functional as F
+
+    out = []
+    for label, pose, trans, cam, gt, mask in items:
+        factor = size / cam.width
+        img = torch.as_tensor(np.asarray(gt, dtype=np.float32)).permute(2, 0, 1)[None]
+        img = F.interpolate(img, size=(size, size), mode="bilinear", align_corners=False)[0].permute(1, 2, 0)
+        m = torch.as_tensor(np.asarray(mask, dtype=np.float32))[None, None]
+        m = F.interpolate(m, size=(size, size), mode="nearest")[0, 0] > 0.5
+        out.append((label, pose, trans, cam.scaled(factor), img.numpy(), m.numpy()))
+    return out
+
+
 class Timed:
     """A pose field whose calls (density or SDF) add their time and point count to
     ``spent``; ``beta`` passes through (the surface-guided marcher reads it)."""
@@ -162,9 +189,13 @@ class Timed:
         self.field, self.spent = field, spent
         self.beta = field.beta
 
-    def _timed(self, fn, points, dirs):
+    @property
+    def takes_known(self) -> bool:
+        return getattr(self.field, "takes_known", False)
+
+    def _timed(self, fn, points, dirs, **kw):
         start = time.perf_counter()
-        out = fn(points, dirs)
+        out = fn(points, dirs, **kw)
         self.spent["field"] += time.perf_counter() - start
         self.spent["evals"] += len(points)
         return out
@@ -172,8 +203,8 @@ class Timed:
     def __call__(self, points, dirs):
         return self._timed(self.field, points, dirs)
 
-    def sdf_rgb(self, points, dirs):
-        return self._timed(self.field.sdf_rgb, points, dirs)
+    def sdf_rgb(self, points, dirs, **kw):
+        return self._timed(self.field.sdf_rgb, points, dirs, **kw)
 
 
 def timed_render(model, item, march):
@@ -257,6 +288,20 @@ def plain_softplus(model, plain: bool):
             net[i] = m
 
 
+@contextlib.contextmanager
+def plain_search(plain: bool):
+    """With ``plain``, the mesh queries search with the closest-face kernel as it was
+    (:func:`~texvocab.geometry._nearest_jit.nearest_faces_plain`: the same answers bit for
+    bit, slower) for the duration: the ``previous`` path."""
+    from texvocab.geometry import _nearest_jit, surface
+
+    surface.nearest_faces = _nearest_jit.nearest_faces_plain if plain else _nearest_jit.nearest_faces
+    try:
+        yield
+    finally:
+        surface.nearest_faces = _nearest_jit.nearest_faces
+
+
 def compare(
     model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "bfloat16"
 ) -> int:
@@ -274,15 +319,15 @@ def compare(
 
     paths = {
         "new": march("fast", "raster", f"precision={precision}"),
-        "previous": march("fast", "raster", "precision=float32"),
+        "previous": march("fast", "raster", f"precision={precision}").replace(**BEFORE),
         "shell": march("fast", "shell", "precision=float32"),
         "quality": march("quality", "shell", "precision=float32"),
     }
     print(
         f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
         f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
-        f"{max(repeats, 1)} per frame, incl. pose context and shell; PSNR in the mask's "
-        "bounding box.\n"
+        f"{max(repeats, 1)} per frame (the paths in turn), incl. pose context and shell; PSNR "
+        "in the mask's bounding box.\n"
     )
     print("| path | frame | seconds | field evals | PSNR vs truth | PSNR vs reference |")
     print("|---|---|---|---|---|---|")
@@ -291,14 +336,14 @@ def compare(
         box = mask_bbox(item[5])
         ref_img, ref_row = reference_render(model, item, 64, 32)
         results = {"reference": (ref_img, ref_row)}
-        for name, march in paths.items():
-            best = None
-            for _ in range(max(repeats, 1)):
-                with plain_softplus(model, name != "new"):
+        # the repeats take the paths in turn, so that each path's best sees the same load
+        # on a shared machine (the paths one after the other drifted by 10-20 %)
+        for _ in range(max(repeats, 1)):
+            for name, march in paths.items():
+                with plain_softplus(model, name not in ("new", "previous")), plain_search(name == "previous"):
                     img, row = timed_render(model, item, march)
-                if best is None or row["total"] < best[1]["total"]:
-                    best = (img, row)
-            results[name] = best
+                if name not in results or row["total"] < results[name][1]["total"]:
+                    results[name] = (img, row)
         for name, (img, row) in results.items():
             p_gt = evaluate_pair(img, item[4], item[5])["psnr_bbox"]
             p_ref = psnr(crop_to_bbox(img, box), crop_to_bbox(ref_img, box))
@@ -376,6 +421,7 @@ def main(argv=None) -> int:
         "--reference", type=int, default=1, help="frames also rendered by the uniform 64+64 reference marcher"
     )
     ap.add_argument("--repeats", type=int, default=1, help="renders per frame (best kept)")
+    ap.add_argument("--size", type=int, default=None, help="render at N x N (the cameras scaled)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument(
         "--compare",
@@ -403,7 +449,7 @@ def main(argv=None) -> int:
         model, settings, cap, what = load(args)
         if args.save is not None:
             args.save.mkdir(parents=True, exist_ok=True)
-        items = items_of(cap, settings, args.frames)
+        items = resized(items_of(cap, settings, args.frames), args.size)
         return compare(model, settings, items, what, args.repeats, args.save, args.new_precision)
 
     from texvocab.metrics import evaluate_pair
@@ -412,7 +458,7 @@ def main(argv=None) -> int:
     model, settings, cap, what = load(args)
     base = march_settings(settings)
     variants = [("settings", {})] + [parse_variant(v) for v in args.variant]
-    items = items_of(cap, settings, args.frames)
+    items = resized(items_of(cap, settings, args.frames), args.size)
     print(
         f"# render speed: {what}\n\n{len(items)} frames at {items[0][3].width}x"
         f"{items[0][3].height}, {torch.get_num_threads()} threads, OMP_WAIT_POLICY="

@@ -316,3 +316,53 @@ def test_outward_orientation_of_closed_and_open_meshes(body):
     faces = body.faces.numpy()
     assert outward_orientation(body.v_template, faces) == 1
     assert outward_orientation(body.v_template, faces[:, ::-1]) == -1
+
+
+def test_known_faces_give_the_searched_projection(body, posed):
+    """``known`` closest faces skip the search: a point's own answer given back yields the
+    same projection bit for bit, a point on a face (a rasterised hit) lies at distance ~0
+    with that face's UV and weights, unknown rows (-1) are searched, and a known face
+    beyond max_distance is invalid as a searched one is."""
+    verts, faces, index = posed
+    rng = np.random.default_rng(3)
+    near = verts[rng.integers(0, len(verts), 400)] + rng.normal(0, 0.02, (400, 3))
+    args = (body.vt.numpy(), body.ft.numpy(), body.weights.numpy())
+    searched = index.project(near, *args, max_distance=0.025)
+    ok = searched.face >= 0
+    assert ok.sum() > 200 and (~ok).sum() > 10
+    mixed = np.where(rng.random(400) < 0.5, searched.face, -1)
+    again = index.project(near, *args, max_distance=0.025, known=mixed)
+    for name in ("face", "bary", "closest", "distance", "uv", "weights"):
+        assert np.array_equal(getattr(again, name), getattr(searched, name), equal_nan=True), name
+    on, fid = trimesh.sample.sample_surface(trimesh.Trimesh(verts, faces, process=False), 300, seed=4)
+    hit = index.project(on, *args, known=fid)
+    assert np.array_equal(hit.face, fid) and np.abs(hit.distance).max() < 1e-9
+    ref = index.project(on, *args)
+    assert np.abs(hit.closest - ref.closest).max() < 1e-9 and np.abs(hit.weights - ref.weights).max() < 1e-6
+    far = verts[:5] + np.array([0.0, 0.0, 0.5])
+    out = index.project(far, max_distance=0.03, known=np.zeros(5, dtype=np.int64))
+    assert (out.face == -1).all() and np.isinf(out.distance).all()
+
+
+def test_the_search_kernel_matches_the_plain_one_bit_for_bit(posed):
+    """nearest_faces (children beyond the best never pushed, sorted as measured) visits
+    and drops what nearest_faces_plain does: the same slots, v, w and d² for points on,
+    near and far from the body, with and without a search bound."""
+    from texvocab.geometry._nearest_jit import nearest_faces, nearest_faces_plain
+
+    verts, _, index = posed
+    rng = np.random.default_rng(5)
+    base = verts[rng.integers(0, len(verts), 300)]
+    d = rng.normal(size=(300, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    along = base[:, None] + np.linspace(-0.04, 0.04, 9)[None, :, None] * d[:, None]  # along rays
+    x = np.concatenate([along.reshape(-1, 3), rng.uniform(verts.min(0) - 0.2, verts.max(0) + 0.2, (500, 3))])
+    tables = (index._box_lo, index._box_hi, index._box_offset, index._table, index._slot_face)
+    for bound in (0.025, np.inf):
+        outs = []
+        for search in (nearest_faces, nearest_faces_plain):
+            out = np.empty(len(x), np.int64), np.empty(len(x)), np.empty(len(x)), np.empty(len(x))
+            search(np.ascontiguousarray(x), bound * bound, *tables, *out)
+            outs.append(out)
+        assert all(np.array_equal(a, b) for a, b in zip(*outs)), bound
+        assert (outs[0][0] >= 0).any() and ((outs[0][0] < 0).any() or bound == np.inf)

@@ -471,6 +471,35 @@ def test_bfloat16_field_renders_stay_finite_at_the_extremes(body, avatar, case):
             assert image.stats.field_evals > 0 and float(image.alpha.max()) > 0.05, guide
 
 
+@pytest.mark.parametrize("case", ["inside", "surface_in", "miss", "limits_high"])
+def test_surface_reuse_renders_as_the_search_at_the_extremes(body, avatar, case):
+    """The guided marcher's reuse of the closest faces it knows (the raster's hit faces,
+    the residual rays' mesh samples) and its grouped residual quadrature give the image
+    of every point searched and one padded quadrature: the camera inside the body or at
+    its surface looking in, rays that miss, joints at their limits."""
+    pose = extreme_pose("limits_high") if case == "limits_high" else np.zeros((24, 3))
+    ctx = avatar.pose_feature.context(pose)
+    cam = (
+        front_camera(ctx.vertices, 12) if case in ("miss", "limits_high") else camera_at(body, ctx, case, 12)
+    )
+    if case == "miss":
+        cam = look_at(2 * cam.center - ctx.vertices.detach().double().mean(0).numpy(), cam.center, 12)
+    march = MARCH.replace(guide="raster")
+    with torch.no_grad():
+        new, old = (
+            render_image(avatar.for_pose(ctx), cam, ctx.vertices, body.faces, m, index=ctx.index)
+            for m in (march, march.replace(surface_reuse=False, residual_groups=1))
+        )
+    assert_finite(rgb=new.rgb, alpha=new.alpha, depth=new.depth)
+    # equivalent computations: rounding may move a residual ray's quantile by one sample
+    assert (new.stats.kind != old.stats.kind).sum() <= 1
+    assert (new.rgb - old.rgb).abs().max() < 1e-3 and (new.alpha - old.alpha).abs().max() < 1e-3
+    if case == "miss":
+        assert new.stats.field_evals == 0
+    else:
+        assert new.stats.field_evals > 0 and float(new.alpha.max()) > 0.05
+
+
 # --- extreme joint angles -------------------------------------------------------------
 
 

@@ -41,3 +41,13 @@ def test_the_previous_path_swaps_torchs_softplus_in_for_the_run_only(tmp_path):
     with render_speed.plain_softplus(model, True):
         assert all(t is torch.nn.Softplus for t in acts())
     assert acts() == before
+
+
+def test_the_previous_path_searches_with_the_plain_kernel_for_the_run_only():
+    from texvocab.geometry import _nearest_jit, surface
+
+    assert surface.nearest_faces is _nearest_jit.nearest_faces
+    with render_speed.plain_search(True):
+        assert surface.nearest_faces is _nearest_jit.nearest_faces_plain
+    assert surface.nearest_faces is _nearest_jit.nearest_faces
+    assert render_speed.BEFORE == {"surface_reuse": False, "residual_groups": 1, "fallback_segment": 8}

@@ -165,7 +165,7 @@ def test_a_one_point_field_call_works(body):
         ("min_cos", 0.6),
         ("miss_margin", 6.0),
         ("band_leftover", 1e-6),
-        ("fallback_segment", 64),
+        ("fallback_segment", 8),
         ("fallback_scout", None),
         ("residual_rays", False),
         ("residual_tolerance", 0.1),

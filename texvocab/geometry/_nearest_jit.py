@@ -2,15 +2,16 @@
 of each query point, by depth-first search of the implicit box hierarchy.
 
 :func:`nearest_faces` (then :func:`closest_and_distance` and :func:`interpolate` for the
-fields of the result), compiled by numba (``nogil``, so the index's thread
-pool runs chunks truly in parallel; ``cache``, so a process loads the machine code from
-``__pycache__`` instead of compiling it again, about 3 s the first time). Per point:
-the best squared distance starts at the search bound; nodes are visited nearest box
-first (children pushed farthest first), and a node is dropped when the distance from
-the point to its box exceeds the best so far. A box contains every face below it, so no
-face that could be the closest is ever dropped: the result is exact. The triangle test
-is Ericson's closest-point region test (Real-Time Collision Detection, 5.1.5), the same
-formulas as ``texvocab.geometry.surface._closest_vw``, with zero-area faces tested as their three
+fields of the result; :func:`on_faces` where the closest face is known already), compiled
+by numba (``nogil``, so the index's thread pool runs chunks truly in parallel; ``cache``,
+so a process loads the machine code from ``__pycache__`` instead of compiling it again,
+about 3 s the first time). Per point: the best squared distance starts at the search
+bound; nodes are visited nearest box first (children pushed farthest first), and a node is
+dropped when the distance from the point to its box exceeds the best so far. A box
+contains every face below it, so no face that could be the closest is ever dropped: the
+result is exact. The triangle test is Ericson's closest-point region test (Real-Time
+Collision Detection, 5.1.5), the same formulas as
+``texvocab.geometry.surface._closest_vw``, with zero-area faces tested as their three
 edges.
 """
 
@@ -97,8 +98,10 @@ def _closest_on_face(px, py, pz, g, s):
 
 
 @njit(cache=True, nogil=True)
-def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_out, d2_out):
-    """Closest face slot of each point x (M, 3) within squared distance ``bound2``.
+def nearest_faces_plain(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_out, d2_out):
+    """:func:`nearest_faces` as it was first written (children sorted in an array, every
+    child pushed and dropped when popped): the reference :func:`nearest_faces` matches bit
+    for bit, about 14 % slower.
 
     lo, hi (N, 3): the boxes of all levels, finest (one per face slot) first, level l
     starting at row offset[l] (offset has L + 1 entries); node n of level l + 1 holds
@@ -157,6 +160,97 @@ def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_ou
                 sp += 1
         slot[i] = best_slot
         v_out[i], w_out[i], d2_out[i] = bv, bw, best
+
+
+@njit(cache=True, nogil=True)
+def nearest_faces(x, bound2, lo, hi, offset, table, slot_face, slot, v_out, w_out, d2_out):
+    """Closest face slot of each point x (M, 3) within squared distance ``bound2``.
+
+    lo, hi (N, 3): the boxes of all levels, finest (one per face slot) first, level l
+    starting at row offset[l] (offset has L + 1 entries); node n of level l + 1 holds
+    nodes 4n .. 4n + 3 of level l. table (13, S): per-slot face rows; slot_face (S,): -1
+    for an empty slot. Writes the best slot to ``slot`` (M,) (-1: none within the bound)
+    and v, w, d² of its closest point. Ties keep the first face found. The children of a
+    node beyond the best so far are not pushed, and the others are sorted by insertion
+    (nearest first, stable) as they are measured: the visit order and the drops of
+    :func:`nearest_faces_plain`, with less work per node.
+    """
+    top = len(offset) - 2
+    stack_l = np.empty(_STACK, np.int64)
+    stack_n = np.empty(_STACK, np.int64)
+    stack_g = np.empty(_STACK, np.float64)
+    g = np.empty(4, np.float64)
+    for i in range(x.shape[0]):
+        px, py, pz = x[i, 0], x[i, 1], x[i, 2]
+        best, best_slot, bv, bw = bound2, -1, 0.0, 0.0
+        sp = 0
+        for n in range(offset[top + 1] - offset[top] - 1, -1, -1):
+            stack_l[sp], stack_n[sp] = top, n
+            stack_g[sp] = _box_gap2(px, py, pz, lo, hi, offset[top] + n)
+            sp += 1
+        while sp > 0:
+            sp -= 1
+            lvl, n, gap = stack_l[sp], stack_n[sp], stack_g[sp]
+            # rounding slack: a box is dropped only when clearly farther than the best
+            lim = best * (1.0 + 1e-12) + 1e-300
+            if gap > lim:
+                continue
+            if lvl == 0:
+                if slot_face[n] < 0:  # empty slot
+                    continue
+                v, w, d2 = _closest_on_face(px, py, pz, table, n)
+                if d2 < best or (best_slot < 0 and d2 <= best):
+                    best, best_slot, bv, bw = d2, n, v, w
+                continue
+            child = lvl - 1
+            base = offset[child] + 4 * n
+            m, o0, o1, o2, o3 = 0, 0, 0, 0, 0  # the children within lim, nearest first
+            for c in range(min(4, offset[child + 1] - base)):
+                gc = _box_gap2(px, py, pz, lo, hi, base + c)
+                g[c] = gc
+                if gc > lim:
+                    continue
+                if m == 0:
+                    o0 = c
+                elif m == 1:
+                    if g[o0] > gc:
+                        o0, o1 = c, o0
+                    else:
+                        o1 = c
+                elif m == 2:
+                    if g[o1] <= gc:
+                        o2 = c
+                    elif g[o0] <= gc:
+                        o1, o2 = c, o1
+                    else:
+                        o0, o1, o2 = c, o0, o1
+                elif g[o2] <= gc:
+                    o3 = c
+                elif g[o1] <= gc:
+                    o2, o3 = c, o2
+                elif g[o0] <= gc:
+                    o1, o2, o3 = c, o1, o2
+                else:
+                    o0, o1, o2, o3 = c, o0, o1, o2
+                m += 1
+            for k in range(m - 1, -1, -1):  # farthest first: the nearest pops first
+                c = o0 if k == 0 else (o1 if k == 1 else (o2 if k == 2 else o3))
+                stack_l[sp], stack_n[sp], stack_g[sp] = child, 4 * n + c, g[c]
+                sp += 1
+        slot[i] = best_slot
+        v_out[i], w_out[i], d2_out[i] = bv, bw, best
+
+
+@njit(cache=True, nogil=True)
+def on_faces(x, known, bound2, table, slot, v_out, w_out, d2_out):
+    """The closest point of each point x (M, 3) on its known closest face slot known (M,)
+    (no search: a point on that face, as a rasterised hit, or one an earlier query
+    answered): v, w, d² as :func:`nearest_faces` writes them, slot -1 beyond squared
+    distance ``bound2``."""
+    for i in range(x.shape[0]):
+        v, w, d2 = _closest_on_face(x[i, 0], x[i, 1], x[i, 2], table, known[i])
+        slot[i] = known[i] if d2 <= bound2 else -1
+        v_out[i], w_out[i], d2_out[i] = v, w, d2
 
 
 @njit(cache=True, nogil=True)

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from texvocab.geometry._build_jit import face_centroids, pseudo_normals, slot_layout, slot_tables
-from texvocab.geometry._nearest_jit import closest_and_distance, interpolate, nearest_faces
+from texvocab.geometry._nearest_jit import closest_and_distance, interpolate, nearest_faces, on_faces
 
 _LEAF = _FAN = 4  # faces per leaf box, children per inner box (the kernel assumes 4)
 _CHUNK = 4096  # points per work item (a call of fewer is split evenly over the workers)
@@ -245,6 +245,9 @@ class SurfaceIndex:
         self._table, self._box_lo, self._box_hi, self._box_offset = slot_tables(
             self.vertices, self.faces, self._slot_face, _DEGENERATE, _FAN
         )
+        self._face_slot = np.full(len(self.faces), -1, np.int64)  # each face's slot
+        used = np.flatnonzero(self._slot_face >= 0)
+        self._face_slot[self._slot_face[used]] = used
 
     def relayout(self) -> None:
         """Replace a borrowed slot layout by this pose's own split (no-op otherwise):
@@ -254,14 +257,25 @@ class SurfaceIndex:
             self.borrowed = False
 
     def project(
-        self, points, vt=None, ft=None, weights=None, max_distance: float | None = None
+        self,
+        points,
+        vt=None,
+        ft=None,
+        weights=None,
+        max_distance: float | None = None,
+        known=None,
     ) -> SurfaceProjection:
         """Closest surface point of each of ``points`` (N, 3) (Eq. 7).
 
         vt (T, 2) with ft (F, 3) add ``uv`` (N, 2); weights (V, J) add ``weights`` (N, J).
-        Points farther than ``max_distance`` are marked invalid (face -1).
+        Points farther than ``max_distance`` are marked invalid (face -1). ``known`` (N,)
+        int, -1 for none: the point's closest face where it is known (a point on that
+        face, as a rasterised hit; a point an earlier query answered): its closest point
+        on that face is taken without a search (the same answer up to ties between
+        equally near faces).
         """
         x = _numpy(points, np.float64).reshape(-1, 3)
+        known = self._slots(known)
         bound = np.inf if max_distance is None else float(max_distance)
         n = len(x)
         face, bary = np.empty(n, np.int64), np.empty((n, 3))
@@ -274,7 +288,7 @@ class SurfaceIndex:
 
         def work(start: int) -> None:
             sl = slice(start, start + chunk)
-            face[sl], bary[sl] = self._nearest(x[sl], bound)
+            face[sl], bary[sl] = self._nearest(x[sl], bound, None if known is None else known[sl])
             self._fill(
                 x[sl],
                 face[sl],
@@ -298,23 +312,37 @@ class SurfaceIndex:
                 work(start)
         return _like(points, SurfaceProjection(face, bary, closest, distance, uv, wts, self.closed))
 
-    def _nearest(self, x: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
-        """(face (M,), bary (M, 3)) for one chunk x (M, 3); face -1 beyond ``bound``."""
-        slot = np.empty(len(x), np.int64)
-        v, w, d2 = np.empty(len(x)), np.empty(len(x)), np.empty(len(x))
-        nearest_faces(
-            np.ascontiguousarray(x),
-            bound * bound,
-            self._box_lo,
-            self._box_hi,
-            self._box_offset,
-            self._table,
-            self._slot_face,
-            slot,
-            v,
-            w,
-            d2,
-        )
+    def _slots(self, faces) -> np.ndarray | None:
+        """The slots (N,) of faces (N,) (-1 stays -1), or None for None."""
+        if faces is None:
+            return None
+        f = _numpy(faces, np.int64).reshape(-1)
+        return np.where(f >= 0, self._face_slot[np.maximum(f, 0)], -1)
+
+    def _nearest(
+        self, x: np.ndarray, bound: float, known: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(face (M,), bary (M, 3)) for one chunk x (M, 3); face -1 beyond ``bound``;
+        known (M,): the known closest face slots (-1: none; searched), or None."""
+        x = np.ascontiguousarray(x)
+        slot, v, w, d2 = np.empty(len(x), np.int64), np.empty(len(x)), np.empty(len(x)), np.empty(len(x))
+        boxes = (self._box_lo, self._box_hi, self._box_offset, self._table, self._slot_face)
+        if known is None or (known < 0).all():
+            nearest_faces(x, bound * bound, *boxes, slot, v, w, d2)
+        else:
+            have, find = np.flatnonzero(known >= 0), np.flatnonzero(known < 0)
+            for rows, search in ((have, False), (find, True)):
+                out = (
+                    np.empty(len(rows), np.int64),
+                    np.empty(len(rows)),
+                    np.empty(len(rows)),
+                    np.empty(len(rows)),
+                )
+                if search:
+                    nearest_faces(np.ascontiguousarray(x[rows]), bound * bound, *boxes, *out)
+                else:
+                    on_faces(np.ascontiguousarray(x[rows]), known[rows], bound * bound, self._table, *out)
+                slot[rows], v[rows], w[rows], d2[rows] = out
         ok = slot >= 0
         face = np.where(ok, self._slot_face[np.maximum(slot, 0)], -1)
         bary = np.where(ok[:, None], np.column_stack([1.0 - v - w, v, w]), np.nan)

@@ -185,15 +185,22 @@ class PoseFeature(nn.Module):
         )
 
     def forward(
-        self, ctx: PoseContext, points: torch.Tensor, max_distance: float | None = None
+        self,
+        ctx: PoseContext,
+        points: torch.Tensor,
+        max_distance: float | None = None,
+        known: torch.Tensor | None = None,
     ) -> FeatureOutput:
-        """f(Θ, x) at points (N, 3) in the observation space of ``ctx``'s pose."""
+        """f(Θ, x) at points (N, 3) in the observation space of ``ctx``'s pose. ``known``
+        (N,) long: each point's closest face of the posed body where the caller knows it
+        (-1 elsewhere; :meth:`SurfaceIndex.project`'s ``known``: no search for those)."""
         proj = ctx.index.project(
             points.detach().double().cpu().numpy(),
             self.body.vt.numpy(),
             self.body.ft.numpy(),
             self.body.weights.numpy(),
             max_distance=max_distance,
+            known=None if known is None else known.numpy(),
         )
         ok = proj.face >= 0  # numpy mask for the numpy arrays (a one-element torch bool
         valid = torch.from_numpy(ok)  # tensor would index numpy as the integer 0 or 1)

@@ -217,9 +217,16 @@ class AvatarField(nn.Module):
         return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))
 
     def sdf_and_color(
-        self, ctx: PoseContext, points: torch.Tensor, dirs: torch.Tensor, precision: str = "float32"
+        self,
+        ctx: PoseContext,
+        points: torch.Tensor,
+        dirs: torch.Tensor,
+        precision: str = "float32",
+        known: torch.Tensor | None = None,
     ):
         """SDF (N,), RGB (N, 3), valid (N,) for world points (N, 3) and unit dirs (N, 3).
+        ``known`` (N,) long: the points' closest faces where the caller knows them (-1
+        elsewhere), which the projection onto the body takes without a search.
 
         Gradients of the SDF w.r.t. ``points`` are exact (the body distance contributes its
         analytic gradient), so the eikonal term can use autograd. ``precision``: the
@@ -228,7 +235,7 @@ class AvatarField(nn.Module):
         the outputs. "bfloat16" is for rendering (AMX matrix units on CPUs that have them).
         """
         s = self.settings
-        out = self.pose_feature(ctx, points, max_distance=s.shell_width)
+        out = self.pose_feature(ctx, points, max_distance=s.shell_width, known=known)
         valid = out.valid
         # d_body with its analytic gradient: value from the projection, slope = ∇d
         diff = points - out.closest
@@ -269,7 +276,12 @@ class PoseField:
     """The avatar field at one pose: ``field(points, dirs) -> (density, rgb)`` for the
     shell marcher, ``field.sdf_rgb(points, dirs) -> (sdf, rgb)`` and ``field.beta`` for the
     surface-guided one (points more than the shell width from the body read SDF =
-    shell width: no density); ``precision`` as :meth:`AvatarField.sdf_and_color`'s."""
+    shell width: no density); ``precision`` as :meth:`AvatarField.sdf_and_color`'s.
+    ``sdf_rgb`` takes the points' ``known`` closest faces of the posed body too
+    (:attr:`takes_known`), which the guided marcher passes where the raster or its own
+    mesh queries found them."""
+
+    takes_known = True
 
     def __init__(self, model: AvatarField, ctx: PoseContext, precision: str = "float32"):
         resolve_precision(precision)  # a ValueError for an unknown name, here
@@ -278,8 +290,8 @@ class PoseField:
     def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
         return self.model(self.ctx, points, dirs, self.precision)
 
-    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor):
-        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs, self.precision)
+    def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor, known: torch.Tensor | None = None):
+        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs, self.precision, known)
         return torch.where(valid, sdf, self.model.settings.shell_width), rgb
 
     @property

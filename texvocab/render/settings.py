@@ -119,21 +119,28 @@ class ResidualSettings:
     spread: a smaller spread puts the outer evaluations farther out.
     tolerance: a smaller tolerance marches more rays (the Newton band's residuals obey it
         too).
+    groups: speed only: the rays' quadrature runs in this many groups of similar sample
+        counts, each as long as its longest ray (1: one array for all, padded to the
+        longest; the counts vary several-fold).
     """
 
     enabled: bool = True
     step: float = 1.5
     spread: float = 0.05
     tolerance: float = 2.0
+    groups: int = 4
 
 
 @dataclass(frozen=True)
 class FallbackSettings:
     """The guided marcher's march of the rays neither the band nor the residual rays
     resolve: the shell marcher with ``segment`` scouts per step and ``scout_threshold`` as
-    its scout threshold instead of the shell group's (few rays: fewer, larger calls)."""
+    its scout threshold instead of the shell group's (few rays: fewer, larger calls). A field
+    call has a fixed cost of a few ms: 64 scouts a step evaluate most of these rays' coarse
+    samples in one call (3 calls a frame for the march instead of 7 with 8, for 0.02 % more
+    evaluations and the same image to 2e-4 on a trained avatar)."""
 
-    segment: int = 8
+    segment: int = 64
     scout_threshold: float | None = 1e-3
 
 
@@ -152,10 +159,15 @@ class MarchSettings:
     surface-guided marcher (band, residual rays, the rest marched). ``precision`` is the
     number format the field's MLPs are evaluated in when an image is rendered
     (``AvatarField.for_pose``; "float32", "bfloat16" or "auto"); the marchers themselves compute
-    in float32."""
+    in float32. ``surface_reuse``: the guided marcher hands the field each point's closest
+    face of the posed mesh where it knows it already — a probe at a rasterised hit lies on
+    the hit face, a residual ray's three evaluations lie on its mesh samples — so the
+    field's projection onto the body skips the search there (the same answers up to ties
+    between equally near faces); False searches every point, as before."""
 
     guide: str = "shell"
     precision: str = "float32"
+    surface_reuse: bool = True
     shell: ShellSettings = field(default_factory=ShellSettings)
     band: BandSettings = field(default_factory=BandSettings)
     residual: ResidualSettings = field(default_factory=ResidualSettings)
@@ -208,6 +220,7 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "chunk_points": ("chunks", "points"),
     "guide": ("", "guide"),
     "precision": ("", "precision"),
+    "surface_reuse": ("", "surface_reuse"),
     "band_samples": ("band", "samples"),
     "band_spacing": ("band", "spacing"),
     "band_leftover": ("band", "leftover"),
@@ -219,6 +232,7 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "residual_step": ("residual", "step"),
     "residual_spread": ("residual", "spread"),
     "residual_tolerance": ("residual", "tolerance"),
+    "residual_groups": ("residual", "groups"),
     "band_newton": ("band", "newton"),
 }
 

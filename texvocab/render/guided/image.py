@@ -102,6 +102,7 @@ class GuidedImage:
             plan.t_hit[pix],
             plan.cos[pix],
             torch.stack([plan.t_pass[pix], plan.t_behind[pix]], 1),
+            plan.face[pix] if self.settings.surface_reuse else None,
         )
 
         def march(idx: torch.Tensor) -> RayResult:

@@ -29,7 +29,7 @@ class SurfacePlan:
     than δ nearer, within ``radius`` pixels) or misses the mesh near one; ``t_pass``,
     ``t_behind`` where a passing ray comes closest to the surface it passes (two probe
     distances; inf for other rays); ``band`` the band rays: hit, cos >= min_cos, no
-    passby."""
+    passby; ``face`` the hit face (long; -1: none)."""
 
     t_hit: torch.Tensor
     cos: torch.Tensor
@@ -37,6 +37,7 @@ class SurfacePlan:
     t_pass: torch.Tensor
     t_behind: torch.Tensor
     band: torch.Tensor
+    face: torch.Tensor
 
     @property
     def hit(self) -> torch.Tensor:
@@ -90,7 +91,7 @@ def plan_surface(
     none = torch.full((H * W,), torch.inf)
     if not hit.any():
         nothing = torch.zeros(H * W, dtype=torch.bool)
-        return SurfacePlan(t_hit, cos, nothing, none, none.clone(), nothing)
+        return SurfacePlan(t_hit, cos, nothing, none, none.clone(), nothing, raster.face.view(-1))
     z_min = float(raster.depth.view(-1)[hit].min())
     radius = max(min(int(math.ceil(reach * float(camera.K[0, 0]) / max(z_min, 1e-6))), 64), 1)
     front = _frontmost_neighbour(t_hit.view(H, W), radius)
@@ -119,4 +120,4 @@ def plan_surface(
     t_pass, t_behind = none, none.clone()
     t_pass[p_idx] = ((t_hit[q, None] * dirs[q]) * dirs[p_idx]).sum(1)
     t_behind[p_idx] = t_pass[p_idx] * (1 + gap[p_idx] / float(camera.K[0, 0]))
-    return SurfacePlan(t_hit, cos, passby, t_pass, t_behind, band)
+    return SurfacePlan(t_hit, cos, passby, t_pass, t_behind, band, raster.face.view(-1))

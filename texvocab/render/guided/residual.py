@@ -53,12 +53,22 @@ _KEEP = 6.0  # the part of a ray that matters: ŝ within this many β of max(lea
 _OPAQUE = 8.0  # ... up to this optical depth (transmittance 3e-4)
 
 
-def mesh_distance(index, points: torch.Tensor, cap: float) -> torch.Tensor:
-    """Signed distance (N,) of points (N, 3) to the indexed mesh, ``cap`` beyond cap."""
+def mesh_distance(index, points: torch.Tensor, cap: float, known: torch.Tensor | None = None) -> torch.Tensor:
+    """Signed distance (N,) of points (N, 3) to the indexed mesh, ``cap`` beyond cap.
+    ``known`` (N,) long: closest faces known already (-1: search)."""
+    return mesh_distance_faces(index, points, cap, known)[0]
+
+
+def mesh_distance_faces(
+    index, points: torch.Tensor, cap: float, known: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`mesh_distance` and the closest face (N,) long of each point (-1 beyond cap)."""
     if len(points) == 0:
-        return points.new_zeros(0)
-    proj = index.project(points.detach().double().numpy(), max_distance=cap)
-    return torch.from_numpy(np.where(proj.face >= 0, proj.distance, cap)).to(points.dtype)
+        return points.new_zeros(0), torch.zeros(0, dtype=torch.long)
+    known = None if known is None else known.numpy()
+    proj = index.project(points.detach().double().numpy(), max_distance=cap, known=known)
+    d = torch.from_numpy(np.where(proj.face >= 0, proj.distance, cap)).to(points.dtype)
+    return d, torch.from_numpy(proj.face)
 
 
 def _estimate(d: torch.Tensor, r0: torch.Tensor, cap: float) -> torch.Tensor:
@@ -68,16 +78,18 @@ def _estimate(d: torch.Tensor, r0: torch.Tensor, cap: float) -> torch.Tensor:
 
 
 def _samples(index, origin, dirs, near, far, step: float, cap: float):
-    """d every ``step`` over [near, far] (R,): t, d (R, M) and ``inside`` (R, M) (columns
-    past far repeat the last one)."""
+    """d every ``step`` over [near, far] (R,): t, d (R, M), their closest faces f (R, M)
+    (-1 beyond cap) and ``inside`` (R, M) (columns past far repeat the last one)."""
     last = torch.ceil((far - near).clamp(min=0) / step).long().clamp(min=1)
     M = int(last.max()) + 1
     col = torch.arange(M)
     t = torch.minimum(near[:, None] + col * step, far[:, None])
     inside = col <= last[:, None]
     d = torch.full(t.shape, cap, dtype=dirs.dtype)
-    d[inside] = mesh_distance(index, points_along(origin, dirs, t)[inside], cap)
-    return t, torch.where(inside, d, d.gather(1, last[:, None])), inside
+    f = torch.full(t.shape, -1, dtype=torch.long)
+    d[inside], f[inside] = mesh_distance_faces(index, points_along(origin, dirs, t)[inside], cap)
+    end = last[:, None]
+    return t, torch.where(inside, d, d.gather(1, end)), torch.where(inside, f, f.gather(1, end)), inside
 
 
 def _part_that_matters(
@@ -103,10 +115,10 @@ def _part_that_matters(
     return low, first, end, found
 
 
-def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
-    """The coarse samples t_c, d_c (R, M) of the part first..end (R,), with _COARSE - 1
-    more in each low interval (R, M - 1): t, d (R, N) sorted (a ray with fewer than N
-    repeats its last)."""
+def _refine(index, origin, dirs, t_c, d_c, f_c, low, first, end, cap: float):
+    """The coarse samples t_c, d_c and their faces f_c (R, M) of the part first..end (R,),
+    with _COARSE - 1 more in each low interval (R, M - 1): t, d, f (R, N) sorted (a ray
+    with fewer than N repeats its last) and the number of samples per ray (R,)."""
     R, M = t_c.shape
     k = torch.arange(_COARSE, dtype=t_c.dtype) / _COARSE
     col = torch.arange(M - 1)
@@ -115,23 +127,28 @@ def _refine(index, origin, dirs, t_c, d_c, low, first, end, cap: float):
     part = (col >= first[:, None]) & (col < end[:, None])
     keep = part[..., None] & ((k == 0) | low[..., None])
     d = d_c[:, :-1, None].expand_as(t).clone()
+    f = f_c[:, :-1, None].expand_as(t).clone()
     new = keep & (k > 0)
-    d[new] = mesh_distance(index, points_along(origin, dirs, t)[new], cap)
+    r, c, j = torch.nonzero(new, as_tuple=True)  # the new samples' points only
+    at = points_along(origin if origin.dim() == 1 else origin[r], dirs[r], t[r, c, j])
+    d[new], f[new] = mesh_distance_faces(index, at, cap)
     t = torch.cat([t.reshape(R, -1), t_c.gather(1, end[:, None])], 1)
     d = torch.cat([d.reshape(R, -1), d_c.gather(1, end[:, None])], 1)
+    f = torch.cat([f.reshape(R, -1), f_c.gather(1, end[:, None])], 1)
     keep = torch.cat([keep.reshape(R, -1), torch.ones(R, 1, dtype=torch.bool)], 1)
     # t is sorted along each row already: pack the kept columns to the front
     count = keep.sum(1)
     N = int(count.max())
     rows, cols = torch.nonzero(keep, as_tuple=True)
     slot = (torch.cumsum(keep, 1) - 1)[rows, cols]
-    packed_t, packed_d = torch.empty(R, N, dtype=t.dtype), torch.empty(R, N, dtype=d.dtype)
-    packed_t[rows, slot], packed_d[rows, slot] = t[rows, cols], d[rows, cols]
     inside = torch.arange(N) < count[:, None]
     last = (count - 1)[:, None]
-    packed_t = torch.where(inside, packed_t, packed_t.gather(1, last))
-    packed_d = torch.where(inside, packed_d, packed_d.gather(1, last))
-    return packed_t, packed_d
+    packed = []
+    for v in (t, d, f):
+        p = torch.empty(R, N, dtype=v.dtype)
+        p[rows, slot] = v[rows, cols]
+        packed.append(torch.where(inside, p, p.gather(1, last)))
+    return (*packed, count)
 
 
 def _quantile_columns(weights: torch.Tensor, qs: tuple[float, ...]) -> torch.Tensor:
@@ -162,16 +179,20 @@ def render_residual(
     sdf_probe: torch.Tensor,
     beta,
     settings: MarchSettings,
+    probe_face: torch.Tensor | None = None,
 ):
     """Residual rays (R,) from origin (3,) or origins (R, 3) along dirs (R, 3), in the
     shell over [near, far] (R,), with probes at t_probe (R, P) that read field SDF
-    sdf_probe (R, P) (inf where a ray has fewer probes; every ray has one).
+    sdf_probe (R, P) (inf where a ray has fewer probes; every ray has one) and whose
+    closest mesh faces are probe_face (R, P) where known (-1 elsewhere; None: none).
 
     Differentiable w.r.t. the three evaluations and ``beta`` (a float, or the model's β
     tensor as training passes it); the probes, the knots' places and ``ok`` carry no
     gradient.
 
-    ``field.sdf_rgb`` is evaluated at 3 points per ray; ``index`` is the posed mesh's
+    ``field.sdf_rgb`` is evaluated at 3 points per ray, on three of the mesh samples:
+    with ``settings.surface_reuse`` their closest faces go with them (the field's
+    projection does not search again). ``index`` is the posed mesh's
     :class:`~texvocab.geometry.surface.SurfaceIndex`. Knobs from ``settings``
     (:class:`~texvocab.render.settings.MarchSettings`): the residual group, the shell's
     width (distances beyond it read as it) and the field call's chunk.
@@ -189,30 +210,67 @@ def render_residual(
     # it passes) stands for the ray's until the field is evaluated
     has = torch.isfinite(sdf_probe)
     pts = points_along(origin, dirs, torch.where(has, t_probe, 0.0))
-    d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
+    if settings.surface_reuse:  # only the probes a ray has: the residual is read at one
+        d_probe = torch.full(has.shape, cap, dtype=dirs.dtype)
+        known = None if probe_face is None else probe_face[has]
+        d_probe[has] = mesh_distance(index, pts[has], cap, known)
+    else:
+        d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
-    t, d, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap)
+    t, d, f, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap)
     low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, b)
-    t, d = _refine(index, origin, dirs, t, d, low, first, end, cap)
-    s_hat = _estimate(d, r0, cap)
-    spread = settings.residual.spread
-    cols = _quantile_columns(_column_weights(t, s_hat, b), (spread, 0.5, 1 - spread))
-    knots = t.gather(1, cols)
+    t, d, f, count = _refine(index, origin, dirs, t, d, f, low, first, end, cap)
+    # the rays in groups of similar sample counts, each group's arrays as long as its
+    # longest ray (the counts vary several-fold: one array for all was mostly padding)
+    n_groups = max(settings.residual.groups, 1)
+    by_count = count.argsort() if n_groups > 1 else torch.arange(R)
+    groups = [g for g in torch.tensor_split(by_count, n_groups) if len(g)]
+    spread, parts = settings.residual.spread, []
+    for rows in groups:
+        n = int(count[rows].max())
+        tg, dg, fg = t[rows, :n], d[rows, :n], f[rows, :n]
+        cols = _quantile_columns(
+            _column_weights(tg, _estimate(dg, r0[rows], cap), b), (spread, 0.5, 1 - spread)
+        )
+        parts.append((rows, tg, dg, cols, tg.gather(1, cols), fg.gather(1, cols)))
+    order = torch.cat([p[0] for p in parts])
+    knots = torch.cat([p[4] for p in parts])
+    o = origin if origin.dim() == 1 else origin[order]
     sdf3, rgb3 = evaluate_sdf(
         field,
-        points_along(origin, dirs, knots).reshape(-1, 3),
-        dirs.repeat_interleave(3, 0),
+        points_along(o, dirs[order], knots).reshape(-1, 3),
+        dirs[order].repeat_interleave(3, 0),
         settings.chunks.points,
+        torch.cat([p[5] for p in parts]).reshape(-1) if settings.surface_reuse else None,
     )
-    resid = sdf3.view(R, 3) - d.gather(1, cols)
+    out, start = [], 0
+    for rows, tg, dg, cols, kg, _ in parts:
+        sl = slice(start, start + len(rows))
+        start += len(rows)
+        out.append(
+            _resolve(
+                tg, dg, cols, kg, sdf3.view(-1, 3)[sl], rgb3.view(-1, 3, 3)[sl], r0[rows], beta, settings
+            )
+        )
+    back = torch.empty_like(order)
+    back[order] = torch.arange(R)
+    acc, color, depth, ok = (torch.cat(v)[back] for v in zip(*out))
+    return acc, color, depth, ok & found, 3 * R
+
+
+def _resolve(t, d, cols, knots, sdf3, rgb3, r0, beta, settings: MarchSettings):
+    """Rays (G,) with mesh samples t, d (G, N), the columns cols (G, 3) of their three
+    evaluations at knots (G, 3), which read SDF sdf3 (G, 3) and colour rgb3 (G, 3, 3), and
+    the probe's residual r0 (G, 1): opacity, colour (G, 3), depth and ok (G,) (but for
+    ``found``)."""
+    b, cap = beta_value(beta), float(settings.shell.width)
+    resid = sdf3 - d.gather(1, cols)
     sdf = torch.where(d < cap, d + interpolate_knots(t, knots, resid), cap)
-    acc, color, depth, _ = composite_linear_sdf(
-        t, sdf, interpolate_knots(t, knots, rgb3.view(R, 3, 3)), beta, front=False
-    )
+    acc, color, depth, _ = composite_linear_sdf(t, sdf, interpolate_knots(t, knots, rgb3), beta, front=False)
     median = _quantile_columns(_column_weights(t, sdf.detach(), b), (0.5,))[:, 0]
     faint = acc.detach() < 1e-4  # shows nothing: where its weight sits does not matter
     spread_r = torch.cat([resid.detach(), r0], 1)
     smooth = spread_r.amax(1) - spread_r.amin(1) <= settings.residual.tolerance * b
-    ok = found & (faint | (smooth & (median >= cols[:, 0]) & (median <= cols[:, 2])))
-    return acc, color, depth, ok, 3 * R
+    ok = faint | (smooth & (median >= cols[:, 0]) & (median <= cols[:, 2]))
+    return acc, color, depth, ok

@@ -49,13 +49,15 @@ class GuidedRays:
     dirs: (R, 3) unit; t_hit: (R,) ray distance of the mesh hit a probe may start from (inf:
     none); cos: (R,) |cosine| between the ray and the hit face's normal; t_passing: (R, 2)
     the two probe distances of rays that pass a nearer surface (inf: not passing), or
-    None."""
+    None; face: (R,) long the mesh face hit at t_hit (-1: none), or None (not known: the
+    field searches the hit probes' closest faces)."""
 
     origins: torch.Tensor
     dirs: torch.Tensor
     t_hit: torch.Tensor
     cos: torch.Tensor
     t_passing: torch.Tensor | None = None
+    face: torch.Tensor | None = None
 
     def origins_of(self, idx: torch.Tensor) -> torch.Tensor:
         """The origins of rays idx (n,): (n, 3), or the shared (3,)."""
@@ -66,7 +68,8 @@ class GuidedRays:
 class _Probes:
     """Step 1's outcome: ``close`` (R,) bool; the hit probes' rays ``h_idx`` (H,) and their
     SDF ``sdf_h`` (H,) and colour ``rgb_h`` (H, 3); each ray's probe distances ``t`` and
-    SDFs ``sdf`` (R, 3) (passing, behind, hit; inf where none) for the residual rays."""
+    SDFs ``sdf`` (R, 3) (passing, behind, hit; inf where none) for the residual rays, and
+    the probes' known closest faces ``face`` (R, 3) (-1: unknown), or None."""
 
     close: torch.Tensor
     h_idx: torch.Tensor
@@ -75,6 +78,7 @@ class _Probes:
     t: torch.Tensor
     sdf: torch.Tensor
     evals: int
+    face: torch.Tensor | None = None
 
 
 def _probe(
@@ -104,7 +108,12 @@ def _probe(
         h_idx = torch.nonzero(probed).squeeze(1)
         idx = torch.cat([p_idx, p_idx, h_idx])
         t = torch.cat([t_pass[p_idx, 0], t_pass[p_idx, 1], rays.t_hit[h_idx]])
-        sdf, rgb = evaluate_sdf(field, points_along(rays.origins_of(idx), dirs[idx], t), dirs[idx], chunk)
+        known = None  # a hit probe lies on its hit face
+        if rays.face is not None:
+            known = torch.cat([p_idx.new_full((2 * len(p_idx),), -1), rays.face[h_idx]])
+        sdf, rgb = evaluate_sdf(
+            field, points_along(rays.origins_of(idx), dirs[idx], t), dirs[idx], chunk, known
+        )
         n = len(p_idx)
         sdf_p = torch.stack([sdf[:n], sdf[n : 2 * n]], 1)
         close[p_idx] = torch.minimum(sdf[:n], sdf[n : 2 * n]) <= s.band.miss_margin * beta
@@ -114,7 +123,11 @@ def _probe(
     probe_sdf = dirs.new_full((R, 3), torch.inf)
     probe_t[p_idx, :2], probe_sdf[p_idx, :2] = t_pass[p_idx], sdf_p.detach()
     probe_t[h_idx, 2], probe_sdf[h_idx, 2] = rays.t_hit[h_idx], sdf_h.detach()
-    return _Probes(close, h_idx, sdf_h, rgb_h, probe_t, probe_sdf, evals)
+    probe_face = None
+    if rays.face is not None:
+        probe_face = torch.full((R, 3), -1, dtype=torch.long)
+        probe_face[h_idx, 2] = rays.face[h_idx]
+    return _Probes(close, h_idx, sdf_h, rgb_h, probe_t, probe_sdf, evals, probe_face)
 
 
 def triage_rays(
@@ -206,6 +219,7 @@ def triage_rays(
             probes.sdf[r_idx],
             beta,
             s,
+            None if probes.face is None else probes.face[r_idx],
         )
         evals += n
         kind[r_idx[ok]] = RayKind.RESIDUAL

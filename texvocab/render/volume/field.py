@@ -32,11 +32,23 @@ def evaluate_field(
     return torch.cat(sigmas), torch.cat(rgbs)
 
 
-def evaluate_sdf(field, points: torch.Tensor, dirs: torch.Tensor, chunk: int):
-    """(sdf (N,), rgb (N, 3)) of ``field.sdf_rgb`` in chunks."""
+def evaluate_sdf(
+    field, points: torch.Tensor, dirs: torch.Tensor, chunk: int, known: torch.Tensor | None = None
+):
+    """(sdf (N,), rgb (N, 3)) of ``field.sdf_rgb`` in chunks. ``known`` (N,) long: the
+    points' closest mesh faces where known (-1 elsewhere), passed on to a field that
+    takes them (``field.takes_known``: :class:`~texvocab.method.field.PoseField`) and
+    dropped for others."""
     if len(points) == 0:
         return points.new_zeros(0), points.new_zeros(0, 3)
-    return evaluate_field(field.sdf_rgb, points, dirs, chunk)
+    if known is None or not getattr(field, "takes_known", False):
+        return evaluate_field(field.sdf_rgb, points, dirs, chunk)
+    sdfs, rgbs = [], []
+    for s in range(0, len(points), chunk):
+        sdf, rgb = field.sdf_rgb(points[s : s + chunk], dirs[s : s + chunk], known=known[s : s + chunk])
+        sdfs.append(sdf)
+        rgbs.append(rgb)
+    return torch.cat(sdfs), torch.cat(rgbs)
 
 
 def points_along(origin: torch.Tensor, dirs: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
