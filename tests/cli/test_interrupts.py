@@ -195,3 +195,37 @@ def test_an_interrupt_wrapped_by_an_extension_is_still_one_line(monkeypatch, cap
     monkeypatch.setattr(cli, "run", broken)
     with pytest.raises(SystemError, match="a real bug"):
         cli.main(["synth", "x"])
+
+
+@pytest.mark.parametrize("sig, kind", [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, "Terminated")])
+def test_a_swallowed_stop_signal_still_stops_the_next_write(tmp_path, sig, kind):
+    """A library that catches every exception (trimesh's vertex normals do) swallows the
+    interrupt; the signal was noted, so the write that would commit the command's output
+    raises it instead, and nothing is put in place (texvocab.io.stop_flag)."""
+    from texvocab.cli.interrupts import Terminated, stop_signals
+    from texvocab.io.images import atomic_write_bytes
+
+    kind = Terminated if kind == "Terminated" else kind
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)  # as a terminal's job has it
+    out = tmp_path / "out.bin"
+    try:
+        _swallowed_then_written(stop_signals, sig, kind, out, tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, before)
+    # outside a command nothing is noted: the same write goes through
+    atomic_write_bytes(out, lambda t: Path(t).write_bytes(b"x"))
+    assert out.read_bytes() == b"x"
+
+
+def _swallowed_then_written(stop_signals, sig, kind, out, tmp_path):
+    from texvocab.io.images import atomic_write_bytes
+
+    with stop_signals():
+        try:
+            os.kill(os.getpid(), sig)
+            time.sleep(1)  # the handler runs here
+        except BaseException:  # the library's catch-all
+            pass
+        with pytest.raises(kind):
+            atomic_write_bytes(out, lambda t: Path(t).write_bytes(b"x"))
+    assert list(tmp_path.iterdir()) == []

@@ -30,6 +30,7 @@ from texvocab.capture.zju import ZjuWriter
 from texvocab.errors import AssetError
 from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.io.gl_platform import ensure_offscreen
+from texvocab.io.stop_flag import raise_if_stopped
 from texvocab.io.temp_files import sweep_stale, temp_dir
 
 LAYOUTS = ("zju", "thuman")
@@ -279,6 +280,7 @@ def synthesize(
         _check_replaceable(out, overwrite, while_rendering=True)  # made meanwhile: the user's
         if out.exists():
             shutil.rmtree(out)
+        raise_if_stopped()  # a stop signal that a library swallowed (texvocab.io.stop_flag)
         tmp.rename(out)
     except BaseException as e:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -11,28 +11,40 @@ import sys
 import threading
 from collections.abc import Iterator
 
+from texvocab.io.stop_flag import Terminated, clear_stop, note_stop
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the main thread is, like Ctrl-C's KeyboardInterrupt."""
+__all__ = ["Terminated", "interrupt_cause", "report_interrupt", "stop_signals"]
 
 
 def _terminate(signum, frame) -> None:
+    note_stop(Terminated)
     raise Terminated
+
+
+def _interrupt(signum, frame) -> None:
+    note_stop(KeyboardInterrupt)
+    raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
 def stop_signals() -> Iterator[None]:
-    """For the block, SIGTERM raises :class:`Terminated` (when this is the main thread and
-    SIGTERM has its default action: a host that set its own handler keeps it)."""
-    mine = threading.current_thread() is threading.main_thread()
-    mine = mine and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
-    if mine:
-        signal.signal(signal.SIGTERM, _terminate)
+    """For the block, SIGTERM raises :class:`Terminated` and SIGINT KeyboardInterrupt, each
+    also noted for :func:`~texvocab.io.stop_flag.raise_if_stopped` (when this is the main
+    thread and the signal has Python's default action: a host that set its own handler
+    keeps it)."""
+    main = threading.current_thread() is threading.main_thread()
+    defaults = {signal.SIGTERM: signal.SIG_DFL, signal.SIGINT: signal.default_int_handler}
+    handlers = {signal.SIGTERM: _terminate, signal.SIGINT: _interrupt}
+    mine = [s for s in handlers if main and signal.getsignal(s) is defaults[s]]
+    clear_stop()
+    for s in mine:
+        signal.signal(s, handlers[s])
     try:
         yield
     finally:
-        if mine:
-            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        for s in mine:
+            signal.signal(s, defaults[s])
+        clear_stop()
 
 
 def report_interrupt(exc: KeyboardInterrupt) -> int:

@@ -9,6 +9,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from texvocab.io.full_disk import disk_full_cause
+from texvocab.io.stop_flag import raise_if_stopped
 from texvocab.io.temp_files import sweep_stale, temp_file
 
 
@@ -45,6 +46,7 @@ def atomic_write_bytes(path: str | Path, write) -> Path:
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600; the file gets the user's umask
     try:
         write(tmp)
+        raise_if_stopped()  # a stop signal that a library swallowed (texvocab.io.stop_flag)
         os.replace(tmp, path)
     except BaseException as e:
         Path(tmp).unlink(missing_ok=True)

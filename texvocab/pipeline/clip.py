@@ -19,6 +19,7 @@ from tqdm import tqdm
 from texvocab.capture.camera import Camera
 from texvocab.errors import TexvocabError
 from texvocab.io.images import atomic_write_bytes, save_png
+from texvocab.io.stop_flag import raise_if_stopped
 from texvocab.io.temp_files import sweep_stale, temp_name
 
 KEY_FILE = "clip.json"
@@ -182,6 +183,7 @@ def write_mp4(paths: list[Path], out: Path, fps: float) -> Path:
             frame[:h, :w] = img
             writer.send(np.ascontiguousarray(frame))
         writer.close()
+        raise_if_stopped()  # a stop signal that a library swallowed (texvocab.io.stop_flag)
         os.replace(tmp, out)
     finally:
         if tmp.exists():
