@@ -53,3 +53,24 @@ def test_full_masks_are_a_note_and_the_capture_still_passes(world, capsys):
         ln.startswith("note ") and "1 of 30 masks are full" in ln and "frames 2 (view 0)" in ln for ln in out
     )
     assert out[-1].startswith("OK ")
+
+
+def test_masks_reaching_beyond_the_shell_get_a_note_of_the_shell_training_will_take(world, capsys):
+    """Masks dilated by 2 px (64² images, about 3 cm a pixel: a stand-in for clothing off
+    the body) reach beyond the default 4 cm shell; the untouched capture does not."""
+    import numpy as np
+    from scipy import ndimage
+
+    assert main(["check-assets", str(world / "cap")]) == 0
+    assert "field shell" not in capsys.readouterr().out
+    root = _copy(world, "grown_masks")
+    for path in sorted((root / "mask").rglob("*.png")):
+        with Image.open(path) as im:
+            m = np.asarray(im.convert("L")) > 127
+        Image.fromarray((ndimage.binary_dilation(m, iterations=2) * 255).astype(np.uint8)).save(path)
+    assert main(["check-assets", str(root)]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    notes = [ln for ln in out if ln.startswith("note ") and "field shell: " in ln]
+    assert len(notes) == 1 and "4 cm reaches 0." in notes[0] and out[-1].startswith("OK ")
+    width = int(notes[0].split("field shell: ")[1].split(" cm")[0])
+    assert 4 < width <= 12

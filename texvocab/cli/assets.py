@@ -127,9 +127,28 @@ def check_capture(path: Path) -> list[str]:
     if not [ln for ln in lines if ln.startswith("FAIL")]:
         lines += _check_content(cap)
     if not [ln for ln in lines if ln.startswith("FAIL")]:
+        lines += _shell_note(cap)
         lines.append(
             f"OK   {path}: {cap.layout} capture, {cap.num_views} "
             f"view{'s' if cap.num_views != 1 else ''} x "
             f"{cap.num_frames} frames ({cap.num_train} training)"
         )
     return lines
+
+
+def _shell_note(cap) -> list[str]:
+    """A note when the person in the masks reaches farther from the posed body than the
+    field's default shell, so training will widen it (texvocab.pipeline.shell_fit)."""
+    from texvocab.errors import TexvocabError
+    from texvocab.pipeline.model import train_views
+    from texvocab.pipeline.shell_fit import fit_shell
+
+    s = Settings()
+    try:
+        views = train_views(cap, s)
+    except TexvocabError:  # held-out views the capture lacks: reported by the content checks
+        views = list(range(cap.num_views))
+    fitted, fit = fit_shell(cap, s, views)
+    if fit is None or fitted.field.shell_width <= s.field.shell_width:
+        return []
+    return [f"note {cap.root}: {fit.line(s.field.shell_coverage)}"]
