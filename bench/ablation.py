@@ -51,6 +51,9 @@ import numpy as np
 from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips", "iou")  # iou: rendered silhouette (opacity > 0.5)
+# on the pixels whose truth changes with pose (texvocab.metrics.fold_region): None for an
+# image without a fold region (or a capture without fold_regions.npz)
+FOLD_METRICS = ("psnr_fold", "ssim_fold")
 SET = "novel_poses"
 # the earlier training rays (marched rest, 5-sample band, shell grid voxel 1 cm)
 EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
@@ -132,19 +135,23 @@ def die_with_parent() -> None:
         print(f"warning: worker {os.getpid()} will outlive a killed bench", file=sys.stderr)
 
 
-def make_capture(out: Path, motion: str = "compositional") -> Path:
-    """The synthetic capture of ``motion`` under OUT (reused when present)."""
+def make_capture(out: Path, motion: str = "compositional", garment: str = "painted") -> Path:
+    """The synthetic capture of ``motion`` under OUT, its person wearing ``garment``
+    (``texvocab synth --garment``; reused when present): OUT/capture_<motion> for the
+    painted default, OUT/capture_<motion>_<garment> for the others."""
     from texvocab.body import load_body
-    from texvocab.capture.synth import synthesize
+    from texvocab.capture.garment_sets import garment_spec
+    from texvocab.capture.synth import SynthSettings, synthesize
 
-    root = out / f"capture_{motion}"
+    garment_spec(garment)  # AssetError for an unknown name, before anything is made
+    root = out / (f"capture_{motion}" if garment == "painted" else f"capture_{motion}_{garment}")
     if not root.exists():
         if motion == "compositional":
             from texvocab.capture.compositional import compositional_motion as make
         else:
             from texvocab.capture.motion import default_motion as make
         poses, trans, num_train = make(0)
-        synthesize(root, poses, trans, num_train, load_body(None))
+        synthesize(root, poses, trans, num_train, load_body(None), SynthSettings(garment=garment))
     return root
 
 
@@ -214,8 +221,14 @@ def train_and_evaluate(job: dict) -> dict:
         },
     )
     rows = grids[SET]
+    images = [r for r in records if r["set"] == SET]
+    # grid rows are the set's first images: their frame and view (fold-crop grid)
     np.savez_compressed(
-        run_dir / "grid.npz", truth=np.stack([r[0] for r in rows]), render=np.stack([r[1] for r in rows])
+        run_dir / "grid.npz",
+        truth=np.stack([r[0] for r in rows]),
+        render=np.stack([r[1] for r in rows]),
+        frame=np.asarray([r["frame"] for r in images[: len(rows)]], np.int64),
+        view=np.asarray([r["view"] for r in images[: len(rows)]], np.int64),
     )
     result = {
         "run": run_dir.parent.name,
@@ -227,7 +240,7 @@ def train_and_evaluate(job: dict) -> dict:
         # training PSNR of each step's batch (this session's steps; resumed runs
         # have only the steps after the resume)
         "train_psnr": [r["psnr"] for r in logs] if steps0 == 0 else None,
-        "per_image": {m: [r.get(m) for r in records if r["set"] == SET] for m in METRICS},
+        "per_image": {m: [r.get(m) for r in images] for m in METRICS + FOLD_METRICS},
     }
     blob = json.dumps(result)
     atomic_write_bytes(done, lambda t: Path(t).write_text(blob))
@@ -396,6 +409,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("groups", nargs="+", choices=list(GROUPS))
     ap.add_argument("--capture", default=None, help="capture folder (default: synthesise)")
+    ap.add_argument(
+        "--garment",
+        default="painted",
+        help="what the synthesised capture's person wears (texvocab synth --garment: painted, "
+        "hoodie, wide-trousers, loose); its own folder OUT/capture_compositional_<garment>",
+    )
     ap.add_argument("--iterations", type=int, default=500, help="training steps per run")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument(
@@ -422,7 +441,7 @@ def main(argv=None) -> int:
     )
     args = ap.parse_args(argv)
     out = Path(args.out)
-    root = Path(args.capture) if args.capture else make_capture(out)
+    root = Path(args.capture) if args.capture else make_capture(out, garment=args.garment)
     plan: dict[str, dict[str, str]] = {}
     jobs, seen = [], set()
     for g in args.groups:
