@@ -5,6 +5,7 @@ their spread and as *paired* differences against a reference variant.
 
     .venv/bin/python bench/ablation.py GROUP [GROUP ...] [--seeds 0 1 2] [--iterations 500]
         [--jobs 2] [--per-set 10] [--preset fast] [--base KEY=VALUE ...] [--report-only]
+        [--garment painted|hoodie|wide-trousers|loose]
 
 Groups (each varies one knob from the common base; the first variant is its reference):
 ``strategies`` (part/joint/global/none, Table 4 of the paper), ``encoders`` (pyramid,
@@ -33,6 +34,11 @@ whole-body combinations never seen. Each run lives in OUT/runs/<settings>/seed<S
 its checkpoint and result.json; finished runs are skipped, unfinished ones resume.
 ``--jobs N`` trains N runs at once, each on one thread. Writes OUT/<groups>.md (tables)
 and OUT/<group>_side_by_side.png (truth | one column per variant, first seed).
+``--garment NAME`` dresses the synthesised person (``texvocab synth --garment``; its
+capture is OUT/capture_compositional_NAME). On a capture with fold regions (the pixels
+whose truth changes with pose, which ``texvocab synth`` stores) the tables add psnr_fold /
+ssim_fold, and OUT/<group>_fold_crops.png crops each grid image around its fold region:
+truth | one column per variant (first seed).
 """
 
 from __future__ import annotations
@@ -48,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
+from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png, to_uint8
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips", "iou")  # iou: rendered silhouette (opacity > 0.5)
 # on the pixels whose truth changes with pose (texvocab.metrics.fold_region): None for an
@@ -252,8 +258,9 @@ def train_and_evaluate(job: dict) -> dict:
 
 
 def _with_metrics(result: dict, run_dir: Path) -> dict:
-    """A cached result with any METRICS it predates read back from its eval/metrics.json."""
-    missing = [m for m in METRICS if m not in result["per_image"]]
+    """A cached result with any METRICS or FOLD_METRICS it predates read back from its
+    eval/metrics.json (None per image where that report lacks them too: n/a)."""
+    missing = [m for m in METRICS + FOLD_METRICS if m not in result["per_image"]]
     report = run_dir / "eval" / "metrics.json"
     if missing and report.is_file():
         images = [r for r in json.loads(report.read_text())["images"] if r["set"] == SET]
@@ -265,6 +272,21 @@ def _mean(v) -> float | None:
     return None if not v or any(x is None for x in v) else float(np.mean(v))
 
 
+def _mean_present(v) -> float | None:
+    """Mean over the images that have the value (a fold metric: those with a region)."""
+    kept = [x for x in v or () if x is not None]
+    return float(np.mean(kept)) if kept else None
+
+
+def _fold_pairs(results: dict, variants: dict[str, str], lab: str, ref: str, seed: int, metric: str):
+    """Per-image ``metric`` of variant ``lab`` minus ``ref`` (runs of ``seed``) over the
+    images that have it in both runs (a fold metric: those with a fold region)."""
+    a, b = (results[(variants[k], seed)]["per_image"].get(metric) for k in (lab, ref))
+    if a is None or b is None:  # a run that predates the metric
+        return np.zeros(0)
+    return np.asarray([x - y for x, y in zip(a, b, strict=True) if x is not None and y is not None], float)
+
+
 def group_report(group: str, variants: dict[str, str], results: dict) -> list[str]:
     """Markdown of one group: ``variants`` maps a label to its run name (the first is the
     reference); ``results[(run, seed)]`` are result dicts."""
@@ -274,6 +296,7 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
     seeds = sorted({k[1] for k in results})
     by = {
         (lab, s): {m: _mean(results[(variants[lab], s)]["per_image"].get(m)) for m in METRICS}
+        | {m: _mean_present(results[(variants[lab], s)]["per_image"].get(m)) for m in FOLD_METRICS}
         | {
             "kid": results[(variants[lab], s)].get("kid"),
             "sps": results[(variants[lab], s)]["seconds_per_step"],
@@ -284,13 +307,17 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
     }
     first = results[next(k for k in results if k[0] == variants[labels[0]])]
     steps, n_img = first["steps"], len(first["per_image"]["psnr_bbox"])
-    cols = METRICS + ("kid", "sps")
+    n_fold = sum(x is not None for x in first["per_image"].get("psnr_fold") or ())
+    cols = METRICS + FOLD_METRICS + ("kid", "sps")
     lines = [
         f"## {group}: {steps} steps per run, seeds {', '.join(map(str, seeds))}; "
-        f"{n_img} novel-pose images per run",
+        f"{n_img} novel-pose images per run, {n_fold} with a fold region",
         "",
         "Mean over seeds of each run's mean (spread over seeds = max - min); `kid` over "
-        "the run's images against the truth; `sps` = training seconds per step.",
+        "the run's images against the truth; `sps` = training seconds per step; "
+        "`psnr_fold` / `ssim_fold`: on the pixels whose truth changes with pose "
+        "(texvocab.metrics.fold_region), the mean over the run's images that have a fold "
+        "region (n/a: none has one, or the run predates the metric).",
         "",
         "| variant | " + " | ".join(cols) + " | per seed PSNR |",
         "|---" * (len(cols) + 2) + "|",
@@ -310,11 +337,15 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
         lines += [
             "",
             f"Paired, other - {ref} (same seed, same images): mean [min, max] over "
-            "seeds; then per image over all seeds: mean ± standard error and the share "
-            f"of pairs where the other is better. A range containing 0 is not resolved.",
+            "seeds (the fold metrics over the images with a fold region in both runs); "
+            "then per image over all seeds, on the whole image (bbox) and on the fold "
+            "regions: mean ± standard error (n = image pairs) and the share of pairs where "
+            "the other is better. A range containing 0 is not resolved.",
             "",
-            f"| other - {ref} | " + " | ".join(METRICS) + " | d PSNR per image | better |",
-            "|---" * (len(METRICS) + 3) + "|",
+            f"| other - {ref} | "
+            + " | ".join(METRICS + FOLD_METRICS)
+            + " | d PSNR per image | better | d PSNR fold per image | better (fold) |",
+            "|---" * (len(METRICS) + len(FOLD_METRICS) + 5) + "|",
         ]
         for lab in others:
             pairs = [s for s in seeds if (lab, s) in by and (ref, s) in by]
@@ -324,6 +355,13 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
                     by[(lab, s)][m] - by[(ref, s)][m]
                     for s in pairs
                     if by[(lab, s)][m] is not None and by[(ref, s)][m] is not None
+                ]
+                cells.append("n/a" if not d else f"{np.mean(d):+.4f} [{min(d):+.4f}, {max(d):+.4f}]")
+            for m in FOLD_METRICS:
+                d = [
+                    float(f.mean())
+                    for f in (_fold_pairs(results, variants, lab, ref, s, m) for s in pairs)
+                    if len(f)
                 ]
                 cells.append("n/a" if not d else f"{np.mean(d):+.4f} [{min(d):+.4f}, {max(d):+.4f}]")
             d = (
@@ -345,7 +383,18 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
                 else "n/a"
             )
             better = f"{(d > 0).mean():.0%}" if len(d) else "n/a"
-            lines.append(f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} |")
+            f = np.concatenate(
+                [np.zeros(0)] + [_fold_pairs(results, variants, lab, ref, s, "psnr_fold") for s in pairs]
+            )
+            fold = (
+                f"{f.mean():+.3f} ± {f.std(ddof=1) / np.sqrt(len(f)):.3f} (n = {len(f)})"
+                if len(f) > 1
+                else "n/a"
+            )
+            fold_better = f"{(f > 0).mean():.0%}" if len(f) else "n/a"
+            lines.append(
+                f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} | {fold} | {fold_better} |"
+            )
     return lines + curve_report(labels, variants, results, seeds) + [""]
 
 
@@ -402,6 +451,86 @@ def side_by_side(group: str, variants: dict[str, str], seed: int, out: Path) -> 
     return save_png(
         out / f"{group}_side_by_side.png",
         contact_sheet(rows, col_labels=["truth"] + [f"{lab} (seed {seed})" for lab in grids]),
+    )
+
+
+def _grid_rows_where(run_dir: Path, grid) -> list[tuple[int, int]] | None:
+    """(frame, view) of each row of a run's grid.npz: stored with it, or (grids written
+    before they were) the first images of its eval/metrics.json, whose order the grid
+    rows follow."""
+    if "frame" in grid and "view" in grid:
+        return list(zip(grid["frame"].tolist(), grid["view"].tolist(), strict=True))
+    report = run_dir / "eval" / "metrics.json"
+    if not report.is_file():
+        return None
+    images = [r for r in json.loads(report.read_text())["images"] if r["set"] == SET]
+    if len(images) < len(grid["truth"]) or any("frame" not in r for r in images):
+        return None
+    return [(r["frame"], r["view"]) for r in images[: len(grid["truth"])]]
+
+
+def fold_box(region: np.ndarray, margin: int = 8) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1): a square around the bounding box of the bool ``region``, ``margin``
+    pixels wider on each side, kept inside the image (smaller when the image is)."""
+    h, w = region.shape
+    ys, xs = np.nonzero(region)
+    cy, cx = (ys.min() + ys.max() + 1) / 2, (xs.min() + xs.max() + 1) / 2
+    side = min(h, w, max(ys.max() - ys.min(), xs.max() - xs.min()) + 1 + 2 * margin)
+    y0 = int(np.clip(round(cy - side / 2), 0, h - side))
+    x0 = int(np.clip(round(cx - side / 2), 0, w - side))
+    return y0, y0 + side, x0, x0 + side
+
+
+def fold_crops(
+    group: str, variants: dict[str, str], seed: int, out: Path, root: Path, tile: int = 160
+) -> Path | None:
+    """OUT/<group>_fold_crops.png: per grid image (first ``seed``) with a fold region, a
+    crop around the region's bounding box (a margin around it, squared, scaled to
+    ``tile`` pixels, nearest neighbour): truth | one column per variant. None when the
+    capture stores no fold regions or no variant has a grid."""
+    from PIL import Image
+
+    from texvocab.capture.fold_regions import FoldRegions
+
+    folds = FoldRegions.load(root)
+    if folds is None:
+        return None
+    grids = {}
+    for lab, run in variants.items():
+        run_dir = out / "runs" / run / f"seed{seed}"
+        if (run_dir / "grid.npz").is_file():
+            g = dict(np.load(run_dir / "grid.npz"))
+            where = _grid_rows_where(run_dir, g)
+            if where is not None:
+                grids[lab] = (g, where)
+    if not grids:
+        return None
+    truth, where = next(iter(grids.values()))
+    truth = truth["truth"]
+    n = min(len(w) for _, w in grids.values())
+
+    def scaled(img: np.ndarray, box) -> np.ndarray:
+        y0, y1, x0, x1 = box
+        crop = Image.fromarray(np.ascontiguousarray(to_uint8(img[y0:y1, x0:x1, :3])))
+        return np.asarray(crop.resize((tile, tile), Image.NEAREST))
+
+    rows, labels = [], []
+    for i in range(n):
+        if any(w[i] != where[i] for _, w in grids.values()):
+            continue  # runs whose grids show other images
+        region = folds.region(*where[i])
+        if region is None or not region.any() or region.shape != truth[i].shape[:2]:
+            continue
+        box = fold_box(region)
+        rows.append([scaled(truth[i], box)] + [scaled(g["render"][i], box) for g, _ in grids.values()])
+        labels.append(f"frame {where[i][0]} view {where[i][1]}")
+    if not rows:
+        return None
+    return save_png(
+        out / f"{group}_fold_crops.png",
+        contact_sheet(
+            rows, row_labels=labels, col_labels=["truth"] + [f"{lab} (seed {seed})" for lab in grids]
+        ),
     )
 
 
@@ -496,6 +625,7 @@ def main(argv=None) -> int:
     for g in args.groups:
         lines += group_report(g, plan[g], results)
         side_by_side(g, plan[g], args.seeds[0], out)
+        fold_crops(g, plan[g], args.seeds[0], out, root)
     md = "\n".join(lines)
     atomic_write_bytes(out / f"{'_'.join(args.groups)}.md", lambda t: Path(t).write_text(md))
     print(md)

@@ -60,6 +60,8 @@ def test_the_bench_runs_on_a_checkpoint(tmp_path, capsys):
 
 def test_the_bench_reads_training_frames_when_asked(tmp_path, capsys):
     ckpt = smallest_run(tmp_path)
-    assert silhouette_errors.main([str(ckpt), "--frames", "1", "--max-shift", "1", "--split", "training"]) == 0
+    assert (
+        silhouette_errors.main([str(ckpt), "--frames", "1", "--max-shift", "1", "--split", "training"]) == 0
+    )
     out = capsys.readouterr().out
     assert "training frames [0]" in out and out.strip().splitlines()[-1].endswith("frames=1")
