@@ -482,12 +482,13 @@ def fold_box(region: np.ndarray, margin: int = 8) -> tuple[int, int, int, int]:
 
 
 def fold_crops(
-    group: str, variants: dict[str, str], seed: int, out: Path, root: Path, tile: int = 160
+    group: str, variants: dict[str, str], seed: int, out: Path, root: Path, tile: int | None = None
 ) -> Path | None:
     """OUT/<group>_fold_crops.png: per grid image (first ``seed``) with a fold region, a
     crop around the region's bounding box (a margin around it, squared, scaled to
-    ``tile`` pixels, nearest neighbour): truth | one column per variant. None when the
-    capture stores no fold regions or no variant has a grid."""
+    ``tile`` pixels by nearest neighbour; by default the largest crop's side, so that no
+    crop is shrunk): truth | one column per variant. None when the capture stores no fold
+    regions or no variant has a grid."""
     from PIL import Image
 
     from texvocab.capture.fold_regions import FoldRegions
@@ -509,23 +510,27 @@ def fold_crops(
     truth = truth["truth"]
     n = min(len(w) for _, w in grids.values())
 
-    def scaled(img: np.ndarray, box) -> np.ndarray:
-        y0, y1, x0, x1 = box
-        crop = Image.fromarray(np.ascontiguousarray(to_uint8(img[y0:y1, x0:x1, :3])))
-        return np.asarray(crop.resize((tile, tile), Image.NEAREST))
-
-    rows, labels = [], []
+    shown, labels = [], []
     for i in range(n):
         if any(w[i] != where[i] for _, w in grids.values()):
             continue  # runs whose grids show other images
         region = folds.region(*where[i])
         if region is None or not region.any() or region.shape != truth[i].shape[:2]:
             continue
-        box = fold_box(region)
-        rows.append([scaled(truth[i], box)] + [scaled(g["render"][i], box) for g, _ in grids.values()])
+        shown.append((i, fold_box(region)))
         labels.append(f"frame {where[i][0]} view {where[i][1]}")
-    if not rows:
+    if not shown:
         return None
+    tile = tile or max(b[1] - b[0] for _, b in shown)
+
+    def scaled(img: np.ndarray, box) -> np.ndarray:
+        y0, y1, x0, x1 = box
+        crop = Image.fromarray(np.ascontiguousarray(to_uint8(img[y0:y1, x0:x1, :3])))
+        return np.asarray(crop.resize((tile, tile), Image.NEAREST))
+
+    rows = [
+        [scaled(truth[i], box)] + [scaled(g["render"][i], box) for g, _ in grids.values()] for i, box in shown
+    ]
     return save_png(
         out / f"{group}_fold_crops.png",
         contact_sheet(
