@@ -5,6 +5,7 @@ their spread and as *paired* differences against a reference variant.
 
     .venv/bin/python bench/ablation.py GROUP [GROUP ...] [--seeds 0 1 2] [--iterations 500]
         [--jobs 2] [--per-set 10] [--preset fast] [--base KEY=VALUE ...] [--report-only]
+        [--garment painted|hoodie|wide-trousers|loose]
 
 Groups (each varies one knob from the common base; the first variant is its reference):
 ``strategies`` (part/joint/global/none, Table 4 of the paper), ``encoders`` (pyramid,
@@ -17,8 +18,9 @@ nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The base
 is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
 weighting=paper view_weighting=mean train_guide=shell train_coarse_samples=none
-train_residual=off train_band_newton=false train_shell_voxel=0.01``: the project before
-this ablation chose its defaults), so a variant differs from its
+field.shell_coverage=none train_residual=off train_band_newton=false
+train_shell_voxel=0.01``: the project before this ablation chose its defaults; the fixed
+shell keeps older runs' folders meaning what they did), so a variant differs from its
 reference in exactly its own setting; identical settings share one run. ``train_marcher``
 (train_coarse_samples 18, 9) is run with ``--base ... train_guide=raster`` (keeping the
 three training-ray items above), ``train_rays``
@@ -33,6 +35,11 @@ whole-body combinations never seen. Each run lives in OUT/runs/<settings>/seed<S
 its checkpoint and result.json; finished runs are skipped, unfinished ones resume.
 ``--jobs N`` trains N runs at once, each on one thread. Writes OUT/<groups>.md (tables)
 and OUT/<group>_side_by_side.png (truth | one column per variant, first seed).
+``--garment NAME`` dresses the synthesised person (``texvocab synth --garment``; its
+capture is OUT/capture_compositional_NAME). On a capture with fold regions (the pixels
+whose truth changes with pose, which ``texvocab synth`` stores) the tables add psnr_fold /
+ssim_fold, and OUT/<group>_fold_crops.png crops each grid image around its fold region:
+truth | one column per variant (first seed).
 """
 
 from __future__ import annotations
@@ -48,9 +55,12 @@ from pathlib import Path
 
 import numpy as np
 
-from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png
+from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png, to_uint8
 
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips", "iou")  # iou: rendered silhouette (opacity > 0.5)
+# on the pixels whose truth changes with pose (texvocab.metrics.fold_region): None for an
+# image without a fold region (or a capture without fold_regions.npz)
+FOLD_METRICS = ("psnr_fold", "ssim_fold")
 SET = "novel_poses"
 # the earlier training rays (marched rest, 5-sample band, shell grid voxel 1 cm)
 EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
@@ -61,9 +71,10 @@ DEFAULT_BASE = [
     "view_weighting=mean",
     "train_guide=shell",
     "train_coarse_samples=none",
+    "field.shell_coverage=none",  # the fixed 4 cm shell runs had before the shell fit
 ] + EARLIER_RAYS
 # base settings that name no run folder: every run before the setting existed had them
-UNNAMED = {"train_guide=shell", "train_coarse_samples=none"} | set(EARLIER_RAYS)
+UNNAMED = {"train_guide=shell", "train_coarse_samples=none", "field.shell_coverage=none"} | set(EARLIER_RAYS)
 GROUPS: dict[str, dict[str, list[str]]] = {
     "strategies": {
         "part": [],
@@ -132,19 +143,23 @@ def die_with_parent() -> None:
         print(f"warning: worker {os.getpid()} will outlive a killed bench", file=sys.stderr)
 
 
-def make_capture(out: Path, motion: str = "compositional") -> Path:
-    """The synthetic capture of ``motion`` under OUT (reused when present)."""
+def make_capture(out: Path, motion: str = "compositional", garment: str = "painted") -> Path:
+    """The synthetic capture of ``motion`` under OUT, its person wearing ``garment``
+    (``texvocab synth --garment``; reused when present): OUT/capture_<motion> for the
+    painted default, OUT/capture_<motion>_<garment> for the others."""
     from texvocab.body import load_body
-    from texvocab.capture.synth import synthesize
+    from texvocab.capture.garment_sets import garment_spec
+    from texvocab.capture.synth import SynthSettings, synthesize
 
-    root = out / f"capture_{motion}"
+    garment_spec(garment)  # AssetError for an unknown name, before anything is made
+    root = out / (f"capture_{motion}" if garment == "painted" else f"capture_{motion}_{garment}")
     if not root.exists():
         if motion == "compositional":
             from texvocab.capture.compositional import compositional_motion as make
         else:
             from texvocab.capture.motion import default_motion as make
         poses, trans, num_train = make(0)
-        synthesize(root, poses, trans, num_train, load_body(None))
+        synthesize(root, poses, trans, num_train, load_body(None), SynthSettings(garment=garment))
     return root
 
 
@@ -214,8 +229,14 @@ def train_and_evaluate(job: dict) -> dict:
         },
     )
     rows = grids[SET]
+    images = [r for r in records if r["set"] == SET]
+    # grid rows are the set's first images: their frame and view (fold-crop grid)
     np.savez_compressed(
-        run_dir / "grid.npz", truth=np.stack([r[0] for r in rows]), render=np.stack([r[1] for r in rows])
+        run_dir / "grid.npz",
+        truth=np.stack([r[0] for r in rows]),
+        render=np.stack([r[1] for r in rows]),
+        frame=np.asarray([r["frame"] for r in images[: len(rows)]], np.int64),
+        view=np.asarray([r["view"] for r in images[: len(rows)]], np.int64),
     )
     result = {
         "run": run_dir.parent.name,
@@ -227,7 +248,7 @@ def train_and_evaluate(job: dict) -> dict:
         # training PSNR of each step's batch (this session's steps; resumed runs
         # have only the steps after the resume)
         "train_psnr": [r["psnr"] for r in logs] if steps0 == 0 else None,
-        "per_image": {m: [r.get(m) for r in records if r["set"] == SET] for m in METRICS},
+        "per_image": {m: [r.get(m) for r in images] for m in METRICS + FOLD_METRICS},
     }
     blob = json.dumps(result)
     atomic_write_bytes(done, lambda t: Path(t).write_text(blob))
@@ -239,8 +260,9 @@ def train_and_evaluate(job: dict) -> dict:
 
 
 def _with_metrics(result: dict, run_dir: Path) -> dict:
-    """A cached result with any METRICS it predates read back from its eval/metrics.json."""
-    missing = [m for m in METRICS if m not in result["per_image"]]
+    """A cached result with any METRICS or FOLD_METRICS it predates read back from its
+    eval/metrics.json (None per image where that report lacks them too: n/a)."""
+    missing = [m for m in METRICS + FOLD_METRICS if m not in result["per_image"]]
     report = run_dir / "eval" / "metrics.json"
     if missing and report.is_file():
         images = [r for r in json.loads(report.read_text())["images"] if r["set"] == SET]
@@ -252,6 +274,21 @@ def _mean(v) -> float | None:
     return None if not v or any(x is None for x in v) else float(np.mean(v))
 
 
+def _mean_present(v) -> float | None:
+    """Mean over the images that have the value (a fold metric: those with a region)."""
+    kept = [x for x in v or () if x is not None]
+    return float(np.mean(kept)) if kept else None
+
+
+def _fold_pairs(results: dict, variants: dict[str, str], lab: str, ref: str, seed: int, metric: str):
+    """Per-image ``metric`` of variant ``lab`` minus ``ref`` (runs of ``seed``) over the
+    images that have it in both runs (a fold metric: those with a fold region)."""
+    a, b = (results[(variants[k], seed)]["per_image"].get(metric) for k in (lab, ref))
+    if a is None or b is None:  # a run that predates the metric
+        return np.zeros(0)
+    return np.asarray([x - y for x, y in zip(a, b, strict=True) if x is not None and y is not None], float)
+
+
 def group_report(group: str, variants: dict[str, str], results: dict) -> list[str]:
     """Markdown of one group: ``variants`` maps a label to its run name (the first is the
     reference); ``results[(run, seed)]`` are result dicts."""
@@ -261,6 +298,7 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
     seeds = sorted({k[1] for k in results})
     by = {
         (lab, s): {m: _mean(results[(variants[lab], s)]["per_image"].get(m)) for m in METRICS}
+        | {m: _mean_present(results[(variants[lab], s)]["per_image"].get(m)) for m in FOLD_METRICS}
         | {
             "kid": results[(variants[lab], s)].get("kid"),
             "sps": results[(variants[lab], s)]["seconds_per_step"],
@@ -271,13 +309,17 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
     }
     first = results[next(k for k in results if k[0] == variants[labels[0]])]
     steps, n_img = first["steps"], len(first["per_image"]["psnr_bbox"])
-    cols = METRICS + ("kid", "sps")
+    n_fold = sum(x is not None for x in first["per_image"].get("psnr_fold") or ())
+    cols = METRICS + FOLD_METRICS + ("kid", "sps")
     lines = [
         f"## {group}: {steps} steps per run, seeds {', '.join(map(str, seeds))}; "
-        f"{n_img} novel-pose images per run",
+        f"{n_img} novel-pose images per run, {n_fold} with a fold region",
         "",
         "Mean over seeds of each run's mean (spread over seeds = max - min); `kid` over "
-        "the run's images against the truth; `sps` = training seconds per step.",
+        "the run's images against the truth; `sps` = training seconds per step; "
+        "`psnr_fold` / `ssim_fold`: on the pixels whose truth changes with pose "
+        "(texvocab.metrics.fold_region), the mean over the run's images that have a fold "
+        "region (n/a: none has one, or the run predates the metric).",
         "",
         "| variant | " + " | ".join(cols) + " | per seed PSNR |",
         "|---" * (len(cols) + 2) + "|",
@@ -297,11 +339,15 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
         lines += [
             "",
             f"Paired, other - {ref} (same seed, same images): mean [min, max] over "
-            "seeds; then per image over all seeds: mean ± standard error and the share "
-            f"of pairs where the other is better. A range containing 0 is not resolved.",
+            "seeds (the fold metrics over the images with a fold region in both runs); "
+            "then per image over all seeds, on the whole image (bbox) and on the fold "
+            "regions: mean ± standard error (n = image pairs) and the share of pairs where "
+            "the other is better. A range containing 0 is not resolved.",
             "",
-            f"| other - {ref} | " + " | ".join(METRICS) + " | d PSNR per image | better |",
-            "|---" * (len(METRICS) + 3) + "|",
+            f"| other - {ref} | "
+            + " | ".join(METRICS + FOLD_METRICS)
+            + " | d PSNR per image | better | d PSNR fold per image | better (fold) |",
+            "|---" * (len(METRICS) + len(FOLD_METRICS) + 5) + "|",
         ]
         for lab in others:
             pairs = [s for s in seeds if (lab, s) in by and (ref, s) in by]
@@ -311,6 +357,13 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
                     by[(lab, s)][m] - by[(ref, s)][m]
                     for s in pairs
                     if by[(lab, s)][m] is not None and by[(ref, s)][m] is not None
+                ]
+                cells.append("n/a" if not d else f"{np.mean(d):+.4f} [{min(d):+.4f}, {max(d):+.4f}]")
+            for m in FOLD_METRICS:
+                d = [
+                    float(f.mean())
+                    for f in (_fold_pairs(results, variants, lab, ref, s, m) for s in pairs)
+                    if len(f)
                 ]
                 cells.append("n/a" if not d else f"{np.mean(d):+.4f} [{min(d):+.4f}, {max(d):+.4f}]")
             d = (
@@ -332,7 +385,18 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
                 else "n/a"
             )
             better = f"{(d > 0).mean():.0%}" if len(d) else "n/a"
-            lines.append(f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} |")
+            f = np.concatenate(
+                [np.zeros(0)] + [_fold_pairs(results, variants, lab, ref, s, "psnr_fold") for s in pairs]
+            )
+            fold = (
+                f"{f.mean():+.3f} ± {f.std(ddof=1) / np.sqrt(len(f)):.3f} (n = {len(f)})"
+                if len(f) > 1
+                else "n/a"
+            )
+            fold_better = f"{(f > 0).mean():.0%}" if len(f) else "n/a"
+            lines.append(
+                f"| {lab} | " + " | ".join(cells) + f" | {img} | {better} | {fold} | {fold_better} |"
+            )
     return lines + curve_report(labels, variants, results, seeds) + [""]
 
 
@@ -392,10 +456,101 @@ def side_by_side(group: str, variants: dict[str, str], seed: int, out: Path) -> 
     )
 
 
+def _grid_rows_where(run_dir: Path, grid) -> list[tuple[int, int]] | None:
+    """(frame, view) of each row of a run's grid.npz: stored with it, or (grids written
+    before they were) the first images of its eval/metrics.json, whose order the grid
+    rows follow."""
+    if "frame" in grid and "view" in grid:
+        return list(zip(grid["frame"].tolist(), grid["view"].tolist(), strict=True))
+    report = run_dir / "eval" / "metrics.json"
+    if not report.is_file():
+        return None
+    images = [r for r in json.loads(report.read_text())["images"] if r["set"] == SET]
+    if len(images) < len(grid["truth"]) or any("frame" not in r for r in images):
+        return None
+    return [(r["frame"], r["view"]) for r in images[: len(grid["truth"])]]
+
+
+def fold_box(region: np.ndarray, margin: int = 8) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1): a square around the bounding box of the bool ``region``, ``margin``
+    pixels wider on each side, kept inside the image (smaller when the image is)."""
+    h, w = region.shape
+    ys, xs = np.nonzero(region)
+    cy, cx = (ys.min() + ys.max() + 1) / 2, (xs.min() + xs.max() + 1) / 2
+    side = min(h, w, max(ys.max() - ys.min(), xs.max() - xs.min()) + 1 + 2 * margin)
+    y0 = int(np.clip(round(cy - side / 2), 0, h - side))
+    x0 = int(np.clip(round(cx - side / 2), 0, w - side))
+    return y0, y0 + side, x0, x0 + side
+
+
+def fold_crops(
+    group: str, variants: dict[str, str], seed: int, out: Path, root: Path, tile: int | None = None
+) -> Path | None:
+    """OUT/<group>_fold_crops.png: per grid image (first ``seed``) with a fold region, a
+    crop around the region's bounding box (a margin around it, squared, scaled to
+    ``tile`` pixels by nearest neighbour; by default the largest crop's side, so that no
+    crop is shrunk): truth | one column per variant. None when the capture stores no fold
+    regions or no variant has a grid."""
+    from PIL import Image
+
+    from texvocab.capture.fold_regions import FoldRegions
+
+    folds = FoldRegions.load(root)
+    if folds is None:
+        return None
+    grids = {}
+    for lab, run in variants.items():
+        run_dir = out / "runs" / run / f"seed{seed}"
+        if (run_dir / "grid.npz").is_file():
+            g = dict(np.load(run_dir / "grid.npz"))
+            where = _grid_rows_where(run_dir, g)
+            if where is not None:
+                grids[lab] = (g, where)
+    if not grids:
+        return None
+    truth, where = next(iter(grids.values()))
+    truth = truth["truth"]
+    n = min(len(w) for _, w in grids.values())
+
+    shown, labels = [], []
+    for i in range(n):
+        if any(w[i] != where[i] for _, w in grids.values()):
+            continue  # runs whose grids show other images
+        region = folds.region(*where[i])
+        if region is None or not region.any() or region.shape != truth[i].shape[:2]:
+            continue
+        shown.append((i, fold_box(region)))
+        labels.append(f"frame {where[i][0]} view {where[i][1]}")
+    if not shown:
+        return None
+    tile = tile or max(b[1] - b[0] for _, b in shown)
+
+    def scaled(img: np.ndarray, box) -> np.ndarray:
+        y0, y1, x0, x1 = box
+        crop = Image.fromarray(np.ascontiguousarray(to_uint8(img[y0:y1, x0:x1, :3])))
+        return np.asarray(crop.resize((tile, tile), Image.NEAREST))
+
+    rows = [
+        [scaled(truth[i], box)] + [scaled(g["render"][i], box) for g, _ in grids.values()] for i, box in shown
+    ]
+    return save_png(
+        out / f"{group}_fold_crops.png",
+        contact_sheet(
+            rows, row_labels=labels, col_labels=["truth"] + [f"{lab} (seed {seed})" for lab in grids]
+        ),
+    )
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("groups", nargs="+", choices=list(GROUPS))
     ap.add_argument("--capture", default=None, help="capture folder (default: synthesise)")
+    ap.add_argument(
+        "--garment",
+        default="painted",
+        help="what the synthesised capture's person wears (texvocab synth --garment: painted, "
+        "hoodie, wide-trousers, loose); its own folder OUT/capture_compositional_<garment>",
+    )
     ap.add_argument("--iterations", type=int, default=500, help="training steps per run")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument(
@@ -422,7 +577,7 @@ def main(argv=None) -> int:
     )
     args = ap.parse_args(argv)
     out = Path(args.out)
-    root = Path(args.capture) if args.capture else make_capture(out)
+    root = Path(args.capture) if args.capture else make_capture(out, garment=args.garment)
     plan: dict[str, dict[str, str]] = {}
     jobs, seen = [], set()
     for g in args.groups:
@@ -477,6 +632,7 @@ def main(argv=None) -> int:
     for g in args.groups:
         lines += group_report(g, plan[g], results)
         side_by_side(g, plan[g], args.seeds[0], out)
+        fold_crops(g, plan[g], args.seeds[0], out, root)
     md = "\n".join(lines)
     atomic_write_bytes(out / f"{'_'.join(args.groups)}.md", lambda t: Path(t).write_text(md))
     print(md)

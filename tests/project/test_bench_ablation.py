@@ -2,6 +2,7 @@
 paired differences against the reference from the same seeds and images."""
 
 import importlib.util
+import json
 from pathlib import Path
 
 import numpy as np
@@ -121,3 +122,135 @@ def test_a_killed_bench_leaves_no_training_worker(tmp_path):
             raise AssertionError("the worker outlived its killed bench")
     finally:
         parent.kill()
+
+
+def _fold_result(run, seed, psnr, fold):
+    r = _result(run, seed, psnr)
+    r["per_image"] |= {"psnr_fold": fold, "ssim_fold": [None if f is None else 0.5 for f in fold]}
+    return r
+
+
+def test_report_scores_fold_regions_over_the_images_that_have_one():
+    """Fold metrics: each run's mean over its images with a region; paired per image over
+    the images with a region in both runs, with their count; a run from before the metric
+    reads n/a."""
+    bench = _load()
+    runs = {"ref": "a", "other": "b"}
+    fold = {
+        ("a", 0): [20.0, None, 22.0],
+        ("b", 0): [21.0, None, 25.0],
+        ("a", 1): [10.0, None, 12.0],
+        ("b", 1): [10.5, None, 12.5],
+    }
+    results = {k: _fold_result(k[0], k[1], [30.0, 30.0, 30.0], v) for k, v in fold.items()}
+    md = "\n".join(bench.group_report("g", runs, results))
+    assert "3 novel-pose images per run, 2 with a fold region" in md
+    # ref: seed means 21 and 11 -> 16 (spread 10); other: 23 and 11.5 -> 17.25 (11.5)
+    assert "| ref | 30.0000 (0.0000) | 0.5000 (0.0000) | n/a | n/a | 16.0000 (10.0000) |" in md
+    assert "| other | 30.0000 (0.0000) | 0.5000 (0.0000) | n/a | n/a | 17.2500 (11.5000) |" in md
+    d = np.array([1.0, 3.0, 0.5, 0.5])  # per image, seeds 0 and 1
+    # paired psnr_fold per seed: +2.0 (seed 0), +0.5 (seed 1)
+    assert "| +1.2500 [+0.5000, +2.0000] | +0.0000 [+0.0000, +0.0000] |" in md
+    assert f"| {d.mean():+.3f} ± {d.std(ddof=1) / 2:.3f} (n = 4) | 100% |" in md
+    older = {k: _result(k[0], k[1], [30.0, 30.0, 30.0]) for k in fold}  # no fold metrics
+    md = "\n".join(bench.group_report("g", runs, older))
+    assert "| ref | 30.0000 (0.0000) | 0.5000 (0.0000) | n/a | n/a | n/a | n/a |" in md
+    assert "0 with a fold region" in md and md.count("| n/a | n/a |") >= 3
+
+
+def test_a_cached_result_reads_its_fold_metrics_from_its_report(tmp_path):
+    bench = _load()
+    (tmp_path / "eval").mkdir()
+    images = [
+        {"set": "novel_poses", "psnr_fold": 21.0, "ssim_fold": 0.7},
+        {"set": "training_poses", "psnr_fold": 99.0},
+        {"set": "novel_poses"},  # no fold region
+    ]
+    (tmp_path / "eval" / "metrics.json").write_text(json.dumps({"images": images}))
+    result = bench._with_metrics(_result("a", 0, [30.0, 29.0]), tmp_path)
+    assert result["per_image"]["psnr_fold"] == [21.0, None]
+    assert result["per_image"]["ssim_fold"] == [0.7, None]
+
+
+def test_garment_reaches_the_synthesis_of_its_own_capture(tmp_path, monkeypatch):
+    """--garment NAME: the capture is synthesised with that garment, in its own folder
+    (the painted default keeps the folder earlier runs used); an unknown name fails
+    before anything is made."""
+    import pytest
+
+    from texvocab.capture import synth
+    from texvocab.errors import TexvocabError
+
+    bench = _load()
+    made = {}
+
+    def record(root, poses, trans, num_train, body, settings=None, **kw):
+        made[Path(root).name] = settings.garment
+        Path(root).mkdir(parents=True)
+        return Path(root)
+
+    monkeypatch.setattr(synth, "synthesize", record)  # rendering 102 frames is tested elsewhere
+    assert bench.main(["strategies", "--garment", "loose", "--out", str(tmp_path), "--report-only"]) == 0
+    bench.make_capture(tmp_path)
+    assert made == {"capture_compositional_loose": "loose", "capture_compositional": "painted"}
+    with pytest.raises(TexvocabError, match="unknown garment"):
+        bench.make_capture(tmp_path, garment="kilt")
+    assert sorted(p.name for p in tmp_path.glob("capture_*")) == sorted(made)
+
+
+def test_fold_crops_show_truth_and_one_column_per_variant(tmp_path):
+    """From a tiny real run on a capture with fold regions: the crop grid has a row per
+    grid image with a region and truth + one column per variant, each crop centred on
+    its image's fold region."""
+    import shutil
+
+    from PIL import Image
+
+    from texvocab.body import default_body
+    from texvocab.capture.fold_regions import FoldRegions
+    from texvocab.capture.motion import make_sequence
+    from texvocab.capture.synth import SynthSettings, synthesize
+
+    bench = _load()
+    poses, trans = make_sequence([("squat", 3)], seed=0)
+    s = SynthSettings(ring_views=3, raised_views=0, size=48, texture_size=128, garment="hoodie")
+    cap = synthesize(tmp_path / "cap", poses, trans, 2, default_body(), s, progress=False)
+    tiny = [
+        "texture_size=32",
+        "num_keys=1",
+        "k=1",
+        "rays_per_batch=64",
+        "coarse_samples=8",
+        "fine_samples=4",
+        "field.hidden=16",
+        "field.sdf_layers=1",
+        "field.color_layers=1",
+        "field.pos_freqs=2",
+        "encoder=small",
+        "eval_views=1,2",
+    ]
+    job = {
+        "root": str(cap),
+        "run_dir": str(tmp_path / "runs" / "a" / "seed0"),
+        "overrides": tiny,
+        "seed": 0,
+        "iterations": 1,
+        "per_set": None,
+        "preset": "fast",
+        "grid_rows": 3,
+        "threads": 1,
+    }
+    result = bench.train_and_evaluate(job)
+    assert result["per_image"]["psnr_fold"][0] is not None  # frame 2, view 1 has a region
+    grid = np.load(tmp_path / "runs" / "a" / "seed0" / "grid.npz")
+    assert grid["frame"].tolist() == [2, 2] and grid["view"].tolist() == [1, 2]
+    shutil.copytree(tmp_path / "runs" / "a", tmp_path / "runs" / "b")
+    variants = {"part": "a", "global": "b", "none": "missing"}  # a variant without runs: no column
+    png = bench.fold_crops("strategies", variants, 0, tmp_path, cap, tile=40)
+    regions = FoldRegions.load(cap)
+    rows = sum(bool(regions.region(2, v).any()) for v in (1, 2))
+    pad, label_h, left = 4, 16, 90  # texvocab.io.images.contact_sheet
+    assert Image.open(png).size == (left + 3 * (40 + pad) + pad, label_h + rows * (40 + pad) + pad)
+    box = bench.fold_box(regions.region(2, 1))
+    ys, xs = np.nonzero(regions.region(2, 1))
+    assert box[0] <= ys.min() and ys.max() < box[1] and box[2] <= xs.min() and xs.max() < box[3]
