@@ -53,3 +53,14 @@ def tiny_settings(**kw) -> Settings:
     )
     base.update(kw)
     return flat_settings(**base)
+
+
+#: ``--set`` items of a smallest run: a few seconds of training on a tiny capture.
+SMALLEST_SET = [
+    "texture_size=32",
+    "num_keys=1",
+    "k=1",
+    "rays_per_batch=64",
+    "coarse_samples=8",
+    "fine_samples=4",
+]

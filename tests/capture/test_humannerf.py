@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 from humannerf_cases import DIST, FRAMES, distort, make_truth, smooth, write_standin
+from train_cases import SMALLEST_SET
 
 from texvocab.body import default_body
 from texvocab.capture import detect_layout
@@ -223,12 +224,7 @@ def test_one_camera_capture_trains_and_evaluates(standin, tmp_path, capsys):
         "field.sdf_layers=1",
         "field.color_layers=1",
         "field.pos_freqs=2",
-        "texture_size=32",
-        "num_keys=1",
-        "k=1",
-        "rays_per_batch=64",
-        "coarse_samples=8",
-        "fine_samples=4",
+        *SMALLEST_SET,
     ]
     args = [a for item in tiny for a in ("--set", item)]
     assert main(["train", str(root), "--out", str(tmp_path / "run"), "--iterations", "2", *args]) == 0

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from train_cases import SMALLEST_SET
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -216,12 +217,7 @@ def test_fold_crops_show_truth_and_one_column_per_variant(tmp_path):
     s = SynthSettings(ring_views=3, raised_views=0, size=48, texture_size=128, garment="hoodie")
     cap = synthesize(tmp_path / "cap", poses, trans, 2, default_body(), s, progress=False)
     tiny = [
-        "texture_size=32",
-        "num_keys=1",
-        "k=1",
-        "rays_per_batch=64",
-        "coarse_samples=8",
-        "fine_samples=4",
+        *SMALLEST_SET,
         "field.hidden=16",
         "field.sdf_layers=1",
         "field.color_layers=1",
