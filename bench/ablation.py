@@ -60,7 +60,9 @@ from texvocab.io.images import atomic_write_bytes, contact_sheet, save_png, to_u
 METRICS = ("psnr_bbox", "ssim_bbox", "lpips", "iou")  # iou: rendered silhouette (opacity > 0.5)
 # on the pixels whose truth changes with pose (texvocab.metrics.fold_region): None for an
 # image without a fold region (or a capture without fold_regions.npz)
-FOLD_METRICS = ("psnr_fold", "ssim_fold")
+# psnr_fold_drawn / fold_empty: on the region's pixels the render covers (each run its own
+# pixels), and the share it leaves empty (texvocab.metrics.fold_region)
+FOLD_METRICS = ("psnr_fold", "ssim_fold", "psnr_fold_drawn", "fold_empty")
 SET = "novel_poses"
 # the earlier training rays (marched rest, 5-sample band, shell grid voxel 1 cm)
 EARLIER_RAYS = ["train_residual=off", "train_band_newton=false", "train_shell_voxel=0.01"]
@@ -319,7 +321,9 @@ def group_report(group: str, variants: dict[str, str], results: dict) -> list[st
         "the run's images against the truth; `sps` = training seconds per step; "
         "`psnr_fold` / `ssim_fold`: on the pixels whose truth changes with pose "
         "(texvocab.metrics.fold_region), the mean over the run's images that have a fold "
-        "region (n/a: none has one, or the run predates the metric).",
+        "region (n/a: none has one, or the run predates the metric); `psnr_fold_drawn` on "
+        "the region's pixels the render covers (opacity > 0.5, each run its own pixels), "
+        "`fold_empty` the share of the region it leaves empty.",
         "",
         "| variant | " + " | ".join(cols) + " | per seed PSNR |",
         "|---" * (len(cols) + 2) + "|",

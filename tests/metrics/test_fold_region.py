@@ -65,3 +65,24 @@ def test_regions_round_trip_through_the_capture_file(tmp_path):
     regions = FoldRegions.load(tmp_path)
     np.testing.assert_array_equal(regions.region(6, 1), masks[1, 1])
     assert regions.region(4, 0) is None and FoldRegions.load(tmp_path / "missing") is None
+
+
+def test_drawn_metrics_leave_out_the_pixels_the_render_leaves_empty():
+    """With the render's opacity: the fold pixels it covers are scored apart, and the
+    share it leaves empty is counted; an empty render has no drawn score."""
+    truth, rest = _pair()
+    region = fold_region(truth, rest)
+    pred = truth.copy()
+    pred[10:20, 20:44] = 0.0  # the region's top half: not drawn (background)
+    pred[20:30, 20:44] += 0.1  # its bottom half: drawn, off by 0.1
+    alpha = np.ones(region.shape)
+    alpha[10:20, 20:44] = 0.2
+    m = fold_region_metrics(pred, truth, region, alpha)
+    assert abs(m["fold_empty"] - 0.5) < 1e-12
+    assert abs(m["psnr_fold_drawn"] - 20.0) < 1e-6  # only the drawn half's mse 0.01
+    assert m["psnr_fold"] < m["psnr_fold_drawn"] - 5  # the empty half dominates the region
+    none_drawn = fold_region_metrics(pred, truth, region, np.zeros(region.shape))
+    assert none_drawn["psnr_fold_drawn"] is None and none_drawn["fold_empty"] == 1.0
+    assert "psnr_fold_drawn" not in fold_region_metrics(pred, truth, region)
+    s = summarise_fold([m, none_drawn])
+    assert s["psnr_fold_drawn"] == m["psnr_fold_drawn"] and s["fold_empty"] == 0.75

@@ -33,3 +33,6 @@ def test_eval_reports_fold_region_metrics(tmp_path, monkeypatch):
     assert records[0]["fold_pixels"] == region.sum()
     text = evaluate.format_table(table)
     assert "psnr_fold" in text and "Fold regions" in text
+    # the stand-in render is opaque everywhere: every fold pixel is drawn
+    assert row["fold_empty"] == 0.0 and row["psnr_fold_drawn"] == row["psnr_fold"]
+    assert "psnr_fold drawn" in text

@@ -180,7 +180,7 @@ def evaluate_sets(
                 m["seconds"] = stats.seconds
                 if folds is not None:
                     region = folds.region(*pairs[i])
-                    fold_per.append(None if region is None else fold_region_metrics(pred, gt, region))
+                    fold_per.append(None if region is None else fold_region_metrics(pred, gt, region, alpha))
                     m.update(fold_per[-1] or {})
                 per.append(m)
                 where = {"frame": int(pairs[i][0]), "view": int(pairs[i][1])} if pairs else {}
@@ -258,9 +258,18 @@ def format_table(table: dict[str, dict], checkpoint: str = "", split: str = "") 
     folds = [(name, row) for name, row in table.items() if "fold_images" in row]
     if folds:  # texvocab.metrics.fold_region
         lines += ["", "Fold regions (pixels whose truth changes with pose):", ""]
-        lines += ["| set | images | psnr_fold | ssim_fold |", "|---|---|---|---|"]
+        lines += [
+            "| set | images | psnr_fold | ssim_fold | psnr_fold drawn | fold empty |",
+            "|---|---|---|---|---|---|",
+        ]
         for name, row in folds:
-            cells = [str(row["fold_images"]), _cell(row, "psnr_fold", 2), _cell(row, "ssim_fold", 4)]
+            cells = [
+                str(row["fold_images"]),
+                _cell(row, "psnr_fold", 2),
+                _cell(row, "ssim_fold", 4),
+                _cell(row, "psnr_fold_drawn", 2),
+                _cell(row, "fold_empty", 3),
+            ]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
