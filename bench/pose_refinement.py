@@ -18,7 +18,7 @@ truth, and prints per run and per refinement mode (mean and spread over seeds):
 
 Usage, with the training runs made by the ablation bench's refinement group::
 
-    texvocab synth --out CAP --fit-noise-deg 3 --fit-noise-trans 0.015
+    texvocab synth CAP --fit-noise-deg 3 --fit-noise-trans 0.015
     bench/ablation.py refinement --capture CAP --seeds 0 1 2 --iterations 800 --jobs 2 --out OUT
     bench/pose_refinement.py CAP OUT/runs/*/seed*/checkpoint.pt [--json FILE]
 """
