@@ -3,6 +3,7 @@ paired differences against the reference from the same seeds and images."""
 
 import importlib.util
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _load():
+    if str(ROOT / "bench") not in sys.path:  # its sibling modules (ablation_tables, ...)
+        sys.path.insert(0, str(ROOT / "bench"))
     spec = importlib.util.spec_from_file_location("bench_ablation", ROOT / "bench" / "ablation.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
