@@ -189,7 +189,7 @@ def train_and_evaluate(job: dict) -> dict:
     from texvocab.blas import budget_blas_threads
     from texvocab.capture import open as open_capture
     from texvocab.pipeline.evaluate import build_sets, evaluate_sets, write_report
-    from texvocab.pipeline.settings import march_settings
+    from texvocab.pipeline.settings import march_settings, render_overrides
     from texvocab.pipeline.train import Trainer
 
     run_dir = Path(job["run_dir"])
@@ -201,9 +201,12 @@ def train_and_evaluate(job: dict) -> dict:
     torch.set_num_threads(job["threads"])
     budget_blas_threads(1)  # as the texvocab command does (texvocab/blas.py)
     cap = open_capture(job["root"])
-    settings, shown = run_settings(job)
-    trainer = Trainer(cap, settings, run_dir, progress=False)
+    trainer = Trainer(cap, run_settings(job)[0], run_dir, progress=False)
     trainer.resume()
+    # the run's own settings: its field's shell is the one fitted to the masks
+    # (field.shell_coverage), which the preset's marcher shell is a share of
+    settings = trainer.s
+    shown = render_overrides(settings, job["preset"], [])
     t0 = time.perf_counter()
     steps0 = trainer.step
     logs = trainer.run()
@@ -222,7 +225,7 @@ def train_and_evaluate(job: dict) -> dict:
             "checkpoint": str(trainer.checkpoint_path),
             "step": trainer.step,
             "capture": str(job["root"]),
-            "settings": settings.to_dict(),
+            "settings": shown.to_dict(),
         },
     )
     rows = grids[SET]

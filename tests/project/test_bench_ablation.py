@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import torch
 from train_cases import SMALLEST_SET
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -227,6 +228,7 @@ def test_fold_crops_show_truth_and_one_column_per_variant(tmp_path):
         "field.pos_freqs=2",
         "encoder=small",
         "eval_views=1,2",
+        "field.shell_width=0.01",  # narrower than the hoodie: the run widens its shell
     ]
     job = {
         "root": str(cap),
@@ -241,6 +243,12 @@ def test_fold_crops_show_truth_and_one_column_per_variant(tmp_path):
     }
     result = bench.train_and_evaluate(job)
     assert result["per_image"]["psnr_fold"][0] is not None  # frame 2, view 1 has a region
+    # the evaluation renders with the run's fitted shell (the preset's marcher shell is a
+    # share of it), not with the width the run was asked to start from
+    run_dir = tmp_path / "runs" / "a" / "seed0"
+    fitted = torch.load(run_dir / "checkpoint.pt", weights_only=True)["settings"]["field"]["shell_width"]
+    shown = json.loads((run_dir / "eval" / "metrics.json").read_text())["meta"]["settings"]
+    assert fitted > 0.01 and shown["field"]["shell_width"] == fitted
     grid = np.load(tmp_path / "runs" / "a" / "seed0" / "grid.npz")
     assert grid["frame"].tolist() == [2, 2] and grid["view"].tolist() == [1, 2]
     shutil.copytree(tmp_path / "runs" / "a", tmp_path / "runs" / "b")

@@ -104,6 +104,7 @@ def demo_avatar(
         log.warning("%s; kept it as %s and training the demo avatar afresh", e, kept)
     trainer.run()
     trainer.model.eval()
+    settings = trainer.s  # with the field's shell fitted to the masks (field.shell_coverage)
     sets = build_sets(cap, settings)  # the full test split: every novel frame x eval view
     table, records, grids = evaluate_sets(trainer.model, sets, march_settings(settings), progress=True)
     paths = write_report(
