@@ -13,11 +13,11 @@ from texvocab.body import default_body
 from texvocab.body.poses import preset
 from texvocab.geometry.surface import (
     SurfaceIndex,
-    closest_on_triangles,
     outward_orientation,
     project_brute_force,
     project_to_surface,
 )
+from texvocab.geometry.triangle_closest import closest_on_triangles
 
 TRI = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 TET = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])

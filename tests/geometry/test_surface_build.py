@@ -9,7 +9,8 @@ import torch
 
 from texvocab.body import default_body
 from texvocab.body.poses import preset
-from texvocab.geometry.surface import SurfaceIndex, _face_table, _slot_layout
+from texvocab.geometry.surface import SurfaceIndex, _slot_layout
+from texvocab.geometry.triangle_closest import face_table
 
 FAN = 4
 
@@ -101,7 +102,7 @@ def test_compiled_build_equals_the_numpy_build_bit_for_bit():
     for verts, faces, zero_area in _meshes():
         index = SurfaceIndex(verts, faces)
         slot_tri = verts[faces][np.maximum(index._slot_face, 0)]
-        table = _face_table(*(slot_tri[:, k] for k in range(3)))
+        table = face_table(*(slot_tri[:, k] for k in range(3)))
         assert np.array_equal(index._table, table)
         lo, hi, offset = reference_boxes(slot_tri, index._slot_face < 0)
         assert np.array_equal(index._box_lo, lo) and np.array_equal(index._box_hi, hi)

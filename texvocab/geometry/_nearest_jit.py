@@ -11,7 +11,7 @@ dropped when the distance from the point to its box exceeds the best so far. A b
 contains every face below it, so no face that could be the closest is ever dropped: the
 result is exact. The triangle test is Ericson's closest-point region test (Real-Time
 Collision Detection, 5.1.5), the same formulas as
-``texvocab.geometry.surface._closest_vw``, with zero-area faces tested as their three
+``texvocab.geometry.triangle_closest.closest_vw``, with zero-area faces tested as their three
 edges.
 """
 
