@@ -210,7 +210,8 @@ def train_and_evaluate(job: dict) -> dict:
     t0 = time.perf_counter()
     steps0 = trainer.step
     logs = trainer.run()
-    step_s = (time.perf_counter() - t0) / max(1, trainer.step - steps0)
+    # None when this call trained no step (a finished run evaluated again): not measured
+    step_s = (time.perf_counter() - t0) / (trainer.step - steps0) if trainer.step > steps0 else None
     trainer.model.eval()
     sets = {SET: build_sets(cap, settings, job["per_set"], generated=())[SET]}
     table, records, grids = evaluate_sets(
@@ -253,7 +254,9 @@ def train_and_evaluate(job: dict) -> dict:
     blob = json.dumps(result)
     atomic_write_bytes(done, lambda t: Path(t).write_text(blob))
     print(
-        f"{run_dir}: {trainer.step} steps, {step_s:.2f} s/step, PSNR {table[SET]['psnr_bbox']:.2f} dB",
+        f"{run_dir}: {trainer.step} steps, "
+        + ("" if step_s is None else f"{step_s:.2f} s/step, ")
+        + f"PSNR {table[SET]['psnr_bbox']:.2f} dB",
         flush=True,
     )
     return result
