@@ -156,7 +156,8 @@ def frame_stages(
     """Per-frame means of each stage of the default render path (guided, ``fast`` knobs,
     with the render knobs ``extra`` as ``name=value``: MarchSettings' flat names; ``plain``:
     the closest-face search's kernel as it was, render_speed.plain_search)."""
-    from render_speed import _value, items_of, plain_search, resized  # bench/ sibling
+    from render_speed import _value, items_of, resized  # bench/ sibling
+    from render_timing import plain_search
 
     from texvocab.pipeline.settings import PRESETS, march_settings
     from texvocab.render import render_image

@@ -61,7 +61,7 @@ VARIANTS = {
 
 
 def measure(capture, overrides: list[str], steps: int, warmup: int, plain_softplus: bool = False) -> dict:
-    from render_speed import plain_softplus as plain  # bench/ sibling
+    from render_timing import plain_softplus as plain  # bench/ sibling
 
     from texvocab.pipeline.settings import Settings, TrainSettings
     from texvocab.pipeline.train import Trainer

@@ -11,6 +11,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))
 
 import render_speed  # noqa: E402
+import render_timing  # noqa: E402
 
 from texvocab.method.field import NormalSoftplus  # noqa: E402
 from texvocab.pipeline.avatar import load_avatar  # noqa: E402
@@ -38,7 +39,7 @@ def test_the_previous_path_swaps_torchs_softplus_in_for_the_run_only(tmp_path):
 
     before = acts()
     assert before and all(t is NormalSoftplus for t in before)
-    with render_speed.plain_softplus(model, True):
+    with render_timing.plain_softplus(model, True):
         assert all(t is torch.nn.Softplus for t in acts())
     assert acts() == before
 
@@ -47,7 +48,7 @@ def test_the_previous_path_searches_with_the_plain_kernel_for_the_run_only():
     from texvocab.geometry import _nearest_jit, surface
 
     assert surface.nearest_faces is _nearest_jit.nearest_faces
-    with render_speed.plain_search(True):
+    with render_timing.plain_search(True):
         assert surface.nearest_faces is _nearest_jit.nearest_faces_plain
     assert surface.nearest_faces is _nearest_jit.nearest_faces
-    assert render_speed.BEFORE == {"surface_reuse": False, "residual_groups": 1, "fallback_segment": 8}
+    assert render_timing.BEFORE == {"surface_reuse": False, "residual_groups": 1, "fallback_segment": 8}
