@@ -20,7 +20,8 @@ same field, for the ratio.
 
 ``--compare`` renders the same frames five ways in one run — ``new``: the default render
 path as it is now (the surface-guided marcher, guide=raster, at the ``fast`` preset's
-knobs, with the field's MLPs in ``--new-precision``, bfloat16 by default, activations free
+knobs, with the field's MLPs in ``--new-precision`` (by default ``auto``: bfloat16 where the
+CPU has bf16 units, float32 where torch would emulate them), activations free
 of subnormal numbers, ``NormalSoftplus``, and ``surface_reuse``: the field's projection
 takes the closest faces the raster and the residual rays' mesh queries found);
 ``previous``: the same path before that reuse and the changes beside it (``BEFORE``:
@@ -177,7 +178,7 @@ def resized(items, size: int | None):
 
 
 def compare(
-    model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "bfloat16"
+    model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "auto"
 ) -> int:
     """The five-way comparison of ``--compare``; prints a table and the summary line. With
     ``save``, each path's images go there as ``<path>_<frame>.npy`` (float32 (H, W, 3)) and
@@ -305,9 +306,10 @@ def main(argv=None) -> int:
     )
     ap.add_argument(
         "--new-precision",
-        default="bfloat16",
-        choices=("float32", "bfloat16"),
-        help="with --compare: the new path's render.precision (default bfloat16)",
+        default="auto",
+        choices=("float32", "bfloat16", "auto"),
+        help="with --compare: the new path's render.precision (default auto: bfloat16 on a "
+        "CPU with bf16 units, else float32)",
     )
     ap.add_argument(
         "--save",

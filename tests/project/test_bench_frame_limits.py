@@ -64,3 +64,16 @@ def test_the_bench_prints_the_limits_the_stages_and_a_summary(ckpt, capsys):
     assert parts == pytest.approx(total, rel=0.1)  # nested stages are not counted twice
     assert int(rows["probe"][2].replace(",", "")) > 0  # the probe evaluated the field
     assert "| backward |" in out.split("## a training step")[1]
+
+
+def test_bf16_rates_are_not_measured_where_the_cpu_emulates_bf16(monkeypatch):
+    """Without bf16 units torch emulates bf16 products at a few GFLOP/s (a 2048³ product
+    then takes minutes): the limits leave them out (nan) and measure float32."""
+    import math
+
+    from texvocab.method import field
+
+    monkeypatch.setattr(field, "native_bfloat16", lambda: False)
+    limits = frame_limits.machine_limits(0.01)
+    assert math.isnan(limits["bf16"]) and math.isnan(limits["bf16_mlp"])
+    assert limits["sgemm"] > 1 and limits["sgemm_mlp"] > 1
