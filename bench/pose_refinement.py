@@ -101,6 +101,10 @@ def analyse(capture: Path, checkpoint: Path, every: int) -> dict:
         **{f"{k}_before": float(v.mean()) for k, v in before.items()},
         **{f"{k}_after": float(v.mean()) for k, v in after.items()},
         "improved": float((rot_after < rot_before - 1e-9).mean()) if state is not None else 0.0,
+        # per joint (J,): mean error over the frames before and after, share brought closer
+        "joint_deg_before": rot_before.mean(0).tolist(),
+        "joint_deg_after": rot_after.mean(0).tolist(),
+        "joint_improved": (rot_after < rot_before - 1e-9).mean(0).tolist(),
         "iou_frames": len(frames) * len(cap.cameras),
         "iou_recorded": body_iou(cap, *recorded, frames),
         "iou_refined": body_iou(cap, *refined, frames) if state is not None else None,
@@ -140,7 +144,33 @@ def format_report(rows: list[dict]) -> str:
         cells = [_spread(group, k, d) for k, d in (("root_deg_after", 2), ("joints_deg_after", 2))]
         cells += [_spread(group, "trans_cm_after", 2), _spread(group, "iou_refined", 4)]
         lines.append(f"| {mode} | {len(group)} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + joint_table(rows)) + "\n"
+
+
+def joint_table(rows: list[dict]) -> list[str]:
+    """Markdown: per joint, the rotation error recorded -> refined (degrees, mean over the
+    frames and the mode's runs) and the share of its frames brought closer, per mode that
+    refines."""
+    from texvocab.body import JOINT_NAMES
+
+    modes = sorted({r["mode"] for r in rows} - {"off"})
+    if not modes:
+        return []
+    lines = [
+        "",
+        "| joint | " + " | ".join(f"{m}: ° recorded -> refined | closer" for m in modes) + " |",
+        "|---" * (1 + 2 * len(modes)) + "|",
+    ]
+    for j, name in enumerate(JOINT_NAMES):
+        cells = []
+        for m in modes:
+            group = [r for r in rows if r["mode"] == m]
+            before = np.mean([r["joint_deg_before"][j] for r in group])
+            after = np.mean([r["joint_deg_after"][j] for r in group])
+            closer = np.mean([r["joint_improved"][j] for r in group])
+            cells += [f"{before:.2f} -> {after:.2f}", f"{closer:.0%}"]
+        lines.append(f"| {j} {name} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -75,6 +75,10 @@ def test_errors_before_are_the_noise_and_an_exact_correction_takes_them_to_zero(
     md = pose_refinement.format_report([row, best, plain])
     assert "| joints | 2 |" in md and "| off | 1 |" in md
     assert f"{best['joints_deg_before']:.2f} -> {best['joints_deg_after']:.2f}" in md
+    # per joint: the exact correction's rows read 0.00 after, each frame closer
+    assert len(best["joint_deg_after"]) == 24 and max(best["joint_deg_after"]) < 0.05
+    rows = [r for r in pose_refinement.joint_table([best]) if r.startswith("| 1")]
+    assert rows and all("-> 0.00 | 100% |" in r for r in rows)
 
 
 def test_a_capture_without_the_truth_is_an_error(noisy, tmp_path, capsys):
