@@ -185,13 +185,15 @@ def test_bench_run_renders_in_the_chosen_worker_and_the_window_idles_after(tiny_
     # frames a pose at most one frame old, the full suite's load 10-56 %), so what is
     # asserted is what load does not change: every image shown while dragging is a
     # preview alone (level > 1, RenderJob.preview_only), and the shown pose is no older
-    # than its own job's time explains (no queue of stale poses behind it)
+    # than its own job's time explains (no queue of stale poses behind it): a preview
+    # that takes J frames shows a pose J frames old when it arrives and 2J when the next
+    # one replaces it, so the median age is below 2J (+ 2 frames of hand-over)
     within, frames = drag_stats(rep)["drag_frames_within_1"]
     age = drag["preview_age_frames"]
     assert frames >= 8 and within >= 1, age
     assert drag["levels_shown"] and all(level > 1 for level in drag["levels_shown"]), drag["levels_shown"]
     job_frames = np.median(drag["level_ms"]) / np.median(drag["frame_ms"])
-    assert np.median(age) <= job_frames + 2, (age, drag["level_ms"], drag["frame_ms"])
+    assert np.median(age) <= 2 * job_frames + 2, (age, drag["level_ms"], drag["frame_ms"])
     assert rep["after_drag_full_s"] is not None
     # the levels' wakes leave the window idling
     assert rep["after_render"]["seconds"] >= 1.5 and rep["after_render"]["frames"] <= 6
