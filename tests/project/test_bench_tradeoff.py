@@ -18,7 +18,12 @@ from texvocab.pipeline.settings import PRESETS  # noqa: E402
 pytestmark = pytest.mark.slow  # about 30 configurations rendered
 
 
-def test_the_sweep_measures_every_knob_and_draws_its_front(tmp_path, capsys):
+def test_the_sweep_measures_every_knob_and_draws_its_front(tmp_path, capsys, monkeypatch):
+    # a knob of each kind from the sweep (image scale, marcher samples, shell, the guided
+    # marcher's own), beside every preset: the whole sweep is 40 renders of each image
+    kinds = ("image_scale=0.25", "coarse=6", "shell=0.02", "residual_rays=false")
+    monkeypatch.setattr(tradeoff, "SWEEP", [c for c in tradeoff.SWEEP if c[0] in kinds])
+    assert len(tradeoff.SWEEP) == len(kinds)
     ck = smallest_run(tmp_path / "avatar")
     out = tmp_path / "tradeoff"
     assert tradeoff.main([str(ck), "--out", str(out), "--per-set", "1"]) == 0
