@@ -26,6 +26,7 @@ Usage, with the training runs made by the ablation bench's refinement group::
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from pathlib import Path
@@ -76,10 +77,23 @@ def body_iou(cap, poses, trans, frames: list[int]) -> float:
     return float(np.mean(np.concatenate(ious)))
 
 
-def analyse(capture: Path, checkpoint: Path, every: int) -> dict:
-    """One run's row (see the module docstring)."""
+@functools.cache
+def _capture_reference(capture: Path, every: int):
+    """What every run on ``capture`` shares, computed once: (capture, true poses, true
+    translations, the IoU frames, the recorded and the true poses' body IoU)."""
     cap = open_capture(capture)
     true_poses, true_trans = true_fit(cap)
+    num = cap.num_train
+    frames = list(range(0, num, every))
+    recorded = (np.asarray(cap.poses[:num], np.float64), np.asarray(cap.trans[:num], np.float64))
+    iou_recorded = body_iou(cap, *recorded, frames)
+    iou_true = body_iou(cap, true_poses[:num], true_trans[:num], frames)
+    return cap, true_poses, true_trans, frames, iou_recorded, iou_true
+
+
+def analyse(capture: Path, checkpoint: Path, every: int) -> dict:
+    """One run's row (see the module docstring)."""
+    cap, true_poses, true_trans, frames, iou_recorded, iou_true = _capture_reference(Path(capture), every)
     ck = load_checkpoint(checkpoint)
     settings = ck["settings"]
     train = settings.get("train", settings)
@@ -89,7 +103,6 @@ def analyse(capture: Path, checkpoint: Path, every: int) -> dict:
     refined = recorded if state is None else refined_poses(state, cap.poses, cap.trans)
     before = pose_errors(*recorded, true_poses, true_trans)
     after = pose_errors(*refined, true_poses, true_trans)
-    frames = list(range(0, num, every))
     rot_before = np.concatenate([before["root_deg"][:, None], before["joints_deg"]], 1)
     rot_after = np.concatenate([after["root_deg"][:, None], after["joints_deg"]], 1)
     return {
@@ -106,9 +119,9 @@ def analyse(capture: Path, checkpoint: Path, every: int) -> dict:
         "joint_deg_after": rot_after.mean(0).tolist(),
         "joint_improved": (rot_after < rot_before - 1e-9).mean(0).tolist(),
         "iou_frames": len(frames) * len(cap.cameras),
-        "iou_recorded": body_iou(cap, *recorded, frames),
+        "iou_recorded": iou_recorded,
         "iou_refined": body_iou(cap, *refined, frames) if state is not None else None,
-        "iou_true": body_iou(cap, true_poses[:num], true_trans[:num], frames),
+        "iou_true": iou_true,
     }
 
 
