@@ -80,3 +80,43 @@ def test_refinement_moves_an_offset_root_towards_the_truth(capture, tmp_path):
     assert np.allclose(ck["pose_refinement"]["trans"].numpy(), found)
     again = Trainer(cap, s, tmp_path / "run", progress=False)
     assert again.resume() and np.allclose(again.refine.state()["trans"].numpy(), found)
+
+
+def test_shared_corrections_blend_between_control_frames(body):
+    """span 3 over 7 frames: controls on frames 0, 3, 6; frame 4 reads 2/3 of control 1
+    and 1/3 of control 2, a step on it trains exactly those two, and the state's
+    per-frame rows are the blends (what the benches read)."""
+    refine = PoseRefinement(7, body.num_joints, "root", span=3)
+    assert len(refine.rot) == 3 and len(refine.trans) == 3
+    with torch.no_grad():
+        for i, p in enumerate(refine.trans):
+            p[:] = torch.tensor([float(i), 0.0, 0.0])
+    rot, tr = refine.delta(4)
+    assert rot.shape == (body.num_joints, 3) and tr[0].item() == pytest.approx(4 / 3)
+    refine.prior(4).backward()
+    grads = [p.grad is not None and p.grad.abs().sum() > 0 for p in refine.trans]
+    assert grads == [False, True, True]
+    state = refine.state()
+    assert state["trans"].shape == (7, 3) and state["control_trans"].shape == (3, 3)
+    assert np.allclose(state["trans"][:, 0].numpy(), np.arange(7) / 3)
+    again = PoseRefinement(7, body.num_joints, "root", span=3)
+    again.load(state)
+    assert torch.equal(again.state()["trans"], state["trans"])
+    with pytest.raises(ValueError, match="span"):
+        PoseRefinement(7, body.num_joints, "root").load(state)
+
+
+def test_shared_corrections_move_an_offset_root_towards_the_truth(capture, tmp_path):
+    """The same 3 cm / 2 cm offset on every training frame, corrections shared by every
+    second frame: 40 steps take every frame's error down by a third or more."""
+    cap = open_capture(capture)
+    offset = np.array([0.03, 0.0, -0.02], np.float32)
+    cap.trans = cap.trans.copy()
+    cap.trans[: cap.num_train] += offset
+    s = tiny_settings(iterations=40, pose_refinement="root", pose_refinement_span=2, checkpoint_every=40)
+    trainer = Trainer(cap, s, tmp_path / "run", progress=False)
+    trainer.run()
+    assert len(trainer.refine.trans) < cap.num_train
+    found = trainer.refine.state()["trans"].numpy()
+    after = np.linalg.norm(found + offset, axis=1)
+    assert (after < 0.67 * np.linalg.norm(offset)).all(), (found, after)

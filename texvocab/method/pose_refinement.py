@@ -51,26 +51,43 @@ class PointWarp:
 class PoseRefinement(nn.Module):
     """δθ_t, δT_t of ``num_frames`` training frames (zeros at the start), under ``mode``
     (:data:`POSE_REFINEMENTS` but ``off``): ``root`` corrects joint 0 and the translation,
-    ``joints`` every joint and the translation. One parameter pair per frame, so an
-    optimiser that skips parameters without a gradient (Adam with ``set_to_none``) moves
-    only the frames a step drew."""
+    ``joints`` every joint and the translation.
 
-    def __init__(self, num_frames: int, num_joints: int, mode: str):
+    ``span`` frames share their corrections: the parameters sit on control frames 0,
+    span, 2·span, … (and the last frame), and frame t's correction is the linear blend of
+    its two neighbouring controls, so a step that draws frame t trains both. span 1 is
+    one parameter pair per frame; a larger span trades temporal detail of the correction
+    for span times as many draws of each parameter (a capture whose fit error varies
+    slowly over its frames). An optimiser that skips parameters without a gradient (Adam
+    with ``set_to_none``) moves only the controls a step drew."""
+
+    def __init__(self, num_frames: int, num_joints: int, mode: str, span: int = 1):
         super().__init__()
         if mode not in POSE_REFINEMENTS[1:]:
             raise ValueError(f"pose refinement must be one of root, joints; got {mode!r}")
-        self.mode = mode
+        if span < 1:
+            raise ValueError(f"pose refinement span must be >= 1; got {span}")
+        self.mode, self.span, self.num_frames = mode, int(span), int(num_frames)
         rows = 1 if mode == "root" else num_joints
         self.num_joints = num_joints
-        self.rot = nn.ParameterList([nn.Parameter(torch.zeros(rows, 3)) for _ in range(num_frames)])
-        self.trans = nn.ParameterList([nn.Parameter(torch.zeros(3)) for _ in range(num_frames)])
+        controls = -(-(self.num_frames - 1) // self.span) + 1 if self.num_frames > 1 else 1
+        self.rot = nn.ParameterList([nn.Parameter(torch.zeros(rows, 3)) for _ in range(controls)])
+        self.trans = nn.ParameterList([nn.Parameter(torch.zeros(3)) for _ in range(controls)])
+
+    def _blend(self, params: nn.ParameterList, t: int) -> torch.Tensor:
+        """Frame t's value of per-control ``params``: the blend of its two controls."""
+        i, r = divmod(int(t), self.span)
+        if r == 0:
+            return params[i]
+        a = r / self.span
+        return (1.0 - a) * params[i] + a * params[min(i + 1, len(params) - 1)]
 
     def delta(self, t: int) -> tuple[torch.Tensor, torch.Tensor]:
         """(δθ (J, 3), δT (3,)) of training frame t."""
-        rot = self.rot[t]
+        rot = self._blend(self.rot, t)
         if self.mode == "root":
             rot = torch.cat([rot, rot.new_zeros(self.num_joints - 1, 3)])
-        return rot, self.trans[t]
+        return rot, self._blend(self.trans, t)
 
     def refined(self, t: int, pose: torch.Tensor, trans: torch.Tensor):
         """Frame t's refined pose (J, 3) and translation (3,) from its recorded ones."""
@@ -88,24 +105,36 @@ class PoseRefinement(nn.Module):
         return PointWarp(new @ torch.linalg.inv(old).to(new))
 
     def prior(self, t: int) -> torch.Tensor:
-        """Σ δθ_t² + (δT_t / 0.1 m)²: keeps a correction small where the images do not ask
-        for it (10 cm of translation weighs as 1 rad of rotation)."""
-        rot, tr = self.rot[t], self.trans[t]
+        """Σ δθ_t² + (δT_t / 0.1 m)² of frame t's correction: keeps it small where the
+        images do not ask for it (10 cm of translation weighs as 1 rad of rotation)."""
+        rot, tr = self._blend(self.rot, t), self._blend(self.trans, t)
         return (rot**2).sum() + ((tr / 0.1) ** 2).sum()
 
     def state(self) -> dict:
-        """{"mode", "rot" (T, rows, 3), "trans" (T, 3)} for a checkpoint."""
-        return {
-            "mode": self.mode,
-            "rot": torch.stack([p.detach() for p in self.rot]),
-            "trans": torch.stack([p.detach() for p in self.trans]),
-        }
+        """{"mode", "span", "rot" (T, rows, 3), "trans" (T, 3) per training frame, and
+        "control_rot", "control_trans" (the parameters)} for a checkpoint."""
+        with torch.no_grad():
+            return {
+                "mode": self.mode,
+                "span": self.span,
+                "rot": torch.stack([self._blend(self.rot, t).detach() for t in range(self.num_frames)]),
+                "trans": torch.stack([self._blend(self.trans, t).detach() for t in range(self.num_frames)]),
+                "control_rot": torch.stack([p.detach() for p in self.rot]),
+                "control_trans": torch.stack([p.detach() for p in self.trans]),
+            }
 
     def load(self, state: dict) -> None:
+        """Back from :meth:`state` (a state without controls is one of span 1)."""
+        rot, trans = state.get("control_rot", state["rot"]), state.get("control_trans", state["trans"])
+        if int(state.get("span", 1)) != self.span or len(rot) != len(self.rot):
+            raise ValueError(
+                f"pose refinement state has span {state.get('span', 1)} and {len(rot)} controls; "
+                f"this run has span {self.span} and {len(self.rot)}"
+            )
         with torch.no_grad():
-            for p, v in zip(self.rot, state["rot"], strict=True):
+            for p, v in zip(self.rot, rot, strict=True):
                 p.copy_(v)
-            for p, v in zip(self.trans, state["trans"], strict=True):
+            for p, v in zip(self.trans, trans, strict=True):
                 p.copy_(v)
 
 

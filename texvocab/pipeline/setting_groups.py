@@ -231,6 +231,12 @@ class TrainSettings:
         doc="per-frame corrections of the recorded poses, trained with the avatar: off | root "
         "(root rotation and translation) | joints (every joint and the translation)",
     )
+    pose_refinement_span: int = knob(
+        1,
+        at_least(1),
+        doc="training frames that share a pose correction: 1 = one per frame; s = corrections on "
+        "every s-th frame, blended linearly between (each drawn s times as often)",
+    )
     pose_lr: float = knob(
         5e-3, within(0, 1, open_low=True), doc="Adam's learning rate of the pose corrections"
     )

@@ -97,7 +97,10 @@ class Trainer:
         self.refine = None  # per-frame pose corrections (train.pose_refinement)
         if settings.train.pose_refinement != "off":
             self.refine = PoseRefinement(
-                capture.num_train, capture.body.num_joints, settings.train.pose_refinement
+                capture.num_train,
+                capture.body.num_joints,
+                settings.train.pose_refinement,
+                settings.train.pose_refinement_span,
             )
             groups.append({"params": list(self.refine.parameters()), "lr": settings.train.pose_lr})
         self.optim = torch.optim.Adam(groups, lr=settings.train.lr)
