@@ -22,7 +22,9 @@ The same protocol as the thread worker, over two pipes and one shared integer:
   still the newest, or if it is the preview of a job newer than the image shown, and
   calls ``on_frame`` to wake the UI.
 - The child loads the renderer from ``factory(*args)`` (pickled: for the viewer,
-  :func:`texvocab_viewer.neural.worker.model_renderer` with the trained model), runs torch with
+  :func:`texvocab_viewer.neural.worker.model_renderer` with the trained model; the
+  arguments come on a pipe of their own, sent from a thread, so the children start
+  side by side and the window does not wait for them), runs torch with
   ``threads`` intra-op threads at niceness +``nice``, and ends when the viewer sends
   None or closes the pipe (the viewer exited or crashed).
 - With ``processes`` > 1, each child renders one share of every job
@@ -79,8 +81,9 @@ def _serve_then_exit(*args) -> None:
     os._exit(0)
 
 
-def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results, newest, previewed) -> None:
-    """The child process: build the renderer, then render the newest job, level by
+def _serve(factory, setup, threads: int | None, nice: int, jobs, results, newest, previewed) -> None:
+    """The child process: build the renderer from the pickled ``factory`` arguments that
+    arrive on ``setup`` (the viewer sends them once the child runs), then render the newest job, level by
     level, until told to stop (None) or the viewer's end of ``jobs`` closes. A shard
     after the first starts a job with a preview only once the first shard is past it
     (``previewed``: the last such version): while a slider is dragged each pose is
@@ -96,6 +99,11 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results, 
     if threads is not None:
         torch.set_num_threads(threads)
     budget_blas_threads(threads or 1)  # numpy's OpenBLAS threads would spin between calls
+    try:
+        args = setup.recv_bytes()
+        setup.close()
+    except (EOFError, OSError):
+        return  # the viewer is gone before the child could start
     try:
         render = factory(*pickle.loads(args))
     except Exception as exc:  # e.g. a model that does not load here: say so, then stop
@@ -155,6 +163,18 @@ def _serve(factory, args: bytes, threads: int | None, nice: int, jobs, results, 
         results.send(("done", job.version))
 
 
+def _feed(setups: list, blob: bytes) -> None:
+    """Send the renderer's pickled arguments to each child in turn, then close the pipes
+    (a child that died before reading is reported by the listener, not here)."""
+    for setup in setups:
+        try:
+            setup.send_bytes(blob)
+        except (BrokenPipeError, OSError):
+            pass
+        finally:
+            setup.close()
+
+
 #: niceness added to the render processes after the first (see the module docstring)
 SHARD_NICE = 5
 
@@ -187,17 +207,18 @@ class ProcessWorker(DeliveredLevels):
         self._newest = _SPAWN.RawValue("q", -1)
         self._previewed = _SPAWN.RawValue("q", -1)  # written by the first shard only
         self._jobs, self._results, self._processes = [], [], []
-        blob = pickle.dumps(tuple(args))
+        blob, setups = pickle.dumps(tuple(args)), []
         for k in range(max(1, int(processes))):
             child_jobs, jobs = _SPAWN.Pipe(duplex=False)
             results, child_results = _SPAWN.Pipe(duplex=False)
+            child_setup, setup = _SPAWN.Pipe(duplex=False)
             proc = _SPAWN.Process(
                 target=_serve_then_exit,
                 name=f"texvocab-neural-{k}",
                 daemon=True,
                 args=(
                     factory,
-                    blob,
+                    child_setup,
                     threads,
                     min(nice + (SHARD_NICE if k else 0), 19),
                     child_jobs,
@@ -209,6 +230,8 @@ class ProcessWorker(DeliveredLevels):
             proc.start()
             child_jobs.close()  # the child's ends: only the child holds them now, so
             child_results.close()  # either side sees EOF when the other goes away
+            child_setup.close()
+            setups.append(setup)
             self._jobs.append(jobs)
             self._results.append(results)
             self._processes.append(proc)
@@ -217,6 +240,13 @@ class ProcessWorker(DeliveredLevels):
         self._merge: dict = {}  # the newest job's levels as its shards send them
         self._listener = threading.Thread(target=self._listen, name="texvocab-neural-results", daemon=True)
         self._listener.start()
+        # the model goes to the children from a thread: a pipe takes a large message only
+        # as fast as its reader reads, and a child reads once it has imported torch, so
+        # sending it here would hold the window for each child's start-up in turn
+        self._feeder = threading.Thread(
+            target=_feed, args=(setups, blob), name="texvocab-neural-setup", daemon=True
+        )
+        self._feeder.start()
 
     # --- UI thread --------------------------------------------------------------------
     def submit(self, job: RenderJob) -> None:
@@ -278,6 +308,7 @@ class ProcessWorker(DeliveredLevels):
                 proc.join(2.0)
         for jobs in self._jobs:
             jobs.close()
+        self._feeder.join(2.0)
         self._listener.join(2.0)
         return clean
 
