@@ -6,6 +6,8 @@ Cameras follow the project convention (OpenCV): ``x_cam = R @ x_world + t``, +z 
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from texvocab.capture.camera import look_at  # noqa: F401  (re-exported for callers here)
@@ -14,6 +16,11 @@ from texvocab.io.gl_platform import ensure_offscreen
 ensure_offscreen()
 import pyrender  # noqa: E402
 import trimesh  # noqa: E402
+
+# trimesh catches every exception in its vertex normals (a Ctrl-C included, which the
+# command's stop flag still honours) and logs it with a traceback: its warnings are
+# nothing a user can act on, and the command's own `error:` line must stay the only one
+logging.getLogger("trimesh").setLevel(logging.ERROR)
 
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 

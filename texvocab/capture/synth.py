@@ -93,7 +93,9 @@ class SynthRenderer:
 
     def __init__(self, body, settings: SynthSettings | None = None):
         ensure_offscreen()
-        import pyrender  # late: PyOpenGL binds its platform at first import, after ensure_offscreen
+        # late: PyOpenGL binds its platform at first import, after ensure_offscreen;
+        # mesh_renderer also quiets trimesh's logger (see there)
+        from texvocab.capture.mesh_renderer import pyrender
 
         self._pr = pyrender
         self.body = body
