@@ -13,7 +13,8 @@ small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg o
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: mean,
 nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_m 0.1, 0.5),
-``beta`` (VolSDF β at the start of training: 5, 2 mm),
+``beta`` (VolSDF β at the start of training: 5, 2 mm), ``texture`` (texture maps of
+256² or 512² texels),
 ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The base
 is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
@@ -94,6 +95,8 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "view_frame": {"world": [], "body": ["field.view_frame=body"]},
     "mask": {"λ_m 0.1": [], "λ_m 0.5": ["lambda_mask=0.5"]},
     "beta": {"β₀ 5 mm": [], "β₀ 2 mm": ["field.beta_init=0.002"]},
+    # texels per side of the texture maps (the pyramid's finest level is half of it)
+    "texture": {"256²": [], "512²": ["texture_size=512"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with
