@@ -96,7 +96,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "mask": {"λ_m 0.1": [], "λ_m 0.5": ["lambda_mask=0.5"]},
     "beta": {"β₀ 5 mm": [], "β₀ 2 mm": ["field.beta_init=0.002"]},
     # texels per side of the texture maps (the pyramid's finest level is half of it)
-    "texture": {"256²": [], "512²": ["texture_size=512"]},
+    "texture": {"256 texels": [], "512 texels": ["texture_size=512"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with

@@ -10,6 +10,13 @@ frames' entries as CAPTURE has them, and ``images/`` and ``masks/`` of symbolic 
 CAPTURE's files (nothing is copied, nothing in CAPTURE changes). OUT must not exist.
 Then ``texvocab train OUT …`` and ``texvocab eval RUN/checkpoint.pt OUT`` as for any
 capture. Prints the chosen frames, the last line ``summary: train=… held_out=…``.
+
+    .venv/bin/python bench/capture_subset.py SUBSET --score CKPT [CKPT ...] [--preset fast]
+
+scores each checkpoint on every training frame of SUBSET (bbox PSNR/SSIM and silhouette
+IoU, mean ± standard error, as ``texvocab eval``), whatever capture it trained on: a run on
+the subset against a run on the whole capture, on the same frames. The last line is
+``summary: CKPT=PSNR …``.
 """
 
 from __future__ import annotations
@@ -77,17 +84,61 @@ def write_subset(capture_dir: Path, out: Path, frames: int) -> tuple[list[int], 
     return train, novel
 
 
+def score(subset: Path, checkpoints: list[Path], preset: str | None) -> dict[str, dict]:
+    """{checkpoint: texvocab eval's summary (mean and sem per metric, ``images``) and
+    ``per_image`` (the bbox PSNR of each frame)} of each checkpoint on every training
+    frame of ``subset``."""
+    from texvocab.pipeline.avatar import load_avatar
+    from texvocab.pipeline.evaluate import CaptureItems, evaluate_sets
+    from texvocab.pipeline.settings import march_settings, render_overrides
+
+    sub = open_capture(subset)
+    items = CaptureItems(sub, [(t, 0) for t in sub.train_frames], "seen view")
+    out = {}
+    for ck in checkpoints:
+        avatar = load_avatar(ck, progress=False)
+        settings = render_overrides(avatar.settings, preset, [])
+        march = march_settings(settings)
+        table, records, _ = evaluate_sets(
+            avatar.model, {"seen": items}, march, scale=settings.render.image_scale, progress=False
+        )
+        out[str(ck)] = {**table["seen"], "per_image": np.array([r["psnr_bbox"] for r in records])}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("capture", type=Path)
-    ap.add_argument("out", type=Path)
+    ap.add_argument("out", type=Path, nargs="?")
     ap.add_argument("--frames", type=int, default=25)
+    ap.add_argument("--score", type=Path, nargs="+", metavar="CKPT")
+    ap.add_argument("--preset", choices=("fast", "balanced", "quality"), default="fast")
     args = ap.parse_args(argv)
+    if (args.out is None) == (args.score is None):
+        print(
+            "error: give OUT (write a subset) or --score CKPT ... (score checkpoints), one of them",
+            file=sys.stderr,
+        )
+        return 2
     try:
-        train, novel = write_subset(args.capture, args.out, args.frames)
+        if args.score:
+            rows = score(args.capture, args.score, args.preset)
+        else:
+            train, novel = write_subset(args.capture, args.out, args.frames)
     except TexvocabError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.score:
+        print("| checkpoint | images | psnr_bbox | ssim_bbox | iou | − the first, per image | better |")
+        print("|---|---|---|---|---|---|---|")
+        first = next(iter(rows.values()))["per_image"]
+        for ck, r in rows.items():
+            cells = [f"{r[k]:.4f} ± {r[k + '_sem'] or 0:.4f}" for k in ("psnr_bbox", "ssim_bbox", "iou")]
+            d = r["per_image"] - first
+            paired = f"{d.mean():+.3f} ± {d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else 0:.3f}"
+            print(f"| {ck} | {r['images']} | {' | '.join(cells)} | {paired} | {np.mean(d > 0):.0%} |")
+        print("summary: " + " ".join(f"{ck}={r['psnr_bbox']:.4f}" for ck, r in rows.items()))
+        return 0
     print(f"training frames: {' '.join(map(str, train))}")
     print(f"held-out frames: {' '.join(map(str, novel))}")
     print(f"summary: train={len(train)} held_out={len(novel)} out={args.out}")

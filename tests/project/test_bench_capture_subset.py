@@ -2,11 +2,13 @@
 split holds out frames the capture holds out; the capture untouched, OUT never replaced."""
 
 import importlib.util
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from humannerf_cases import make_truth, write_standin
 
 from texvocab.body import default_body
@@ -67,3 +69,44 @@ def test_subset_opens_with_its_own_split_and_leaves_the_capture_alone(tmp_path):
     )
     assert many.returncode == 2 and many.stderr.startswith("error: --frames 40: needs 32 training")
     assert not (tmp_path / "many").exists() and len(many.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow  # two training runs and the command line in a subprocess
+def test_score_reads_every_training_frame_as_texvocab_eval_does(tmp_path):
+    """--score renders the subset's training frames as `texvocab eval` renders them (the
+    same PSNR on the frame both score), and scores a run on the whole capture too."""
+    from train_cases import SMALLEST_SET
+
+    from texvocab.cli.main import main
+
+    body = default_body()
+    cap_dir = write_standin(tmp_path / "subject", body, make_truth(body))
+    few = tmp_path / "few"
+    bench = _load()
+    bench.write_subset(cap_dir, few, 5)
+    tiny = ["encoder=small", "field.hidden=16", "field.sdf_layers=1", "field.color_layers=1", *SMALLEST_SET]
+    sets = [a for item in tiny for a in ("--set", item)]
+    mine, whole = tmp_path / "few_run" / "checkpoint.pt", tmp_path / "whole_run" / "checkpoint.pt"
+    for capture, ck in ((few, mine), (cap_dir, whole)):
+        assert main(["train", str(capture), "--out", str(ck.parent), "--iterations", "2", *sets]) == 0
+    rows = bench.score(few, [mine, whole], "fast")
+    for ck in (mine, whole):
+        assert rows[str(ck)]["images"] == 4 and np.isfinite(rows[str(ck)]["per_image"]).all()
+    assert (
+        main(
+            ["eval", str(mine), str(few), "--per-set", "1", "--preset", "fast", "--out", str(tmp_path / "ev")]
+        )
+        == 0
+    )
+    first = json.loads((tmp_path / "ev" / "metrics.json").read_text())["images"][0]
+    assert first["set"] == "training_poses" and first["frame"] == 0
+    assert rows[str(mine)]["per_image"][0] == pytest.approx(first["psnr_bbox"], abs=1e-6)
+    run = subprocess.run(
+        [sys.executable, str(SCRIPT), str(few), "--score", str(mine), str(whole)],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stderr
+    means = [rows[str(ck)]["per_image"].mean() for ck in (mine, whole)]
+    assert run.stdout.strip().splitlines()[-1] == f"summary: {mine}={means[0]:.4f} {whole}={means[1]:.4f}"
+    assert f"| {mine} | 4 |" in run.stdout and "| +0.000 ± 0.000 | 0% |" in run.stdout
