@@ -14,7 +14,8 @@ weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, c
 ``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: mean,
 nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_m 0.1, 0.5),
 ``beta`` (VolSDF β at the start of training: 5, 2 mm), ``texture`` (texture maps of
-256² or 512² texels),
+256² or 512² texels), ``lr`` (the learning rate constant, or decayed to 0.1 of it over
+the run),
 ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The base
 is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
@@ -97,6 +98,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "beta": {"β₀ 5 mm": [], "β₀ 2 mm": ["field.beta_init=0.002"]},
     # texels per side of the texture maps (the pyramid's finest level is half of it)
     "texture": {"256 texels": [], "512 texels": ["texture_size=512"]},
+    "lr": {"constant": [], "decay to 0.1": ["lr_decay=0.1"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with

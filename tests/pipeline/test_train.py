@@ -58,8 +58,9 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-def test_resume_after_kill_gives_the_same_weights(capture, tmp_path, one_thread):
-    s = tiny_settings(iterations=6, checkpoint_every=3)
+@pytest.mark.parametrize("lr_decay", [1.0, 0.1])
+def test_resume_after_kill_gives_the_same_weights(capture, tmp_path, one_thread, lr_decay):
+    s = tiny_settings(iterations=6, checkpoint_every=3, lr_decay=lr_decay)
     straight = Trainer(open_capture(capture), s, tmp_path / "a", progress=False)
     straight.run()
     killed = Trainer(open_capture(capture), s, tmp_path / "b", progress=False)

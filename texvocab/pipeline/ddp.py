@@ -45,10 +45,10 @@ def attach(trainer) -> None:
             p.grad = flat[start : start + g.numel()].view_as(p).clone()
             start += g.numel()
 
-    def agree(flag: bool) -> bool:
-        t = torch.tensor([1.0 if flag else 0.0])
+    def agree(value: float) -> float:
+        t = torch.tensor([float(value)], dtype=torch.float64)
         dist.all_reduce(t, op=dist.ReduceOp.MAX)
-        return bool(t.item() > 0)
+        return float(t.item())
 
     trainer.sync, trainer.agree = sync, agree
     trainer.progress = trainer.progress and trainer.rank == 0

@@ -214,6 +214,13 @@ class TrainSettings:
         "point and one behind it (3 evaluations) | false: band_samples",
     )
     lr: float = knob(5e-4, within(0, 1, open_low=True), doc="Adam's learning rate")
+    lr_decay: float = knob(
+        1.0,
+        within(0, 1, open_low=True),
+        doc="learning rate at the run's end as a share of train.lr, reached exponentially "
+        "over the run (its steps, or its time budget when that ends it first; VolSDF "
+        "decays to 0.1); 1: constant",
+    )
     lambda_color: float = knob(1.0, at_least(0), doc="λ_c of the colour term (Eq. 10)")
     lambda_mask: float = knob(0.1, at_least(0), doc="λ_m of the mask term (Eq. 10)")
     lambda_eikonal: float = knob(0.05, at_least(0), doc="λ_e of the eikonal term (Eq. 10)")

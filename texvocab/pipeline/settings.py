@@ -129,6 +129,7 @@ LEGACY: dict[str, object] = {
     "train.shell_voxel": 0.01,
     "vocab.pose_condition": "global",
     "field.shell_coverage": None,
+    "train.lr_decay": 1.0,
 }
 
 

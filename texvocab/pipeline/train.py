@@ -35,6 +35,7 @@ from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.method.pose_refinement import PoseRefinement
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
+from texvocab.pipeline.lr_schedule import LearningRateSchedule
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures, train_views
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
@@ -104,6 +105,7 @@ class Trainer:
             )
             groups.append({"params": list(self.refine.parameters()), "lr": settings.train.pose_lr})
         self.optim = torch.optim.Adam(groups, lr=settings.train.lr)
+        self.schedule = LearningRateSchedule(self.optim, settings.train.lr_decay)
         self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
         self.saved_step: int | None = None  # the step the checkpoint on disk holds
@@ -113,7 +115,7 @@ class Trainer:
         self.perceptual = perceptual_term(settings)
         # data-parallel training (texvocab.pipeline.ddp): this process computes shard
         # `rank` of `world` of every step's batch; `sync` all-reduces the gradients and
-        # `agree(flag)` is True on every process when it is on any (a time budget's stop)
+        # `agree(x)` is the largest x over the processes (a time budget's stop, its clock)
         self.rank, self.world, self.sync, self.agree = 0, 1, None, None
 
     @property
@@ -262,6 +264,7 @@ class Trainer:
             "optimizer": self.optim.state_dict(),
             "vocab": self.model.pose_feature.vocab.to_dict(),
             "rng": {"torch": self.gen.get_state()},
+            "lr_schedule": self.schedule.state(self.step),
             **({} if self.refine is None else {"pose_refinement": self.refine.state()}),
         }
 
@@ -322,6 +325,7 @@ class Trainer:
         if self.refine is not None:
             self.refine.load(ck["pose_refinement"])
         self.optim.load_state_dict(ck["optimizer"])
+        self.schedule.load(ck.get("lr_schedule"))
         self.gen.set_state(ck["rng"]["torch"])
         self.step = self.saved_step = int(ck["step"])
         return True
@@ -350,17 +354,20 @@ class Trainer:
                 "the time budget [{elapsed}<{remaining}{postfix}]",
             )
         t0 = time.perf_counter()
+        self.schedule.begin(self.step, end, budget)
         try:  # the bar ends its line before any error line
             while self.step < end:
-                over = budget is not None and time.perf_counter() - t0 > budget
-                if self.agree is not None and budget is not None:
-                    over = self.agree(over)
+                elapsed = time.perf_counter() - t0
+                if self.agree is not None and budget is not None:  # one clock for all
+                    elapsed = self.agree(elapsed)
+                over = budget is not None and elapsed > budget
                 if over:
                     minutes = self.s.train.max_minutes
                     log.info("time budget of %.1f min reached at step %d", minutes, self.step)
                     break
+                lr = self.schedule.update(self.step, elapsed)
                 rec = self.train_step()
-                logs.append(rec)
+                logs.append({**rec, "lr": lr})
                 if bar is not None:
                     if budget is None:
                         bar.update(1)
