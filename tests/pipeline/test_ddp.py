@@ -105,8 +105,16 @@ def test_time_budget_stops_every_process_at_the_same_step(capture, tmp_path):
         "max_minutes=0.05",
         "--set",
         "checkpoint_every=1000",
+        "--set",
+        "lr_decay=0.1",
     ]
     assert main(args + sum((["--set", s] for s in sets), [])) == 0
-    step = load_checkpoint(tmp_path / "run" / "checkpoint.pt")["step"]
+    ck = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
+    step = ck["step"]
     assert 1 <= step < 100000
     assert np.isfinite(step)
+    # the learning rate decays over the budget, by the clock every process agreed on: the
+    # last step's rate is the one its share of the budget gives
+    lr, progress = ck["settings"]["train"]["lr"], ck["lr_schedule"]["progress"]
+    assert ck["optimizer"]["param_groups"][0]["lr"] == pytest.approx(lr * 0.1**progress)
+    assert 0 < progress < 1 if step >= 2 else progress == 0
