@@ -15,7 +15,7 @@ weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, c
 nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_m 0.1, 0.5),
 ``beta`` (VolSDF β at the start of training: 5, 2 mm), ``texture`` (texture maps of
 256² or 512² texels), ``lr`` (the learning rate constant, or decayed to 0.1 of it over
-the run), ``shell`` (the field's shell 6 or 8 cm wide),
+the run), ``shell`` (the base's shell, or 8 cm wide),
 ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The base
 is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
@@ -99,7 +99,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # texels per side of the texture maps (the pyramid's finest level is half of it)
     "texture": {"256 texels": [], "512 texels": ["texture_size=512"]},
     "lr": {"constant": [], "decay to 0.1": ["lr_decay=0.1"]},
-    "shell": {"6 cm": ["field.shell_width=0.06"], "8 cm": ["field.shell_width=0.08"]},
+    "shell": {"base shell": [], "8 cm": ["field.shell_width=0.08"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},
     # the shell marcher's coarse step for the rays training still marches (run with
