@@ -378,6 +378,7 @@ class Trainer:
                         loss=f"{rec['loss']:.4f}",
                         psnr=f"{rec['psnr']:.2f}",
                         beta=f"{rec['beta']:.4f}",
+                        lr=f"{lr:.2e}",
                     )
                 if self.step % self.s.train.checkpoint_every == 0 or self.step == end:
                     self.save()
