@@ -4,7 +4,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
-SYS_PKGS="libegl1 libegl-mesa0 libgl1 libopengl0 libgl1-mesa-dri libosmesa6 xvfb xauth"
+SYS_PKGS="libegl1 libegl-mesa0 libgl1 libopengl0 libgl1-mesa-dri libosmesa6 xvfb xauth fonts-dejavu-core"
 missing=""
 for p in $SYS_PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
 from texvocab.io.full_disk import disk_full_cause
 from texvocab.io.stop_flag import raise_if_stopped
@@ -63,6 +64,17 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
     return atomic_write_bytes(path, lambda tmp: img.save(tmp, format="PNG"))
 
 
+@functools.cache
+def label_font(size: int = 11) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    """The labels' font: DejaVu Sans where the system has it (Greek letters, subscripts
+    and the other characters of the settings' names: β₀, λ_m, δ), else Pillow's default,
+    whose glyphs stop at Latin letters (other characters are drawn as boxes)."""
+    try:
+        return ImageFont.truetype("DejaVuSans.ttf", size)
+    except OSError:
+        return ImageFont.load_default()
+
+
 def contact_sheet(
     rows: list[list[np.ndarray]], row_labels=None, col_labels=None, pad: int = 4, label_h: int = 16
 ) -> np.ndarray:
@@ -78,7 +90,7 @@ def contact_sheet(
     for r, row in enumerate(rows):
         y = top + pad + r * (h + pad)
         if row_labels:
-            draw.text((4, y + h // 2), row_labels[r], fill=(0, 0, 0))
+            draw.text((4, y + h // 2), row_labels[r], fill=(0, 0, 0), font=label_font())
         for c, img in enumerate(row):
             x = left + pad + c * (w + pad)
             tile = to_uint8(img)
@@ -86,5 +98,5 @@ def contact_sheet(
             sheet.paste(Image.fromarray(tile), (x, y))
     if col_labels:
         for c, label in enumerate(col_labels):
-            draw.text((left + pad + c * (w + pad) + 4, 2), label, fill=(0, 0, 0))
+            draw.text((left + pad + c * (w + pad) + 4, 2), label, fill=(0, 0, 0), font=label_font())
     return np.asarray(sheet)
