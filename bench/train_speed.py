@@ -57,6 +57,8 @@ VARIANTS = {
     "defaults at train_shell_voxel 0.01": ["train_shell_voxel=0.01"],
     "defaults (Newton band, residual rays inside the mask)": [],
     PLAIN_SOFTPLUS: [],
+    "defaults, eikonal term on 128 points": ["eikonal_points=128"],
+    "defaults without the eikonal term": ["lambda_eikonal=0"],
 }
 
 

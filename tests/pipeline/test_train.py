@@ -48,6 +48,26 @@ def test_trainable_encoder_frames_keep_no_feature_maps(capture, tmp_path):
     assert any(not torch.equal(a, b.detach()) for a, b in zip(before, encoder.parameters(), strict=True))
 
 
+@pytest.mark.parametrize("points", [64, 200])
+def test_the_eikonal_term_reads_eikonal_points_gradients(capture, tmp_path, points):
+    """train.eikonal_points: the eikonal term evaluates the SDF and its gradient at that
+    many points near the body each step (the one field call whose points need a gradient)."""
+    cap = open_capture(capture)
+    settings = tiny_settings(eikonal_points=points, iterations=2)
+    trainer = Trainer(cap, settings, tmp_path / "run", progress=False)
+    model, seen = trainer.model, []
+    original = model.sdf_and_color
+
+    def recording(ctx, pts, dirs, *args, **kw):
+        if pts.requires_grad:
+            seen.append(len(pts))
+        return original(ctx, pts, dirs, *args, **kw)
+
+    model.sdf_and_color = recording
+    log = trainer.train_step()
+    assert seen == [points] and np.isfinite(log["eikonal"]) and log["eikonal"] > 0
+
+
 @pytest.fixture
 def one_thread():
     """Bit-exact comparisons need one thread: with several, oneDNN's convolution backward

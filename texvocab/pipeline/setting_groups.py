@@ -224,6 +224,12 @@ class TrainSettings:
     lambda_color: float = knob(1.0, at_least(0), doc="λ_c of the colour term (Eq. 10)")
     lambda_mask: float = knob(0.1, at_least(0), doc="λ_m of the mask term (Eq. 10)")
     lambda_eikonal: float = knob(0.05, at_least(0), doc="λ_e of the eikonal term (Eq. 10)")
+    eikonal_points: int = knob(
+        512,
+        at_least(1),
+        doc="points near the body (within half the shell) whose SDF gradient the eikonal term "
+        "reads each step; its second-order backward pass is a share of every step's time",
+    )
     perceptual: Perceptual = knob(
         "auto", doc="auto (lpips-vgg if its weights exist, else inception) | lpips-vgg | inception | off"
     )

@@ -194,7 +194,7 @@ class Trainer:
             index=fd.ctx.index,
             residual_misses=s.residual == "all",
         )
-        eikonal = self._eikonal(fd, ctx, 512, evaluate=lead) if s.lambda_eikonal > 0 else None
+        eikonal = self._eikonal(fd, ctx, s.eikonal_points, evaluate=lead) if s.lambda_eikonal > 0 else None
         terms = {
             "color": ((out.rgb - gt) ** 2).mean(),
             "mask": (out.opacity - m).abs().mean(),
