@@ -17,6 +17,7 @@ same field, for the ratio.
     .venv/bin/python bench/render_speed.py [CKPT] [--capture DIR] [--frames 3]
         [--variant "12+4:coarse_samples=12,fine_samples=4"] [--reference 1]
     .venv/bin/python bench/render_speed.py CKPT --compare [--frames 3] [--save DIR]
+        [--variant "step3:residual_step=3"]
 
 ``--compare`` renders the same frames five ways in one run — ``new``: the default render
 path as it is now (the surface-guided marcher, guide=raster, at the ``fast`` preset's
@@ -24,11 +25,12 @@ knobs, with the field's MLPs in ``--new-precision`` (by default ``auto``: bfloat
 CPU has bf16 units, float32 where torch would emulate them), activations free
 of subnormal numbers, ``NormalSoftplus``, and ``surface_reuse``: the field's projection
 takes the closest faces the raster and the residual rays' mesh queries found);
-``previous``: the same path before that reuse and the changes beside it (``BEFORE``:
+``previous``: the default path as it was before any of that, the yardstick for the
+frame's speed (float32 MLPs with torch's nn.Softplus, and ``BEFORE``:
 ``surface_reuse=false``, every point searched; ``residual_groups=1``, the residual rays'
 quadrature in one padded array; ``fallback_segment=8``; and the closest-face search's
 kernel as it was, ``nearest_faces_plain``, :func:`plain_search`); the other paths run with
-torch's nn.Softplus and float32 — ``shell``: the shell marcher (guide=shell) at the
+torch's nn.Softplus and float32 too — ``shell``: the shell marcher (guide=shell) at the
 ``fast`` preset; ``quality``: the shell marcher at the ``quality`` preset; ``reference``:
 the uniform 64+32 marcher in the body's box — and prints per path seconds, field
 evaluations, PSNR against the truth and against the reference, and as its last line
@@ -178,9 +180,18 @@ def resized(items, size: int | None):
 
 
 def compare(
-    model, settings, items, what: str, repeats: int = 1, save: Path | None = None, precision: str = "auto"
+    model,
+    settings,
+    items,
+    what: str,
+    repeats: int = 1,
+    save: Path | None = None,
+    precision: str = "auto",
+    variants: list[tuple[str, dict]] = (),
 ) -> int:
-    """The five-way comparison of ``--compare``; prints a table and the summary line. With
+    """The five-way comparison of ``--compare``, plus ``variants`` ((name, MarchSettings
+    knobs) of ``--variant``: the new path with those knobs, rendered in turn with the
+    others); prints a table and the summary line. With
     ``save``, each path's images go there as ``<path>_<frame>.npy`` (float32 (H, W, 3)) and
     the field evaluations per path and frame as ``evals.json``, so two runs (e.g. before and
     after a change to the marchers) can be compared exactly."""
@@ -194,10 +205,16 @@ def compare(
 
     paths = {
         "new": march("fast", "raster", f"precision={precision}"),
-        "previous": march("fast", "raster", f"precision={precision}").replace(**BEFORE),
+        "previous": march("fast", "raster", "precision=float32").replace(**BEFORE),
         "shell": march("fast", "shell", "precision=float32"),
         "quality": march("quality", "shell", "precision=float32"),
     }
+    newlike = {"new"}
+    for name, kw in variants:
+        if name in paths or name == "reference":
+            raise SystemExit(f"error: --variant {name!r}: that name is one of the compared paths")
+        paths[name] = paths["new"].replace(**kw)
+        newlike.add(name)
     print(
         f"# render paths compared: {what}\n\n{len(items)} frames at {items[0][3].width}x"
         f"{items[0][3].height}, {torch.get_num_threads()} threads; seconds: best of "
@@ -215,7 +232,7 @@ def compare(
         # on a shared machine (the paths one after the other drifted by 10-20 %)
         for _ in range(max(repeats, 1)):
             for name, march in paths.items():
-                with plain_softplus(model, name not in ("new", "previous")), plain_search(name == "previous"):
+                with plain_softplus(model, name not in newlike), plain_search(name == "previous"):
                     img, row = timed_render(model, item, march)
                 if name not in results or row["total"] < results[name][1]["total"]:
                     results[name] = (img, row)
@@ -290,7 +307,8 @@ def main(argv=None) -> int:
         action="append",
         default=[],
         metavar="NAME:KEY=VALUE,...",
-        help="extra marcher variant on top of the checkpoint's settings",
+        help="extra marcher variant on top of the checkpoint's settings; with --compare, on top of "
+        "the new path, rendered in turn with the compared paths",
     )
     ap.add_argument(
         "--reference", type=int, default=1, help="frames also rendered by the uniform 64+64 reference marcher"
@@ -301,7 +319,8 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--compare",
         action="store_true",
-        help="new (guided, fast knobs, --new-precision) vs previous (the same in float32) vs "
+        help="new (guided, fast knobs, --new-precision) vs previous (the default path before the "
+        "speed work: float32, nn.Softplus, no surface reuse) vs "
         "shell (fast) vs quality vs the uniform 64+32 reference; ends with a summary line",
     )
     ap.add_argument(
@@ -326,7 +345,8 @@ def main(argv=None) -> int:
         if args.save is not None:
             args.save.mkdir(parents=True, exist_ok=True)
         items = resized(items_of(cap, settings, args.frames), args.size)
-        return compare(model, settings, items, what, args.repeats, args.save, args.new_precision)
+        extra = [parse_variant(v) for v in args.variant]
+        return compare(model, settings, items, what, args.repeats, args.save, args.new_precision, extra)
 
     from texvocab.metrics import evaluate_pair
     from texvocab.pipeline.settings import march_settings

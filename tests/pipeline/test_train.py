@@ -68,6 +68,23 @@ def test_the_eikonal_term_reads_eikonal_points_gradients(capture, tmp_path, poin
     assert seen == [points] and np.isfinite(log["eikonal"]) and log["eikonal"] > 0
 
 
+def test_beta_learns_at_its_own_rate_when_scaled(capture, tmp_path):
+    """train.beta_lr_scale: β gets an optimiser group of its own at that multiple of the
+    rate (Adam's first step moves a parameter by about its rate), and 1 keeps one group."""
+    cap = open_capture(capture)
+    moves = {}
+    for scale in (1.0, 10.0):
+        settings = tiny_settings(beta_lr_scale=scale, iterations=1, lr=1e-3)
+        trainer = Trainer(cap, settings, tmp_path / f"run{scale}", progress=False)
+        groups = trainer.optim.param_groups
+        assert len(groups) == (1 if scale == 1 else 2)
+        before = float(trainer.model.log_beta.detach())
+        trainer.train_step()
+        moves[scale] = abs(float(trainer.model.log_beta.detach()) - before)
+    assert groups[1]["params"] == [trainer.model.log_beta] and groups[1]["lr"] == pytest.approx(1e-2)
+    assert 5 * moves[1.0] < moves[10.0] < 20 * moves[1.0]
+
+
 @pytest.fixture
 def one_thread():
     """Bit-exact comparisons need one thread: with several, oneDNN's convolution backward

@@ -19,7 +19,8 @@ from texvocab.pipeline.avatar import load_avatar  # noqa: E402
 
 def test_compare_ends_with_speedup_and_psnr_delta(tmp_path, capsys):
     ckpt = smallest_run(tmp_path)
-    assert render_speed.main([str(ckpt), "--compare", "--frames", "1"]) == 0
+    args = [str(ckpt), "--compare", "--frames", "1", "--variant", "step3:residual_step=3"]
+    assert render_speed.main(args) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[-1].startswith("summary: new_s=")
     summary = dict(kv.split("=") for kv in lines[-1].removeprefix("summary: ").split())
@@ -27,7 +28,7 @@ def test_compare_ends_with_speedup_and_psnr_delta(tmp_path, capsys):
     assert {"previous_s", "new_evals", "previous_evals", "speedup"} <= set(summary)
     assert float(summary["speedup"]) > 0 and abs(float(summary["psnr_delta_db"])) < 0.1
     rows = [r.split("|")[1].strip() for r in lines if r.startswith("| ") and "frame" in r]
-    assert {"new", "previous", "shell", "quality", "reference"} <= set(rows)
+    assert {"new", "previous", "shell", "quality", "reference", "step3"} <= set(rows)
 
 
 def test_the_previous_path_swaps_torchs_softplus_in_for_the_run_only(tmp_path):

@@ -214,6 +214,12 @@ class TrainSettings:
         "point and one behind it (3 evaluations) | false: band_samples",
     )
     lr: float = knob(5e-4, within(0, 1, open_low=True), doc="Adam's learning rate")
+    beta_lr_scale: float = knob(
+        1.0,
+        above(0),
+        doc="VolSDF's β learns at this multiple of train.lr (its own optimiser group when not 1): "
+        "how fast the surface sharpens",
+    )
     lr_decay: float = knob(
         1.0,
         within(0, 1, open_low=True),

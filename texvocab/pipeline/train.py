@@ -94,7 +94,17 @@ class Trainer:
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
             torch.manual_seed(settings.train.seed)
             self.model = build_model(capture, settings, self.textures)
-        groups = [{"params": [p for p in self.model.parameters() if p.requires_grad]}]
+        beta = self.model.log_beta
+        scale = settings.train.beta_lr_scale
+        groups = [
+            {
+                "params": [
+                    p for p in self.model.parameters() if p.requires_grad and (p is not beta or scale == 1)
+                ]
+            }
+        ]
+        if scale != 1:  # β in a group of its own (a checkpoint's group layout follows the setting)
+            groups.append({"params": [beta], "lr": settings.train.lr * scale})
         self.refine = None  # per-frame pose corrections (train.pose_refinement)
         if settings.train.pose_refinement != "off":
             self.refine = PoseRefinement(
