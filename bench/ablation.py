@@ -99,6 +99,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # texels per side of the texture maps (the pyramid's finest level is half of it)
     "texture": {"256 texels": [], "512 texels": ["texture_size=512"]},
     "lr": {"constant": [], "decay to 0.1": ["lr_decay=0.1"]},
+    "beta_lr": {"β at the rate": [], "β at 10× the rate": ["beta_lr_scale=10"]},
     "shell": {"base shell": [], "8 cm": ["field.shell_width=0.08"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},
     "training": {"shell": [], "raster": ["train_guide=raster"]},

@@ -59,6 +59,7 @@ VARIANTS = {
     PLAIN_SOFTPLUS: [],
     "defaults, eikonal term on 128 points": ["eikonal_points=128"],
     "defaults without the eikonal term": ["lambda_eikonal=0"],
+    "defaults without the perceptual term": ["perceptual=off"],
 }
 
 
