@@ -12,8 +12,15 @@ import numpy as np
 import torch
 
 #: the render knobs that give the default path as it was before the surface reuse, the
-#: quadrature's ray groups and the fallback's 64-scout steps (``previous`` of --compare)
-BEFORE = {"surface_reuse": False, "residual_groups": 1, "fallback_segment": 8}
+#: quadrature's ray groups, the coarser residual passes, the fallback's 64-scout steps and its
+#: gridless march of a few rays (``previous`` of --compare)
+BEFORE = {
+    "surface_reuse": False,
+    "residual_groups": 1,
+    "residual_levels": 0,
+    "fallback_segment": 8,
+    "fallback_grid_rays": 0,
+}
 
 
 class Timed:

@@ -52,4 +52,10 @@ def test_the_previous_path_searches_with_the_plain_kernel_for_the_run_only():
     with render_timing.plain_search(True):
         assert surface.nearest_faces is _nearest_jit.nearest_faces_plain
     assert surface.nearest_faces is _nearest_jit.nearest_faces
-    assert render_timing.BEFORE == {"surface_reuse": False, "residual_groups": 1, "fallback_segment": 8}
+    assert render_timing.BEFORE == {
+        "surface_reuse": False,
+        "residual_groups": 1,
+        "residual_levels": 0,
+        "fallback_segment": 8,
+        "fallback_grid_rays": 0,
+    }

@@ -167,6 +167,7 @@ def test_a_one_point_field_call_works(body):
         ("band_leftover", 1e-6),
         ("fallback_segment", 8),
         ("fallback_scout", None),
+        ("fallback_grid_rays", 100_000),
         ("residual_rays", False),
         ("residual_tolerance", 0.1),
         ("band_newton", False),
@@ -176,7 +177,7 @@ def test_every_guided_knob_changes_the_render(body, knob, value):
     """Each documented knob of the guided marcher changes what it evaluates (the ones
     that only act on the 4-sample band or on marched rays, with those in use)."""
     v, f, cam, field = body["v"], body["f"], body["camera"], body["field"]
-    marched = {"band_samples", "fallback_segment", "fallback_scout"}
+    marched = {"band_samples", "fallback_segment", "fallback_scout", "fallback_grid_rays"}
     start = GUIDED.replace(band_newton=False, residual_rays=False) if knob in marched else GUIDED
     with torch.no_grad():
         base = render_image(field, cam, v, f, start, shell=body["shell"])

@@ -120,3 +120,51 @@ def test_residual_rays_stay_finite_from_inside_and_at_grazing_views(body, where)
         assert torch.isfinite(x).all()
     assert (out.alpha >= 0).all() and (out.alpha <= 1 + 1e-6).all()
     assert (out.rgb >= 0).all() and (out.rgb <= 1 + 1e-6).all()
+
+
+def test_coarser_passes_narrow_the_residual_rays_to_the_same_image(body, monkeypatch):
+    """At a trained avatar's β (0.5 mm) the dense steps are 0.75 mm and a ray through
+    the body crosses 20-30 cm of shell: passes at 16 and 64 ``residual_step`` β keep only
+    the part around where the ray enters, so the residual rays query the mesh far less
+    often and render the image of the pass over the whole interval."""
+    import texvocab.render.guided.residual as residual
+
+    queried = {"points": 0}
+    faces_of = residual.mesh_distance_faces
+
+    def counted(index, points, cap, known=None):
+        queried["points"] += len(points)
+        return faces_of(index, points, cap, known)
+
+    monkeypatch.setattr(residual, "mesh_distance_faces", counted)
+    field = MeshResidualField(body["v"], body["f"], beta=0.0005, amplitude=0.0002, wavenumber=20.0)
+    camera = body["camera"].scaled(2.0)  # 128²: the residual rays are a pixel's fringe
+    images, counts = [], []
+    for levels in (0, 2):
+        queried["points"] = 0
+        with torch.no_grad():
+            image = render_image(field, camera, body["v"], body["f"], GUIDED.replace(residual_levels=levels))
+        images.append(image)
+        counts.append(queried["points"])
+    whole, narrowed = images
+    assert narrowed.stats.paths["residual"] > 50
+    assert (narrowed.stats.kind != whole.stats.kind).float().mean() <= 0.002
+    assert psnr(narrowed.rgb, whole.rgb) > 60 and float((narrowed.alpha - whole.alpha).abs().max()) < 0.01
+    assert counts[1] < 0.7 * counts[0]
+
+
+def test_marching_without_the_grid_gives_the_grid_marchs_image(body):
+    """``fallback_grid_rays``: a few marched rays march their whole shell interval instead
+    of building the occupancy grid; the image is the grid march's, as close to a dense
+    march, with more field evaluations for the empty stretches."""
+    field = MeshResidualField(body["v"], body["f"], beta=0.003, amplitude=0.01, wavenumber=200.0)
+    grid, gridless = GUIDED.replace(fallback_grid_rays=0), GUIDED.replace(fallback_grid_rays=100_000)
+    with torch.no_grad():
+        images = [
+            render_image(field, body["camera"], body["v"], body["f"], s) for s in (DENSE, grid, gridless)
+        ]
+    dense, on_grid, off_grid = images
+    assert on_grid.stats.paths["fallback"] > 100
+    assert off_grid.stats.field_evals > on_grid.stats.field_evals
+    assert psnr(off_grid.rgb, on_grid.rgb) > 40
+    assert psnr(off_grid.rgb, dense.rgb) > psnr(on_grid.rgb, dense.rgb) - 1.0

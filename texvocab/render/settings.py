@@ -122,6 +122,9 @@ class ResidualSettings:
     groups: speed only: the rays' quadrature runs in this many groups of similar sample
         counts, each as long as its longest ray (1: one array for all, padded to the
         longest; the counts vary several-fold).
+    levels: speed: coarser passes (steps 4× apart) that narrow a ray's interval before
+        the 4 ``step`` β pass, so a ray through the body is not sampled finely along the
+        whole shell interval (0: the 4 ``step`` β pass over all of it, as before).
     """
 
     enabled: bool = True
@@ -129,6 +132,7 @@ class ResidualSettings:
     spread: float = 0.05
     tolerance: float = 2.0
     groups: int = 4
+    levels: int = 2
 
 
 @dataclass(frozen=True)
@@ -138,10 +142,14 @@ class FallbackSettings:
     its scout threshold instead of the shell group's (few rays: fewer, larger calls). A field
     call has a fixed cost of a few ms: 64 scouts a step evaluate most of these rays' coarse
     samples in one call (3 calls a frame for the march instead of 7 with 8, for 0.02 % more
-    evaluations and the same image to 2e-4 on a trained avatar)."""
+    evaluations and the same image to 2e-4 on a trained avatar). ``grid_rays``: up to this
+    many rays march their whole shell interval [near, far] instead of the occupancy grid's
+    in-shell path (the grid's build costs more than a handful of rays' empty stretches;
+    0: always the grid)."""
 
     segment: int = 64
     scout_threshold: float | None = 1e-3
+    grid_rays: int = 64
 
 
 @dataclass(frozen=True)
@@ -228,11 +236,13 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "miss_margin": ("band", "miss_margin"),
     "fallback_segment": ("fallback", "segment"),
     "fallback_scout": ("fallback", "scout_threshold"),
+    "fallback_grid_rays": ("fallback", "grid_rays"),
     "residual_rays": ("residual", "enabled"),
     "residual_step": ("residual", "step"),
     "residual_spread": ("residual", "spread"),
     "residual_tolerance": ("residual", "tolerance"),
     "residual_groups": ("residual", "groups"),
+    "residual_levels": ("residual", "levels"),
     "band_newton": ("band", "newton"),
 }
 

@@ -150,11 +150,14 @@ class GuidedImage:
 
     def _fallback(self, pix: torch.Tensor, cancelled) -> RayResult:
         """The shell marcher on the rays of pixels pix (n,), with the fallback group's
-        segment and scout threshold."""
+        segment and scout threshold; a few rays march [near, far] without the grid."""
         s = self.settings
-        shell, bounds = self._shell_bounds(grid=True)
+        gridless = len(pix) <= s.fallback.grid_rays
+        shell, bounds = self._shell_bounds(grid=not gridless)
         near, far = bounds.near.view(-1)[pix], bounds.far.view(-1)[pix]
         fs = s.replace(segment=s.fallback.segment, scout_threshold=s.fallback.scout_threshold)
+        if gridless:
+            fs = fs.replace(skip_empty=False)
         return march_chunks(
             self.field, self.origins[pix], self.dirs[pix], near, far, fs, None, shell, self.bg, cancelled
         )

@@ -18,7 +18,11 @@ spread of 0.1 β median, 0.3 β at the 90th percentile). So per ray:
    between two samples ŝ stays above their mean minus half the step: that bounds the
    part of the ray that matters — where ŝ may be within 6 β of max(least ŝ, 0) (beyond
    it the density is below e^-6 of its peak), up to where the ray is opaque (optical
-   depth 8).
+   depth 8). With ``residual_levels`` L > 0 the same test first runs at 4^(L+1), …, 4²
+   ``residual_step`` β, each pass on the part the coarser one kept: the bound is looser
+   at a longer step, so a coarse pass keeps at least what a finer one would, and a ray
+   through the body (its shell interval 20–30 cm) is sampled finely only around where
+   it enters.
 2. d every ``residual_step`` β over that part, the weights ŝ gives it, and three field
    evaluations at the ``residual_spread``, 1/2 and 1 - ``residual_spread`` quantiles
    of those weights.
@@ -90,6 +94,22 @@ def _samples(index, origin, dirs, near, far, step: float, cap: float):
     d[inside], f[inside] = mesh_distance_faces(index, points_along(origin, dirs, t)[inside], cap)
     end = last[:, None]
     return t, torch.where(inside, d, d.gather(1, end)), torch.where(inside, f, f.gather(1, end)), inside
+
+
+def _narrow(index, origin, dirs, near, far, step: float, r0, beta: float, cap: float, levels: int):
+    """[near, far] (R,) narrowed to the part that matters by ``levels`` passes of
+    :func:`_part_that_matters` at step·4^levels, …, step·4 (none: unchanged), and found
+    (R,) (False: a pass found no low interval; such a ray's interval is left empty)."""
+    found = torch.ones(len(dirs), dtype=torch.bool)
+    for k in range(levels, 0, -1):
+        t, d, _, inside = _samples(index, origin, dirs, near, far, step * _COARSE**k, cap)
+        _, first, end, ok = _part_that_matters(t, _estimate(d, r0, cap), inside, beta)
+        found &= ok
+        near = t.gather(1, first[:, None])[:, 0]
+        # one interval more: the chords' opacity may come early where the body is concave
+        last = (end + 1).clamp(max=t.shape[1] - 1)
+        far = torch.where(found, t.gather(1, last[:, None])[:, 0], near)
+    return near, far, found
 
 
 def _part_that_matters(
@@ -218,8 +238,12 @@ def render_residual(
         d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
+    near, far, narrowed = _narrow(
+        index, origin, dirs, near, far, _COARSE * h, r0, b, cap, settings.residual.levels
+    )
     t, d, f, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap)
     low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, b)
+    found &= narrowed
     t, d, f, count = _refine(index, origin, dirs, t, d, f, low, first, end, cap)
     # the rays in groups of similar sample counts, each group's arrays as long as its
     # longest ray (the counts vary several-fold: one array for all was mostly padding)
