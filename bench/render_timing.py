@@ -12,14 +12,16 @@ import numpy as np
 import torch
 
 #: the render knobs that give the default path as it was before the surface reuse, the
-#: quadrature's ray groups, the coarser residual passes, the fallback's 64-scout steps and its
-#: gridless march of a few rays (``previous`` of --compare)
+#: quadrature's ray groups, the coarser residual passes, the fallback's 64-scout steps, its
+#: gridless march of a few rays and the misses probed across the whole shell (``previous`` of
+#: --compare; its misses were probed only within miss_margin β of the mesh)
 BEFORE = {
     "surface_reuse": False,
     "residual_groups": 1,
     "residual_levels": 0,
     "fallback_segment": 8,
     "fallback_grid_rays": 0,
+    "miss_reach": "margin",
 }
 
 

@@ -23,6 +23,7 @@ from texvocab.pipeline.settings import (
     DataSettings,
     Encoder,
     Guide,
+    MissReach,
     PoseRefinementMode,
     Precision,
     RenderSettings,
@@ -35,7 +36,7 @@ from texvocab.pipeline.settings import (
     Weighting,
     resolve_name,
 )
-from texvocab.render import GUIDES
+from texvocab.render import GUIDES, MISS_REACHES
 
 
 def test_settings_round_trip_and_overrides():
@@ -129,6 +130,7 @@ def test_choices_are_the_methods_own_and_every_knob_says_what_it_does():
         (Weighting, WEIGHTINGS),
         (Encoder, ENCODER_NAMES),
         (Guide, GUIDES),
+        (MissReach, MISS_REACHES),
         (Precision, PRECISIONS),
     ):
         assert set(get_args(hint)) == set(names)

@@ -58,4 +58,5 @@ def test_the_previous_path_searches_with_the_plain_kernel_for_the_run_only():
         "residual_levels": 0,
         "fallback_segment": 8,
         "fallback_grid_rays": 0,
+        "miss_reach": "margin",
     }

@@ -18,6 +18,7 @@ Strategy = Literal["part", "joint", "global", "none"]  # body.parts.STRATEGIES
 Weighting = Literal["paper", "inverse"]  # method.vocab.WEIGHTINGS
 Encoder = Literal["auto", "resnet34", "resnet34-scratch", "inception", "small", "pyramid"]
 Guide = Literal["raster", "shell"]  # render.GUIDES
+MissReach = Literal["shell", "margin"]  # render.MISS_REACHES
 Precision = Literal["float32", "bfloat16", "auto"]  # method.field.PRECISIONS
 TrainResidual = Literal["hits", "all", "off"]
 Perceptual = Literal["auto", "lpips-vgg", "inception", "off"]
@@ -149,6 +150,13 @@ class RenderSettings:
         True,
         doc="guide raster: band rays from the probe, the Newton "
         "point and one point behind it (false: band_samples samples)",
+    )
+    miss_reach: MissReach = knob(
+        "shell",
+        doc="guide raster: the rays that miss the posed mesh which are probed for surface: "
+        "shell, every ray passing within δ of it (exact: clothing may stand off the body "
+        "anywhere in the shell) | margin, only those within miss_margin β (faster; cuts "
+        "off surface the field grew outside the body's silhouette)",
     )
     precision: Precision = knob(
         "float32",

@@ -26,6 +26,7 @@ from texvocab.pipeline.setting_groups import (  # noqa: F401  re-exported: the g
     DataSettings,
     Encoder,
     Guide,
+    MissReach,
     Perceptual,
     PoseCondition,
     PoseRefinementMode,
@@ -268,6 +269,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
         precision=r.precision,
         residual_rays=r.residual_rays,
         band_newton=r.band_newton,
+        miss_reach=r.miss_reach,
     )
     if training:
         knobs.update(

@@ -30,6 +30,7 @@ from texvocab.render.progressive import progressive_render, progressive_shard
 from texvocab.render.reference import composite_reference, mesh_bbox, ray_box, render_image_uniform
 from texvocab.render.results import RayKind, RayResult, RenderCancelled, RenderResult, RenderStats
 from texvocab.render.settings import (
+    MISS_REACHES,
     BandSettings,
     ChunkSettings,
     FallbackSettings,
@@ -45,6 +46,7 @@ from texvocab.render.volume.samples import RaySamples, composite, sample_pdf
 
 __all__ = [
     "GUIDES",
+    "MISS_REACHES",
     "BandSettings",
     "ChunkSettings",
     "FallbackSettings",

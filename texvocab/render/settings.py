@@ -74,6 +74,10 @@ class ShellSettings:
     empty_opacity: float = 1e-3
 
 
+#: How far from the mesh a missing ray can still meet the surface (BandSettings.miss_reach).
+MISS_REACHES = ("shell", "margin")
+
+
 @dataclass(frozen=True)
 class BandSettings:
     """The surface band of the guided marcher (:mod:`texvocab.render.guided`): the mesh's
@@ -93,6 +97,12 @@ class BandSettings:
         behind it) and the SDF between is the hit face's plane plus the interpolated
         residual (:func:`texvocab.render.guided.band.newton_band`, 3 evaluations per ray);
         False: ``samples`` samples around t*.
+    miss_reach: which rays that miss the mesh are probed (:data:`MISS_REACHES`): "shell",
+        every ray passing within δ of the mesh (exact: the avatar's surface may lie anywhere
+        in the shell, as loose clothing does); "margin", only those within
+        min(δ, ``miss_margin`` β), which assumes the surface lies on the mesh outside its
+        silhouette (faster for avatars whose surface is the body's; cuts off clothing that
+        stands off it).
     """
 
     samples: int = 4
@@ -101,6 +111,11 @@ class BandSettings:
     min_cos: float = 0.25
     miss_margin: float = 8.0
     newton: bool = True
+    miss_reach: str = "shell"
+
+    def __post_init__(self) -> None:
+        if self.miss_reach not in MISS_REACHES:
+            raise ValueError(f"miss_reach {self.miss_reach!r}: expected one of {', '.join(MISS_REACHES)}")
 
 
 @dataclass(frozen=True)
@@ -234,6 +249,7 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "band_leftover": ("band", "leftover"),
     "min_cos": ("band", "min_cos"),
     "miss_margin": ("band", "miss_margin"),
+    "miss_reach": ("band", "miss_reach"),
     "fallback_segment": ("fallback", "segment"),
     "fallback_scout": ("fallback", "scout_threshold"),
     "fallback_grid_rays": ("fallback", "grid_rays"),

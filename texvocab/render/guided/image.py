@@ -79,8 +79,10 @@ class GuidedImage:
         self.verts = torch.as_tensor(vertices).detach().float()
         self.faces = torch.as_tensor(faces).long()
         self.origins, self.dirs = camera.pixel_rays()
-        # a surface farther than `reach` from a ray contributes < e^-miss_margin / 2β density
-        reach = min(delta, s.band.miss_margin * self.beta)
+        # the surface lies within δ of the mesh, so a ray passing farther from it meets
+        # nothing; "margin" assumes it lies on the mesh outside the silhouette, so that a
+        # ray farther than miss_margin β sees < e^-miss_margin / 2β density
+        reach = delta if s.band.miss_reach == "shell" else min(delta, s.band.miss_margin * self.beta)
         self.plan = plan_surface(self.verts, self.faces, camera, self.dirs, delta, reach, s.band.min_cos)
         self.rgb = self.bg.repeat(H * W, 1)
         self.alpha, self.depth = torch.zeros(H * W), torch.zeros(H * W)
