@@ -13,8 +13,9 @@ import torch
 
 #: the render knobs that give the default path as it was before the surface reuse, the
 #: quadrature's ray groups, the coarser residual passes, the fallback's 64-scout steps, its
-#: gridless march of a few rays and the misses probed across the whole shell (``previous`` of
-#: --compare; its misses were probed only within miss_margin β of the mesh)
+#: gridless march of a few rays, the misses probed across the whole shell and the retried
+#: Newton bands (``previous`` of --compare; its misses were probed only within miss_margin β
+#: of the mesh)
 BEFORE = {
     "surface_reuse": False,
     "residual_groups": 1,
@@ -22,6 +23,7 @@ BEFORE = {
     "fallback_segment": 8,
     "fallback_grid_rays": 0,
     "miss_reach": "margin",
+    "band_retries": 0,
 }
 
 

@@ -59,4 +59,5 @@ def test_the_previous_path_searches_with_the_plain_kernel_for_the_run_only():
         "fallback_segment": 8,
         "fallback_grid_rays": 0,
         "miss_reach": "margin",
+        "band_retries": 0,
     }

@@ -282,6 +282,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
             residual_rays=t.residual != "off" and t.guide == "raster",
             band_newton=t.band_newton,
             shell_voxel=t.shell_voxel,
+            band_retries=0,  # measured for rendering only; training's rays as before
         )
     elif r.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact

@@ -97,6 +97,11 @@ class BandSettings:
         behind it) and the SDF between is the hit face's plane plus the interpolated
         residual (:func:`texvocab.render.guided.band.newton_band`, 3 evaluations per ray);
         False: ``samples`` samples around t*.
+    retries: a Newton band ray left unresolved whose SDF at its Newton point is more than
+        ``retry_from`` β from 0 (the step missed the surface: clothing off the body) starts
+        again from that point, up to this many times (two evaluations each; 0: it goes on
+        to the residual rays or the marcher).
+    retry_from: see ``retries`` (in β).
     miss_reach: which rays that miss the mesh are probed (:data:`MISS_REACHES`): "shell",
         every ray passing within δ of the mesh (exact: the avatar's surface may lie anywhere
         in the shell, as loose clothing does); "margin", only those within
@@ -111,6 +116,8 @@ class BandSettings:
     min_cos: float = 0.25
     miss_margin: float = 8.0
     newton: bool = True
+    retries: int = 1
+    retry_from: float = 2.0
     miss_reach: str = "shell"
 
     def __post_init__(self) -> None:
@@ -250,6 +257,8 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "min_cos": ("band", "min_cos"),
     "miss_margin": ("band", "miss_margin"),
     "miss_reach": ("band", "miss_reach"),
+    "band_retries": ("band", "retries"),
+    "band_retry_from": ("band", "retry_from"),
     "fallback_segment": ("fallback", "segment"),
     "fallback_scout": ("fallback", "scout_threshold"),
     "fallback_grid_rays": ("fallback", "grid_rays"),

@@ -106,6 +106,11 @@ def newton_band(
     alone the image is 1-2 dB further from the 64+32 reference, with it 0.3 dB nearer
     than the 4-sample band.
 
+    A ray this leaves unresolved whose SDF at t* is more than ``band.retry_from`` β from
+    0 (the step missed the surface: clothing off the body, whose residual changes between
+    the body and the cloth) starts again from t* as its probe, up to ``band.retries``
+    times (two evaluations each).
+
     Returns opacity (R,), colour (R, 3) (not over a background), depth (R,), ok (R,) and
     the field evaluations: ok when the points bracket the surface (first SDF > 0 > last),
     leave at most ``band.leftover`` transmittance, t* is within the shell width of the hit
@@ -114,6 +119,32 @@ def newton_band(
     R = len(dirs)
     if R == 0:
         return (*no_rays(dirs), 0)
+    acc, color, depth, ok, evals, t_star, sdf_star, rgb_star = _newton_once(
+        field, origin, dirs, t_hit, cos, sdf0, rgb0, beta, settings
+    )
+    b = beta_value(beta)
+    rows = torch.arange(R)
+    for _ in range(settings.band.retries):
+        redo = ~ok[rows] & (sdf_star.detach().abs() > settings.band.retry_from * b)
+        if not redo.any():
+            break
+        rows, t_from = rows[redo], t_star[redo]
+        o = origin if origin.dim() == 1 else origin[rows]
+        a2, c2, d2, ok2, n, t_star, sdf_star, rgb_star = _newton_once(
+            field, o, dirs[rows], t_from, cos[rows], sdf_star[redo], rgb_star[redo], beta, settings
+        )
+        evals += n
+        acc, color, depth = (v.index_put((rows,), w) for v, w in ((acc, a2), (color, c2), (depth, d2)))
+        ok = ok.index_put((rows,), ok2)
+        t_hit = t_hit.index_put((rows,), t_from)
+    return acc, color, depth, ok, evals
+
+
+def _newton_once(field, origin, dirs, t_hit, cos, sdf0, rgb0, beta, settings: MarchSettings):
+    """One Newton band (:func:`newton_band`): opacity, colour, depth, ok, the
+    evaluations, and t* (R,) with the SDF (R,) and colour (R, 3) read there (a retry's
+    probe)."""
+    R = len(dirs)
     cap, b = float(settings.shell.width), beta_value(beta)
     step = sdf0.detach() / cos  # the sample places carry no gradient
     t_star = t_hit + step.clamp(-cap, cap)
@@ -146,4 +177,5 @@ def newton_band(
         & (rest <= settings.band.leftover)
         & (r.amax(1) - r.amin(1) <= settings.residual.tolerance * b)
     )
-    return acc, color, depth, ok.detach(), len(sdfq)
+    sdfq, rgbq = sdfq.view(R, 2), rgbq.view(R, 2, 3)
+    return acc, color, depth, ok.detach(), R * 2, t_star, sdfq[:, 0], rgbq[:, 0]
