@@ -48,9 +48,9 @@ def test_render_overrides_touch_only_render_knobs(knob):
     trained = Settings(vocab=VocabSettings(num_keys=7, k=2))
     s = render_overrides(trained, "fast", [f"{knob}=10"])
     assert s.render.coarse_samples == 10  # --set wins over the preset
-    assert (s.render.fine_samples, s.render.shell_scale) == (
+    assert (s.render.fine_samples, s.render.precision) == (
         PRESETS["fast"]["fine_samples"],
-        PRESETS["fast"]["shell_scale"],
+        PRESETS["fast"]["precision"],
     )
     assert (s.vocab.num_keys, s.vocab.k) == (7, 2)
     assert s.train == trained.train  # train.coarse_samples is training's own
@@ -59,7 +59,14 @@ def test_render_overrides_touch_only_render_knobs(knob):
             render_overrides(trained, None, [item])
     assert RENDER_KNOBS == tuple(f.name for f in fields(RenderSettings))
     in_presets = {k for p in PRESETS.values() for k in p}
-    assert set(RENDER_KNOBS) == in_presets | {"image_scale", "guide", "shell_width"}
+    # knobs no preset sets: the resolution, the path and the shell (presets keep all of it)
+    assert set(RENDER_KNOBS) == in_presets | {
+        "image_scale",
+        "guide",
+        "shell_width",
+        "shell_scale",
+        "miss_reach",
+    }
 
 
 def test_marcher_shell_width_is_a_render_knob_but_training_keeps_the_fields():
@@ -110,15 +117,16 @@ def test_quality_takes_the_guided_marchers_exact_paths_and_the_knobs_reach_the_m
         Settings().with_overrides(["residual_rays=maybe"])
 
 
-def test_presets_narrow_the_shell_relative_to_the_fields():
-    """fast and balanced march 0.625 of the field's shell: 2.5 cm on the default 4 cm, and
-    an avatar trained with a 6 cm shell for clothing off the body keeps 3.75 cm of it; an
-    explicit render.shell_width still wins."""
-    for name in ("fast", "balanced"):
-        assert march_settings(_with(name)).shell_width == pytest.approx(0.025)
+def test_presets_keep_the_fields_shell():
+    """Every preset marches the field's whole shell (loose clothing stands up to its edge):
+    4 cm on the default, 6 cm on an avatar trained with a 6 cm shell; render.shell_scale
+    narrows it as a share, and an explicit render.shell_width wins."""
+    for name in PRESETS:
+        assert march_settings(_with(name)).shell_width == Settings().field.shell_width
         wide = Settings().with_overrides(["field.shell_width=0.06", *preset_overrides(name)])
-        assert march_settings(wide).shell_width == pytest.approx(0.0375)
-        assert march_settings(wide, training=True).shell_width == 0.06
+        assert march_settings(wide).shell_width == 0.06
+        assert march_settings(wide.with_overrides(["render.shell_scale=0.5"])).shell_width == pytest.approx(
+            0.03
+        )
         pinned = wide.with_overrides(["render.shell_width=0.02"])
         assert march_settings(pinned).shell_width == 0.02
-    assert march_settings(_with("quality")).shell_width == Settings().field.shell_width

@@ -56,3 +56,19 @@ def test_a_newton_band_retried_from_its_newton_point_resolves_cloth_off_the_body
     assert retried.stats.field_evals < 0.7 * once.stats.field_evals
     # the marched rays (once) and the retried bands give the same image to about 50 dB
     assert psnr(once.rgb, truth.rgb) > 50 and psnr(retried.rgb, truth.rgb) > 50
+
+
+def test_a_residual_ray_retried_from_its_evaluations_resolves_cloth_off_the_body(body):
+    """Misses past the cloth's edge read the residual at their closest approach to the
+    body, not where they meet the cloth: the first try's three evaluations disagree, and
+    a second try from them resolves the ray instead of the marcher."""
+    v, f = body["v"], body["f"]
+    cam = body["camera"].scaled(2.0)
+    field = ClothField(v, f, beta=0.002)
+    with torch.no_grad():
+        truth = render_image(field, cam, v, f, SHELL, shell=body["shell"])
+        once = render_image(field, cam, v, f, GUIDED.replace(residual_retries=0), shell=body["shell"])
+        retried = render_image(field, cam, v, f, GUIDED.replace(residual_retries=1), shell=body["shell"])
+    assert retried.stats.paths["fallback"] < 0.2 * once.stats.paths["fallback"]
+    assert retried.stats.field_evals < 0.5 * once.stats.field_evals
+    assert psnr(once.rgb, truth.rgb) > 50 and psnr(retried.rgb, truth.rgb) > 50

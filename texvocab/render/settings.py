@@ -147,6 +147,10 @@ class ResidualSettings:
     levels: speed: coarser passes (steps 4× apart) that narrow a ray's interval before
         the 4 ``step`` β pass, so a ray through the body is not sampled finely along the
         whole shell interval (0: the 4 ``step`` β pass over all of it, as before).
+    retries: a ray left unresolved starts again, up to this many times, with its three
+        evaluations as probes: the residual of the one nearest the surface stands for the
+        ray's (clothing off the body, whose residual at the probe is not the residual at
+        the surface; three evaluations each). 0: it is marched.
     """
 
     enabled: bool = True
@@ -155,6 +159,7 @@ class ResidualSettings:
     tolerance: float = 2.0
     groups: int = 4
     levels: int = 2
+    retries: int = 0
 
 
 @dataclass(frozen=True)
@@ -268,6 +273,7 @@ FLAT_NAMES: dict[str, tuple[str, str]] = {
     "residual_tolerance": ("residual", "tolerance"),
     "residual_groups": ("residual", "groups"),
     "residual_levels": ("residual", "levels"),
+    "residual_retries": ("residual", "retries"),
     "band_newton": ("band", "newton"),
 }
 

@@ -238,6 +238,7 @@ def render_residual(
         d_probe = mesh_distance(index, pts.reshape(-1, 3), cap).view(R, -1)
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
+    shell_near, shell_far = near, far  # a retry narrows the whole interval again
     near, far, narrowed = _narrow(
         index, origin, dirs, near, far, _COARSE * h, r0, b, cap, settings.residual.levels
     )
@@ -280,7 +281,21 @@ def render_residual(
     back = torch.empty_like(order)
     back[order] = torch.arange(R)
     acc, color, depth, ok = (torch.cat(v)[back] for v in zip(*out))
-    return acc, color, depth, ok & found, 3 * R
+    ok, evals = ok & found, 3 * R
+    redo = torch.nonzero(~ok & found).squeeze(1)
+    if settings.residual.retries > 0 and len(redo):
+        # the three evaluations as the probes of a second try
+        knots, sdf3 = knots.view(-1, 3)[back][redo], sdf3.view(-1, 3).detach()[back][redo]
+        faces = torch.cat([p[5] for p in parts])[back][redo] if settings.surface_reuse else None
+        fewer = settings.replace(residual_retries=settings.residual.retries - 1)
+        o = origin if origin.dim() == 1 else origin[redo]
+        a2, c2, d2, ok2, n = render_residual(
+            field, index, o, dirs[redo], shell_near[redo], shell_far[redo], knots, sdf3, beta, fewer, faces
+        )
+        evals += n
+        acc, color, depth = (v.index_put((redo,), w) for v, w in ((acc, a2), (color, c2), (depth, d2)))
+        ok = ok.index_put((redo,), ok2)
+    return acc, color, depth, ok, evals
 
 
 def _resolve(t, d, cols, knots, sdf3, rgb3, r0, beta, settings: MarchSettings):
