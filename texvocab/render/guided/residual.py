@@ -311,5 +311,7 @@ def _resolve(t, d, cols, knots, sdf3, rgb3, r0, beta, settings: MarchSettings):
     faint = acc.detach() < 1e-4  # shows nothing: where its weight sits does not matter
     spread_r = torch.cat([resid.detach(), r0], 1)
     smooth = spread_r.amax(1) - spread_r.amin(1) <= settings.residual.tolerance * b
-    ok = faint | (smooth & (median >= cols[:, 0]) & (median <= cols[:, 2]))
+    # a faint ray is taken only where the field's residual is the probe's: otherwise the
+    # surface may lie where the probe's residual did not put it (cloth off the body)
+    ok = smooth & (faint | ((median >= cols[:, 0]) & (median <= cols[:, 2])))
     return acc, color, depth, ok
