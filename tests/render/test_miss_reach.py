@@ -44,14 +44,21 @@ class ClothField(InflatedField):
         return torch.where(d < self.band, cloth, torch.full_like(d, self.band))
 
 
-def test_a_newton_band_retried_from_its_newton_point_resolves_cloth_off_the_body(body):
+def cloth_renders(body, knob: str):
+    """The cloth field at 128²: the shell marcher's image, and the guided marcher's with
+    ``knob`` (a retry count) at 0 and at 1."""
     v, f = body["v"], body["f"]
     cam = body["camera"].scaled(2.0)
     field = ClothField(v, f, beta=0.002)
     with torch.no_grad():
-        truth = render_image(field, cam, v, f, SHELL, shell=body["shell"])
-        once = render_image(field, cam, v, f, GUIDED.replace(band_retries=0), shell=body["shell"])
-        retried = render_image(field, cam, v, f, GUIDED.replace(band_retries=1), shell=body["shell"])
+        return [
+            render_image(field, cam, v, f, march, shell=body["shell"])
+            for march in (SHELL, GUIDED.replace(**{knob: 0}), GUIDED.replace(**{knob: 1}))
+        ]
+
+
+def test_a_newton_band_retried_from_its_newton_point_resolves_cloth_off_the_body(body):
+    truth, once, retried = cloth_renders(body, "band_retries")
     assert retried.stats.paths["band"] > once.stats.paths["band"] + 0.3 * int((truth.alpha > 0.5).sum())
     assert retried.stats.field_evals < 0.7 * once.stats.field_evals
     # the marched rays (once) and the retried bands give the same image to about 50 dB
@@ -62,13 +69,7 @@ def test_a_residual_ray_retried_from_its_evaluations_resolves_cloth_off_the_body
     """Misses past the cloth's edge read the residual at their closest approach to the
     body, not where they meet the cloth: the first try's three evaluations disagree, and
     a second try from them resolves the ray instead of the marcher."""
-    v, f = body["v"], body["f"]
-    cam = body["camera"].scaled(2.0)
-    field = ClothField(v, f, beta=0.002)
-    with torch.no_grad():
-        truth = render_image(field, cam, v, f, SHELL, shell=body["shell"])
-        once = render_image(field, cam, v, f, GUIDED.replace(residual_retries=0), shell=body["shell"])
-        retried = render_image(field, cam, v, f, GUIDED.replace(residual_retries=1), shell=body["shell"])
+    truth, once, retried = cloth_renders(body, "residual_retries")
     assert retried.stats.paths["fallback"] < 0.3 * once.stats.paths["fallback"]
     assert retried.stats.field_evals < 0.5 * once.stats.field_evals
     assert psnr(once.rgb, truth.rgb) > 50 and psnr(retried.rgb, truth.rgb) > 50

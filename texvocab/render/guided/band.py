@@ -128,16 +128,20 @@ def newton_band(
         redo = ~ok[rows] & (sdf_star.detach().abs() > settings.band.retry_from * b)
         if not redo.any():
             break
-        rows, t_from = rows[redo], t_star[redo]
+        rows = rows[redo]
         o = origin if origin.dim() == 1 else origin[rows]
-        a2, c2, d2, ok2, n, t_star, sdf_star, rgb_star = _newton_once(
-            field, o, dirs[rows], t_from, cos[rows], sdf_star[redo], rgb_star[redo], beta, settings
+        *again, n, t_star, sdf_star, rgb_star = _newton_once(
+            field, o, dirs[rows], t_star[redo], cos[rows], sdf_star[redo], rgb_star[redo], beta, settings
         )
         evals += n
-        acc, color, depth = (v.index_put((rows,), w) for v, w in ((acc, a2), (color, c2), (depth, d2)))
-        ok = ok.index_put((rows,), ok2)
-        t_hit = t_hit.index_put((rows,), t_from)
+        acc, color, depth, ok = put_rows(rows, (acc, color, depth, ok), again)
     return acc, color, depth, ok, evals
+
+
+def put_rows(rows: torch.Tensor, outputs, retried) -> tuple:
+    """(opacity, colour, depth, ok) of all rays with rows ``rows`` (n,) replaced by a
+    retry's (each (n,) or (n, 3)); out of place, so gradients reach both."""
+    return tuple(v.index_put((rows,), w) for v, w in zip(outputs, retried, strict=True))
 
 
 def _newton_once(field, origin, dirs, t_hit, cos, sdf0, rgb0, beta, settings: MarchSettings):

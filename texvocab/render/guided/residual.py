@@ -42,7 +42,7 @@ import math
 import numpy as np
 import torch
 
-from texvocab.render.guided.band import interpolate_knots, no_rays
+from texvocab.render.guided.band import interpolate_knots, no_rays, put_rows
 from texvocab.render.settings import MarchSettings
 from texvocab.render.volume.field import evaluate_sdf, points_along
 from texvocab.render.volume.volsdf import (
@@ -261,13 +261,14 @@ def render_residual(
         parts.append((rows, tg, dg, cols, tg.gather(1, cols), fg.gather(1, cols)))
     order = torch.cat([p[0] for p in parts])
     knots = torch.cat([p[4] for p in parts])
+    knot_faces = torch.cat([p[5] for p in parts]) if settings.surface_reuse else None
     o = origin if origin.dim() == 1 else origin[order]
     sdf3, rgb3 = evaluate_sdf(
         field,
         points_along(o, dirs[order], knots).reshape(-1, 3),
         dirs[order].repeat_interleave(3, 0),
         settings.chunks.points,
-        torch.cat([p[5] for p in parts]).reshape(-1) if settings.surface_reuse else None,
+        None if knot_faces is None else knot_faces.reshape(-1),
     )
     out, start = [], 0
     for rows, tg, dg, cols, kg, _ in parts:
@@ -286,15 +287,14 @@ def render_residual(
     if settings.residual.retries > 0 and len(redo):
         # the three evaluations as the probes of a second try
         knots, sdf3 = knots.view(-1, 3)[back][redo], sdf3.view(-1, 3).detach()[back][redo]
-        faces = torch.cat([p[5] for p in parts])[back][redo] if settings.surface_reuse else None
+        faces = None if knot_faces is None else knot_faces[back][redo]
         fewer = settings.replace(residual_retries=settings.residual.retries - 1)
         o = origin if origin.dim() == 1 else origin[redo]
-        a2, c2, d2, ok2, n = render_residual(
+        *again, n = render_residual(
             field, index, o, dirs[redo], shell_near[redo], shell_far[redo], knots, sdf3, beta, fewer, faces
         )
         evals += n
-        acc, color, depth = (v.index_put((redo,), w) for v, w in ((acc, a2), (color, c2), (depth, d2)))
-        ok = ok.index_put((redo,), ok2)
+        acc, color, depth, ok = put_rows(redo, (acc, color, depth, ok), again)
     return acc, color, depth, ok, evals
 
 
