@@ -3,7 +3,8 @@ density (Yariv et al. 2021).
 
 * x is canonicalised by inverse LBS with the skinning weights of its closest point on
   the posed body: x_c = (Σ_j ω_j A_j)^-1 x.
-* SDF = d_body(x) + MLP(γ(x_c), f, Θ): the signed distance to the posed body plus a
+* SDF = d_body(x) - g(x) + MLP(γ(x_c), f, Θ): the signed distance to the posed body, less
+  the body's girth g (zero unless fitted to the masks, :mod:`texvocab.body.girth`), plus a
   learned residual whose last layer starts at zero — the geometric initialisation is the
   body surface itself (for a clothed person the residual is small), which is what makes
   short CPU training converge.
@@ -182,6 +183,18 @@ class AvatarField(nn.Module):
         d_d = 3 * (1 + 2 * s.dir_freqs)
         self.color_net = _mlp(s.hidden + d_d + s.feature_proj, s.hidden // 2, s.color_layers, 3)
         self.log_beta = nn.Parameter(torch.tensor(float(s.beta_init)).log())
+        # per-joint girth (m): the SDF starts at d_body - g (texvocab.body.girth); stored in
+        # the checkpoint beside the weights (``body_girth``), zero for older ones
+        self.register_buffer("girth", torch.zeros(self.body.num_joints), persistent=False)
+
+    def set_girth(self, offsets) -> None:
+        """Start the SDF at ``d_body - sum_j w_j offsets_j`` (offsets (J,) m; w the skinning
+        weights of a point's closest body point): the surface where the clothes stand off
+        the body rather than on the body."""
+        o = torch.as_tensor(offsets, dtype=self.girth.dtype).reshape(-1)
+        if o.shape != self.girth.shape or not torch.isfinite(o).all():
+            raise ValueError(f"girth: expected {self.girth.numel()} finite offsets (m), got {tuple(o.shape)}")
+        self.girth.copy_(o)
 
     @property
     def beta(self) -> torch.Tensor:
@@ -243,6 +256,8 @@ class AvatarField(nn.Module):
         grad_dir = torch.where(norm > 1e-9, diff / norm.clamp(min=1e-9), torch.zeros_like(diff))
         grad_dir = grad_dir * torch.sign(out.distance)[:, None]
         d_body = torch.where(valid, out.distance, torch.full_like(out.distance, s.shell_width))
+        if bool(self.girth.any()):  # the clothes' room around the body (texvocab.body.girth)
+            d_body = d_body - (out.skin_weights.to(self.girth.dtype) @ self.girth) * valid
         # pose refinement (training): the field at the corrected pose is the field at the
         # warped point (texvocab.method.pose_refinement); x = points without it
         x, d = (points, dirs) if ctx.warp is None else ctx.warp(points, dirs, out.skin_weights)

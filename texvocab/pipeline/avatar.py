@@ -22,6 +22,7 @@ from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint
 from texvocab.method.field import AvatarField
 from texvocab.method.vocab import Vocabulary
+from texvocab.pipeline.girth_fit import apply_stored_girth
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures
 from texvocab.pipeline.settings import Settings
 
@@ -134,5 +135,6 @@ def load_avatar(
             f"{checkpoint}: weights do not fit this model (missing "
             f"{missing[:3]}, unexpected {unexpected[:3]})"
         )
+    apply_stored_girth(model, ck, checkpoint)
     model.eval()
     return Avatar(model, settings, ck, capture)

@@ -23,6 +23,7 @@ Precision = Literal["float32", "bfloat16", "auto"]  # method.field.PRECISIONS
 TrainResidual = Literal["hits", "all", "off"]
 Perceptual = Literal["auto", "lpips-vgg", "inception", "off"]
 PoseRefinementMode = Literal["off", "root", "joints"]  # method.pose_refinement.POSE_REFINEMENTS
+BodyGirth = Literal["masks", "none"]  # pipeline.girth_fit
 PoseCondition = Literal["root-relative", "global"]  # body.pose_condition.POSE_CONDITIONS
 
 
@@ -62,6 +63,11 @@ class DataSettings:
         "mean",
         doc="texels no view of a frame saw: mean (the training frames' coverage-weighted "
         "mean there) | nearest (the map's nearest seen texel)",
+    )
+    body_girth: BodyGirth = knob(
+        "none",
+        doc="(S/A) masks: the body's surface moved out along its normals by per-joint "
+        "offsets fitted to the training masks (clothes off the body) | none: the body as fitted",
     )
 
     def __post_init__(self) -> None:

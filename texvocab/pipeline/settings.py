@@ -131,6 +131,7 @@ LEGACY: dict[str, object] = {
     "vocab.pose_condition": "global",
     "field.shell_coverage": None,
     "train.lr_decay": 1.0,
+    "data.body_girth": "none",
 }
 
 

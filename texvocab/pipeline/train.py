@@ -35,6 +35,8 @@ from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.method.pose_refinement import PoseRefinement
 from texvocab.metrics import LPIPS, lpips_available
 from texvocab.metrics.inception_perceptual import InceptionPerceptual
+from texvocab.pipeline.girth_fit import CHECKPOINT_KEY as GIRTH_KEY
+from texvocab.pipeline.girth_fit import apply_stored_girth, fit_girth
 from texvocab.pipeline.lr_schedule import LearningRateSchedule
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures, train_views
 from texvocab.pipeline.run_folder import RunLock
@@ -90,10 +92,14 @@ class Trainer:
         # the shell from the data (field.shell_coverage), before anything reads its width
         settings, self.shell_fit = fit_shell(capture, settings, self.views)
         self.s = settings
+        # where the clothes stand off the body (data.body_girth), inside that shell
+        self.girth_fit = fit_girth(capture, settings, self.views)
         self.textures = load_textures(capture, settings, progress)
         with torch.random.fork_rng():  # seeded initial weights; the global RNG is untouched
             torch.manual_seed(settings.train.seed)
             self.model = build_model(capture, settings, self.textures)
+        if self.girth_fit is not None:
+            self.model.set_girth(self.girth_fit.offsets)
         beta = self.model.log_beta
         scale = settings.train.beta_lr_scale
         groups = [
@@ -276,6 +282,7 @@ class Trainer:
             "rng": {"torch": self.gen.get_state()},
             "lr_schedule": self.schedule.state(self.step),
             **({} if self.refine is None else {"pose_refinement": self.refine.state()}),
+            **({GIRTH_KEY: self.model.girth.tolist()} if bool(self.model.girth.any()) else {}),
         }
 
     def save(self) -> Path:
@@ -332,6 +339,7 @@ class Trainer:
                 f"{ck['step']} to extend it"
             )
         self.model.load_state_dict(load_stored_textures(self.model, ck["model"], self.checkpoint_path))
+        apply_stored_girth(self.model, ck, self.checkpoint_path)
         if self.refine is not None:
             self.refine.load(ck["pose_refinement"])
         self.optim.load_state_dict(ck["optimizer"])
