@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from scipy import ndimage
+from grown_masks import grown
 from train_cases import tiny_settings
 
 from texvocab.capture import open as open_capture
@@ -19,14 +19,6 @@ from texvocab.pipeline.model import train_views
 from texvocab.pipeline.settings import Settings
 
 GIRTH = Settings().with_overrides(["data.body_girth=masks"])
-
-
-def _grown(root, pixels: int):
-    """The capture with every mask dilated by ``pixels`` (64² images: ~3 cm a pixel)."""
-    cap = open_capture(root)
-    mask = cap.mask
-    cap.mask = lambda v, t: ndimage.binary_dilation(mask(v, t), iterations=pixels)
-    return cap
 
 
 def test_candidates_reach_to_the_shell_less_room():
@@ -44,7 +36,7 @@ def test_a_person_on_the_body_keeps_a_zero_girth(capture):
 
 
 def test_masks_wider_than_the_body_give_it_a_girth(capture):
-    cap = _grown(capture, 1)
+    cap = grown(capture, 1)
     fit = fit_girth(cap, GIRTH, train_views(cap, GIRTH))
     assert fit.iou_after > fit.iou_before + 0.05
     assert fit.offsets.mean() > 0.01 and fit.offsets.max() <= 0.02 + 1e-9  # 4 cm shell less 2 cm
@@ -56,7 +48,7 @@ def test_the_sdf_starts_outside_the_body_by_the_girth(capture, tmp_path):
     from texvocab.pipeline.avatar import load_avatar
     from texvocab.pipeline.train import Trainer
 
-    cap = _grown(capture, 1)
+    cap = grown(capture, 1)
     s = tiny_settings(iterations=1).with_overrides(["data.body_girth=masks"])
     trainer = Trainer(cap, s, tmp_path / "run", progress=False)
     model = trainer.model
@@ -66,12 +58,12 @@ def test_the_sdf_starts_outside_the_body_by_the_girth(capture, tmp_path):
     pts = cap.posed_body(0).vertices[0, ::50] + 0.005
     dirs = torch.nn.functional.normalize(torch.ones_like(pts), dim=-1)
     with torch.no_grad():
-        grown, _, valid = model.sdf_and_color(ctx, pts, dirs)
+        offset_sdf, _, valid = model.sdf_and_color(ctx, pts, dirs)
         girth = model.girth.clone()
         model.set_girth(torch.zeros_like(girth))
         plain, _, _ = model.sdf_and_color(ctx, pts, dirs)
         model.set_girth(girth)
-    drop = (plain - grown)[valid]
+    drop = (plain - offset_sdf)[valid]
     assert valid.sum() > 10 and float(drop.min()) >= float(girth.min()) - 1e-5
     assert float(drop.max()) <= float(girth.max()) + 1e-5 and float(drop.mean()) > 0.01
     trainer.run()

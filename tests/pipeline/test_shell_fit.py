@@ -7,21 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import ndimage
+from grown_masks import grown
 from train_cases import tiny_settings
 
 from texvocab.capture import open as open_capture
 from texvocab.pipeline.model import train_views
 from texvocab.pipeline.settings import Settings
 from texvocab.pipeline.shell_fit import SHELL_MAX, SHELL_STEP, candidate_widths, fit_shell, measure_shell
-
-
-def _grown(root, pixels: int):
-    """The capture with every mask dilated by ``pixels`` (64² images: ~3 cm a pixel)."""
-    cap = open_capture(root)
-    mask = cap.mask
-    cap.mask = lambda v, t: ndimage.binary_dilation(mask(v, t), iterations=pixels)
-    return cap
 
 
 def test_candidate_widths_step_from_the_given_width_to_the_widest():
@@ -41,7 +33,7 @@ def test_a_person_on_the_body_keeps_the_given_shell(capture):
 
 
 def test_masks_beyond_the_shell_widen_it_to_the_narrowest_that_reaches_them(capture):
-    cap = _grown(capture, 2)
+    cap = grown(capture, 2)
     s = Settings()
     widths, cov, _ = measure_shell(cap, train_views(cap, s), 0.04)
     assert cov[0] < 0.97 and np.all(np.diff(cov) >= 0)  # wider reaches at least as much
@@ -60,7 +52,7 @@ def test_the_run_trains_and_stores_the_fitted_shell(capture, tmp_path):
     from texvocab.io.checkpoint import load_checkpoint
     from texvocab.pipeline.train import Trainer
 
-    cap = _grown(capture, 2)
+    cap = grown(capture, 2)
     trainer = Trainer(cap, tiny_settings(iterations=1), tmp_path / "run", progress=False)
     width = trainer.s.field.shell_width
     assert width > 0.04 and trainer.model.settings.shell_width == width
