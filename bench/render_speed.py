@@ -29,7 +29,8 @@ takes the closest faces the raster and the residual rays' mesh queries found);
 frame's speed (float32 MLPs with torch's nn.Softplus, and ``BEFORE``:
 ``surface_reuse=false``, every point searched; ``residual_groups=1``, the residual rays'
 quadrature in one padded array; ``fallback_segment=8``; and the closest-face search's
-kernel as it was, ``nearest_faces_plain``, :func:`plain_search`); the other paths run with
+kernel as it was, ``nearest_faces_plain``, and the residual rays' mesh samples in padded torch
+arrays, :func:`plain_search`); the other paths run with
 torch's nn.Softplus and float32 too — ``shell``: the shell marcher (guide=shell) at the
 ``fast`` preset; ``quality``: the shell marcher at the ``quality`` preset; ``reference``:
 the uniform 64+32 marcher in the body's box — and prints per path seconds, field

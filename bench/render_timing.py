@@ -136,13 +136,19 @@ def plain_softplus(model, plain: bool):
 
 @contextlib.contextmanager
 def plain_search(plain: bool):
-    """With ``plain``, the mesh queries search with the closest-face kernel as it was
+    """With ``plain``, the mesh queries as they were for the duration (the ``previous``
+    path): the closest-face kernel as it was
     (:func:`~texvocab.geometry._nearest_jit.nearest_faces_plain`: the same answers bit for
-    bit, slower) for the duration: the ``previous`` path."""
+    bit, slower), and the residual rays' mesh samples placed by torch arrays padded to the
+    longest ray (:func:`~texvocab.render.guided.residual.padded_mesh_samples`: the same
+    samples, slower)."""
     from texvocab.geometry import _nearest_jit, surface
+    from texvocab.render.guided import residual
 
     surface.nearest_faces = _nearest_jit.nearest_faces_plain if plain else _nearest_jit.nearest_faces
+    residual.mesh_samples = residual.padded_mesh_samples if plain else residual.compiled_mesh_samples
     try:
         yield
     finally:
         surface.nearest_faces = _nearest_jit.nearest_faces
+        residual.mesh_samples = residual.compiled_mesh_samples

@@ -47,11 +47,15 @@ def test_the_previous_path_swaps_torchs_softplus_in_for_the_run_only(tmp_path):
 
 def test_the_previous_path_searches_with_the_plain_kernel_for_the_run_only():
     from texvocab.geometry import _nearest_jit, surface
+    from texvocab.render.guided import residual
 
     assert surface.nearest_faces is _nearest_jit.nearest_faces
+    assert residual.mesh_samples is residual.compiled_mesh_samples
     with render_timing.plain_search(True):
         assert surface.nearest_faces is _nearest_jit.nearest_faces_plain
+        assert residual.mesh_samples is residual.padded_mesh_samples
     assert surface.nearest_faces is _nearest_jit.nearest_faces
+    assert residual.mesh_samples is residual.compiled_mesh_samples
     assert render_timing.BEFORE == {
         "surface_reuse": False,
         "residual_groups": 1,

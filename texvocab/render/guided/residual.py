@@ -43,6 +43,7 @@ import numpy as np
 import torch
 
 from texvocab.render.guided.band import interpolate_knots, no_rays, put_rows
+from texvocab.render.guided.residual_samples import ragged_mesh_samples
 from texvocab.render.settings import MarchSettings
 from texvocab.render.volume.field import evaluate_sdf, points_along
 from texvocab.render.volume.volsdf import (
@@ -171,6 +172,41 @@ def _refine(index, origin, dirs, t_c, d_c, f_c, low, first, end, cap: float):
     return (*packed, count)
 
 
+def padded_mesh_samples(
+    index, origin, dirs, near, far, step: float, r0, beta: float, cap: float, levels: int
+):
+    """Steps 1-2 of the module docstring for rays (R,) over [near, far] (R,) with the
+    probe's residual r0 (R, 1): their mesh samples t, d (R, N) and faces f (R, N) (each
+    ray's run sorted, then its last repeated), the sample count (R,) and found (R,) (False:
+    no part of the ray matters). ``step`` is the 4 ``residual_step`` β pass's. Torch
+    arrays padded to the longest ray: the reference :func:`compiled_mesh_samples` matches."""
+    near, far, narrowed = _narrow(index, origin, dirs, near, far, step, r0, beta, cap, levels)
+    t, d, f, inside = _samples(index, origin, dirs, near, far, step, cap)
+    low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, beta)
+    t, d, f, count = _refine(index, origin, dirs, t, d, f, low, first, end, cap)
+    return t, d, f, count, found & narrowed
+
+
+def compiled_mesh_samples(
+    index, origin, dirs, near, far, step: float, r0, beta: float, cap: float, levels: int
+):
+    """:func:`padded_mesh_samples` ray by ray, compiled, without the padding
+    (:func:`~texvocab.render.guided.residual_samples.ragged_mesh_samples`)."""
+
+    def query(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d, f = mesh_distance_faces(index, torch.from_numpy(points), cap)
+        return d.numpy(), f.numpy()
+
+    return ragged_mesh_samples(
+        query, origin, dirs, near, far, step, r0, beta, cap, levels, _COARSE, _KEEP, _OPAQUE
+    )
+
+
+#: the residual rays' mesh samples (bench/render_timing.py swaps in the padded reference for
+#: the ``previous`` path)
+mesh_samples = compiled_mesh_samples
+
+
 def _quantile_columns(weights: torch.Tensor, qs: tuple[float, ...]) -> torch.Tensor:
     """(R, len(qs)) the first column where the cumulative weight (R, M) reaches each
     quantile (uniform where a row has no weight)."""
@@ -239,13 +275,9 @@ def render_residual(
     j = sdf_probe.abs().masked_fill(~has, math.inf).argmin(1, keepdim=True)
     r0 = (sdf_probe - d_probe).gather(1, j)
     shell_near, shell_far = near, far  # a retry narrows the whole interval again
-    near, far, narrowed = _narrow(
+    t, d, f, count, found = mesh_samples(
         index, origin, dirs, near, far, _COARSE * h, r0, b, cap, settings.residual.levels
     )
-    t, d, f, inside = _samples(index, origin, dirs, near, far, _COARSE * h, cap)
-    low, first, end, found = _part_that_matters(t, _estimate(d, r0, cap), inside, b)
-    found &= narrowed
-    t, d, f, count = _refine(index, origin, dirs, t, d, f, low, first, end, cap)
     # the rays in groups of similar sample counts, each group's arrays as long as its
     # longest ray (the counts vary several-fold: one array for all was mostly padding)
     n_groups = max(settings.residual.groups, 1)
