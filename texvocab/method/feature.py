@@ -202,16 +202,16 @@ class PoseFeature(nn.Module):
             max_distance=max_distance,
             known=None if known is None else known.numpy(),
         )
-        ok = proj.face >= 0  # numpy mask for the numpy arrays (a one-element torch bool
-        valid = torch.from_numpy(ok)  # tensor would index numpy as the integer 0 or 1)
+        valid = torch.from_numpy(proj.face >= 0)
         n = points.shape[0]
-        uv = torch.zeros(n, 2, dtype=points.dtype)
-        skin = torch.zeros(n, self.body.num_joints, dtype=points.dtype)
-        uv[valid] = torch.as_tensor(proj.uv[ok], dtype=points.dtype)
-        skin[valid] = torch.as_tensor(proj.weights[ok], dtype=points.dtype)
+        # converted whole, the invalid rows (NaN) then zeroed: copying the valid rows out
+        # and back by a boolean mask took as long as the projection itself
+        invalid = ~valid[:, None]
+        uv, skin, closest = (
+            torch.from_numpy(a).to(points.dtype).masked_fill_(invalid, 0.0)
+            for a in (proj.uv, proj.weights, proj.closest)
+        )
         dist = torch.as_tensor(proj.distance, dtype=points.dtype)
-        closest = torch.zeros(n, 3, dtype=points.dtype)
-        closest[valid] = torch.as_tensor(proj.closest[ok], dtype=points.dtype)
         total = skin.sum(-1, keepdim=True)
         omega = (skin @ self.membership.to(skin)) / torch.where(total > 0, total, torch.ones_like(total))
         coef = omega @ ctx.part_coef.to(omega)  # (N, U): Ω-weighted key weight per frame
