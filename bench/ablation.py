@@ -175,6 +175,18 @@ def run_name(base: list[str], extra: list[str]) -> str:
     return ",".join(f"{k}={v}" for k, v in sorted(items.items())) or "defaults"
 
 
+def _steps_done(run_dir: Path) -> int:
+    """The steps a run folder holds (its result, else its checkpoint; 0: none)."""
+    result, ck = run_dir / "result.json", run_dir / "checkpoint.pt"
+    if result.is_file():
+        return int(json.loads(result.read_text())["steps"])
+    if ck.is_file():
+        from texvocab.io.checkpoint import load_checkpoint
+
+        return int(load_checkpoint(ck)["step"])
+    return 0
+
+
 def run_settings(job: dict):
     """(training settings, evaluation settings) of a job: the run's overrides and seed; the
     evaluation also takes the preset's render knobs. Training once took them
@@ -349,6 +361,13 @@ def main(argv=None) -> int:
                     }
                 )
     jobs.sort(key=lambda j: j["seed"])  # every variant's first seed before any second one
+    longer = next((j for j in jobs if _steps_done(Path(j["run_dir"])) > args.iterations), None)
+    if longer is not None and not args.report_only:
+        sys.exit(
+            f"error: {longer['run_dir']} holds a run of {_steps_done(Path(longer['run_dir']))} steps, more "
+            f"than --iterations {args.iterations}: it would be scored as a run of {args.iterations}; "
+            "use another --out (groups share their runs in one --out)"
+        )
     if args.report_only:
         results = {}
         for j in jobs:

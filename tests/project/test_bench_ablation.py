@@ -261,3 +261,27 @@ def test_fold_crops_show_truth_and_one_column_per_variant(tmp_path):
     box = bench.fold_box(regions.region(2, 1))
     ys, xs = np.nonzero(regions.region(2, 1))
     assert box[0] <= ys.min() and ys.max() < box[1] and box[2] <= xs.min() and xs.max() < box[3]
+
+
+def test_a_longer_run_in_the_out_folder_is_refused_not_rescored(tmp_path, capsys):
+    """A group run with fewer --iterations in an --out whose shared reference run holds more
+    steps would score that longer run as the reference: one error line naming it, nothing
+    trained, the run's result untouched."""
+    import pytest
+
+    bench = _load()
+    cap = tmp_path / "cap"
+    cap.mkdir()
+    run = tmp_path / "out" / "runs" / bench.run_name([], []) / "seed0"
+    run.mkdir(parents=True)
+    result = run / "result.json"
+    result.write_text(json.dumps(_result("defaults", 0, [30.0]) | {"steps": 1000}))
+    before = result.read_text()
+    argv = ["beta_lr", "--capture", str(cap), "--out", str(tmp_path / "out"), "--seeds", "0"]
+    argv += ["--iterations", "600", "--base"]
+    with pytest.raises(SystemExit) as exc:
+        bench.main(argv)
+    message = str(exc.value)
+    assert message.startswith("error: ") and str(run) in message and "1000 steps" in message
+    assert result.read_text() == before
+    assert not (run.parent.parent / "beta_lr_scale=10").exists()
