@@ -39,7 +39,9 @@ def _sampled(rays: _Rays, near: np.ndarray, far: np.ndarray, step: float, query:
     """d every ``step`` over [near, far] (R,) float32, the last sample at far (two at
     least): offsets (R + 1,), t, d (flat float32), f (flat)."""
     step32 = np.float32(step)
-    last = np.maximum(np.ceil(np.maximum(far - near, np.float32(0)) / step32), 1).astype(np.int64)
+    with np.errstate(invalid="ignore"):  # a non-finite interval (a broken field) takes one
+        span = np.ceil(np.maximum(far - near, np.float32(0)) / step32)  # step, as in torch
+    last = np.where(np.isfinite(span), np.maximum(span, 1), 1).astype(np.int64)
     offsets = np.zeros(len(near) + 1, np.int64)
     np.cumsum(last + 1, out=offsets[1:])
     ray = np.repeat(np.arange(len(near)), last + 1)

@@ -3,7 +3,8 @@
 array (ray i holds ``offsets[i]:offsets[i + 1]``), so no ray is padded to the longest, and
 the steps that the torch reference (:func:`texvocab.render.guided.residual.padded_mesh_samples`)
 does as a dozen whole-array operations run as one pass over each ray (numba; ``cache``
-keeps the machine code in ``__pycache__``)."""
+keeps the machine code in ``__pycache__``; IEEE division, ``error_model="numpy"``, so a
+non-finite field gives NaN as torch does instead of raising)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _antiderivative(s, beta, half_beta):
     """F(s) = ∫ Ψ_β(-s) ds, F(+∞) = 0 (texvocab.render.volume.volsdf.laplace_antiderivative),
     in float32 as the torch reference computes it (half_beta = -β/2)."""
@@ -19,7 +20,7 @@ def _antiderivative(s, beta, half_beta):
     return half_beta * e if s >= 0 else s + half_beta * e
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _optical_depth(s_a, s_b, length, beta, half_beta, flat_below):
     """∫ σ dt over an interval where the SDF runs linearly from s_a to s_b
     (texvocab.render.volume.volsdf.interval_optical_depth), float32."""
@@ -34,7 +35,7 @@ def _optical_depth(s_a, s_b, length, beta, half_beta, flat_below):
     )
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def parts_that_matter(offsets, t, s, beta, keep, opaque, low, first, end, found):
     """Per ray i (samples t, ŝ (float32) at offsets[i]:offsets[i + 1], at least two): its
     intervals where ŝ may be within ``keep`` β of max(least, 0) (``low``, indexed like the
@@ -76,7 +77,7 @@ def parts_that_matter(offsets, t, s, beta, keep, opaque, low, first, end, found)
         first[i], end[i] = f, e
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def refine_counts(first, end, low, offsets, split):
     """The refined samples per ray: its samples first .. end - 1, ``split`` - 1 more in each
     low interval among them, and the sample at end. (R,) int64."""
@@ -89,7 +90,7 @@ def refine_counts(first, end, low, offsets, split):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def refine_fill(first, end, low, offsets, t, d, f, split, new_offsets, t_out, d_out, f_out, new):
     """Write each ray's refined samples (:func:`refine_counts`) at new_offsets: the coarse
     samples with their distance d and face f, the ``split`` - 1 samples inside each low
