@@ -361,13 +361,14 @@ def main(argv=None) -> int:
                     }
                 )
     jobs.sort(key=lambda j: j["seed"])  # every variant's first seed before any second one
-    longer = next((j for j in jobs if _steps_done(Path(j["run_dir"])) > args.iterations), None)
-    if longer is not None and not args.report_only:
-        sys.exit(
-            f"error: {longer['run_dir']} holds a run of {_steps_done(Path(longer['run_dir']))} steps, more "
-            f"than --iterations {args.iterations}: it would be scored as a run of {args.iterations}; "
-            "use another --out (groups share their runs in one --out)"
-        )
+    for j in [] if args.report_only else jobs:
+        held = _steps_done(Path(j["run_dir"]))
+        if held > args.iterations:
+            sys.exit(
+                f"error: {j['run_dir']} holds a run of {held} steps, more than --iterations "
+                f"{args.iterations}: it would be scored as a run of {args.iterations}; use another "
+                "--out (groups share their runs in one --out)"
+            )
     if args.report_only:
         results = {}
         for j in jobs:
