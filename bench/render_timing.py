@@ -141,14 +141,18 @@ def plain_search(plain: bool):
     (:func:`~texvocab.geometry._nearest_jit.nearest_faces_plain`: the same answers bit for
     bit, slower), and the residual rays' mesh samples placed by torch arrays padded to the
     longest ray (:func:`~texvocab.render.guided.residual.padded_mesh_samples`: the same
-    samples, slower)."""
+    samples, slower), and their quadrature in torch's groups of padded arrays
+    (:func:`~texvocab.render.guided.residual.grouped_quadrature`: the same to float
+    rounding, slower)."""
     from texvocab.geometry import _nearest_jit, surface
     from texvocab.render.guided import residual
 
     surface.nearest_faces = _nearest_jit.nearest_faces_plain if plain else _nearest_jit.nearest_faces
     residual.mesh_samples = residual.padded_mesh_samples if plain else residual.compiled_mesh_samples
+    residual.quadrature_compiled = not plain
     try:
         yield
     finally:
         surface.nearest_faces = _nearest_jit.nearest_faces
         residual.mesh_samples = residual.compiled_mesh_samples
+        residual.quadrature_compiled = True

@@ -196,3 +196,40 @@ def test_compiled_mesh_samples_are_the_padded_references(body, monkeypatch, knob
     with torch.no_grad():
         padded = render_image(field, camera, body["v"], body["f"], settings)
     assert torch.equal(checked.rgb, padded.rgb) and torch.equal(checked.stats.kind, padded.stats.kind)
+
+
+@pytest.mark.parametrize("knobs", [{}, {"residual_retries": 1, "residual_step": 3.0}])
+def test_compiled_quadrature_is_the_torch_groups(body, monkeypatch, knobs):
+    """At render time (β a float) the residual rays' quadrature runs compiled, ray by ray:
+    the knots, their SDFs and faces, and each ray's opacity, colour, depth and ok are
+    torch's groups of padded arrays (the differentiable path training takes, with the
+    model's β) to float rounding, on every call a frame makes, retries included; so is the
+    image."""
+    import texvocab.render.guided.residual as residual
+
+    calls, compiled = [], residual.compiled_quadrature
+
+    def both(field, origin, dirs, *rest):
+        ours = compiled(field, origin, dirs, *rest)
+        ref = residual.grouped_quadrature(field, origin, dirs, *rest)
+        calls.append(len(dirs))
+        (k1, f1, s1, out1), (k2, f2, s2, out2) = ours, ref
+        assert torch.equal(k1, k2) and torch.equal(f1, f2)
+        assert torch.allclose(s1, s2, atol=1e-6)
+        for a, b in zip(out1[:3], out2[:3], strict=True):
+            assert a.dtype == b.dtype and a.shape == b.shape and torch.allclose(a, b, atol=1e-5)
+        assert float((out1[3] != out2[3]).float().mean()) <= 0.01
+        return ours
+
+    field = MeshResidualField(body["v"], body["f"], beta=0.0008, amplitude=0.002, wavenumber=20.0)
+    settings, camera = GUIDED.replace(**knobs), body["camera"].scaled(2.0)
+    monkeypatch.setattr(residual, "compiled_quadrature", both)
+    with torch.no_grad():
+        checked = render_image(field, camera, body["v"], body["f"], settings)
+    assert calls and sum(calls) > 50
+    monkeypatch.setattr(residual, "quadrature_compiled", False)
+    with torch.no_grad():
+        grouped = render_image(field, camera, body["v"], body["f"], settings)
+    assert checked.stats.paths["residual"] > 50
+    assert psnr(checked.rgb, grouped.rgb) > 80
+    assert (checked.stats.kind != grouped.stats.kind).float().mean() <= 0.001

@@ -43,9 +43,10 @@ import numpy as np
 import torch
 
 from texvocab.render.guided.band import interpolate_knots, no_rays, put_rows
+from texvocab.render.guided.residual_quadrature import compiled_quadrature, evaluate_knots
 from texvocab.render.guided.residual_samples import ragged_mesh_samples
 from texvocab.render.settings import MarchSettings
-from texvocab.render.volume.field import evaluate_sdf, points_along
+from texvocab.render.volume.field import points_along
 from texvocab.render.volume.volsdf import (
     beta_value,
     composite_linear_sdf,
@@ -278,8 +279,39 @@ def render_residual(
     t, d, f, count, found = mesh_samples(
         index, origin, dirs, near, far, _COARSE * h, r0, b, cap, settings.residual.levels
     )
-    # the rays in groups of similar sample counts, each group's arrays as long as its
-    # longest ray (the counts vary several-fold: one array for all was mostly padding)
+    # rendering (β a float) takes the compiled quadrature, training (the model's β
+    # tensor) torch's, which is differentiable
+    learning = torch.is_tensor(beta) and beta.requires_grad and torch.is_grad_enabled()
+    compiled = quadrature_compiled and not learning
+    quadrature = compiled_quadrature if compiled else grouped_quadrature
+    knots, knot_faces, sdf3, (acc, color, depth, ok) = quadrature(
+        field, origin, dirs, t, d, f, count, r0, beta, settings
+    )
+    ok, evals = ok & found, 3 * R
+    redo = torch.nonzero(~ok & found).squeeze(1)
+    if settings.residual.retries > 0 and len(redo):
+        # the three evaluations as the probes of a second try
+        knots, sdf3 = knots[redo], sdf3.detach()[redo]
+        faces = None if knot_faces is None else knot_faces[redo]
+        fewer = settings.replace(residual_retries=settings.residual.retries - 1)
+        o = origin if origin.dim() == 1 else origin[redo]
+        *again, n = render_residual(
+            field, index, o, dirs[redo], shell_near[redo], shell_far[redo], knots, sdf3, beta, fewer, faces
+        )
+        evals += n
+        acc, color, depth, ok = put_rows(redo, (acc, color, depth, ok), again)
+    return acc, color, depth, ok, evals
+
+
+def grouped_quadrature(field, origin, dirs, t, d, f, count, r0, beta, settings: MarchSettings):
+    """Steps 2-3 of the module docstring in torch (differentiable w.r.t. the evaluations and
+    β) for rays (R,) with mesh samples t, d, f (R, N) (``count`` (R,) each), the rays in
+    ``residual.groups`` groups of similar sample counts, each group's arrays as long as its
+    longest ray (the counts vary several-fold: one array for all was mostly padding).
+    Returns the knots (R, 3), their faces (R, 3) (None without ``surface_reuse``), the
+    field's SDF there (R, 3) and (opacity, colour, depth, ok) of :func:`_resolve`."""
+    R = len(dirs)
+    b, cap = beta_value(beta), float(settings.shell.width)
     n_groups = max(settings.residual.groups, 1)
     by_count = count.argsort() if n_groups > 1 else torch.arange(R)
     groups = [g for g in torch.tensor_split(by_count, n_groups) if len(g)]
@@ -294,14 +326,7 @@ def render_residual(
     order = torch.cat([p[0] for p in parts])
     knots = torch.cat([p[4] for p in parts])
     knot_faces = torch.cat([p[5] for p in parts]) if settings.surface_reuse else None
-    o = origin if origin.dim() == 1 else origin[order]
-    sdf3, rgb3 = evaluate_sdf(
-        field,
-        points_along(o, dirs[order], knots).reshape(-1, 3),
-        dirs[order].repeat_interleave(3, 0),
-        settings.chunks.points,
-        None if knot_faces is None else knot_faces.reshape(-1),
-    )
+    sdf3, rgb3 = evaluate_knots(field, origin, dirs, order, knots, knot_faces, settings)
     out, start = [], 0
     for rows, tg, dg, cols, kg, _ in parts:
         sl = slice(start, start + len(rows))
@@ -313,21 +338,13 @@ def render_residual(
         )
     back = torch.empty_like(order)
     back[order] = torch.arange(R)
-    acc, color, depth, ok = (torch.cat(v)[back] for v in zip(*out))
-    ok, evals = ok & found, 3 * R
-    redo = torch.nonzero(~ok & found).squeeze(1)
-    if settings.residual.retries > 0 and len(redo):
-        # the three evaluations as the probes of a second try
-        knots, sdf3 = knots.view(-1, 3)[back][redo], sdf3.view(-1, 3).detach()[back][redo]
-        faces = None if knot_faces is None else knot_faces[back][redo]
-        fewer = settings.replace(residual_retries=settings.residual.retries - 1)
-        o = origin if origin.dim() == 1 else origin[redo]
-        *again, n = render_residual(
-            field, index, o, dirs[redo], shell_near[redo], shell_far[redo], knots, sdf3, beta, fewer, faces
-        )
-        evals += n
-        acc, color, depth, ok = put_rows(redo, (acc, color, depth, ok), again)
-    return acc, color, depth, ok, evals
+    faces = None if knot_faces is None else knot_faces[back]
+    return knots[back], faces, sdf3.view(-1, 3)[back], tuple(torch.cat(v)[back] for v in zip(*out))
+
+
+#: the compiled quadrature at render time (bench/render_timing.py turns it off for the
+#: ``previous`` path)
+quadrature_compiled = True
 
 
 def _resolve(t, d, cols, knots, sdf3, rgb3, r0, beta, settings: MarchSettings):
