@@ -208,7 +208,11 @@ def test_surface_reuse_renders_the_searched_image_with_fewer_searches(field, mon
 
 def test_grouped_residual_quadrature_renders_the_padded_image(field, monkeypatch):
     """The residual rays' quadrature in groups of similar sample counts gives the image
-    of one array padded to the longest ray."""
+    of one array padded to the longest ray (torch's quadrature, as training runs it; a
+    render takes the compiled one, which has no groups)."""
+    import texvocab.render.guided.residual as residual
+
+    monkeypatch.setattr(residual, "quadrature_compiled", False)
     grouped, _ = _guided_frame(field, monkeypatch, residual_groups=4)
     padded, _ = _guided_frame(field, monkeypatch, residual_groups=1)
     assert grouped.stats.paths["residual"] > 100

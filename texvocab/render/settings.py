@@ -143,7 +143,8 @@ class ResidualSettings:
         too).
     groups: speed only: the rays' quadrature runs in this many groups of similar sample
         counts, each as long as its longest ray (1: one array for all, padded to the
-        longest; the counts vary several-fold).
+        longest; the counts vary several-fold). Training's quadrature only: a render's runs
+        compiled, ray by ray.
     levels: speed: coarser passes (steps 4× apart) that narrow a ray's interval before
         the 4 ``step`` β pass, so a ray through the body is not sampled finely along the
         whole shell interval (0: the 4 ``step`` β pass over all of it, as before).
