@@ -120,3 +120,24 @@ def test_pixel_taps_sample_as_zero_padded_bilinear_interpolation(dtype):
     inside = (xi >= 0) & (xi < 13) & (yi >= 0) & (yi < 9)
     np.testing.assert_array_equal(near[inside], image[yi[inside], xi[inside]])
     assert not near[~inside].any()
+
+
+def test_every_pixels_rays_are_kept_per_camera_and_handed_out_as_copies():
+    """pixel_rays() of every pixel is kept for the last few cameras: the same rays as the
+    pixels asked for one by one, a caller's change to them is not seen by the next caller,
+    and a camera that moves gets its own rays."""
+    import torch
+
+    K = np.array([[80.0, 0, 31.5], [0, 80.0, 23.5], [0, 0, 1]])
+    cam = Camera(K, np.eye(3), np.array([0.0, 0.0, 3.0]), 64, 48)
+    ys, xs = np.mgrid[0:48, 0:64]
+    listed = cam.pixel_rays(np.stack([xs.ravel(), ys.ravel()], -1))
+    first = cam.pixel_rays()
+    assert all(torch.equal(a, b) for a, b in zip(first, listed, strict=True))
+    first[1][0] = 99.0
+    again = cam.pixel_rays()
+    assert torch.equal(again[1], listed[1]) and again[1].data_ptr() != first[1].data_ptr()
+    moved = Camera(K, np.eye(3), np.array([0.1, 0.0, 3.0]), 64, 48)
+    assert not torch.equal(moved.pixel_rays()[0], again[0])
+    assert torch.equal(moved.pixel_rays()[1], again[1])  # a shift keeps the directions
+    assert cam.pixel_rays(dtype=torch.float64)[1].dtype == torch.float64
