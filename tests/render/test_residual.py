@@ -198,13 +198,21 @@ def test_compiled_mesh_samples_are_the_padded_references(body, monkeypatch, knob
     assert torch.equal(checked.rgb, padded.rgb) and torch.equal(checked.stats.kind, padded.stats.kind)
 
 
-@pytest.mark.parametrize("knobs", [{}, {"residual_retries": 1, "residual_step": 3.0}])
-def test_compiled_quadrature_is_the_torch_groups(body, monkeypatch, knobs):
+@pytest.mark.parametrize(
+    "knobs, beta, amplitude",
+    [
+        ({}, 0.0008, 0.002),
+        ({"residual_retries": 1, "residual_step": 3.0}, 0.0008, 0.002),
+        # a soft, offset surface: samples beyond the shell still carry weight
+        ({"residual_levels": 0}, 0.005, 0.006),
+    ],
+)
+def test_compiled_quadrature_is_the_torch_groups(body, monkeypatch, knobs, beta, amplitude):
     """At render time (β a float) the residual rays' quadrature runs compiled, ray by ray:
     the knots, their SDFs and faces, and each ray's opacity, colour, depth and ok are
     torch's groups of padded arrays (the differentiable path training takes, with the
-    model's β) to float rounding, on every call a frame makes, retries included; so is the
-    image."""
+    model's β) to float rounding, on every call a frame makes, retries included (and
+    samples beyond the shell, which read the shell width in float32); so is the image."""
     import texvocab.render.guided.residual as residual
 
     calls, compiled = [], residual.compiled_quadrature
@@ -217,11 +225,11 @@ def test_compiled_quadrature_is_the_torch_groups(body, monkeypatch, knobs):
         assert torch.equal(k1, k2) and torch.equal(f1, f2)
         assert torch.allclose(s1, s2, atol=1e-6)
         for a, b in zip(out1[:3], out2[:3], strict=True):
-            assert a.dtype == b.dtype and a.shape == b.shape and torch.allclose(a, b, atol=1e-5)
+            assert a.dtype == b.dtype and a.shape == b.shape and torch.allclose(a, b, atol=1e-4)
         assert float((out1[3] != out2[3]).float().mean()) <= 0.01
         return ours
 
-    field = MeshResidualField(body["v"], body["f"], beta=0.0008, amplitude=0.002, wavenumber=20.0)
+    field = MeshResidualField(body["v"], body["f"], beta=beta, amplitude=amplitude, wavenumber=20.0)
     settings, camera = GUIDED.replace(**knobs), body["camera"].scaled(2.0)
     monkeypatch.setattr(residual, "compiled_quadrature", both)
     with torch.no_grad():

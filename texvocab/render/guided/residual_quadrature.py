@@ -23,6 +23,12 @@ def _f64(x: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(x.detach().double().numpy())
 
 
+def _cap(cap: float) -> float:
+    """The shell width as the float32 samples meet it: torch compares ``d < cap`` in
+    float32, where a sample beyond the shell reads exactly float32(cap)."""
+    return float(np.float32(cap))
+
+
 def knot_columns(t, d, count, r0, beta: float, cap: float, spread: float) -> torch.Tensor:
     """Columns (R, 3) long of the three evaluations for rays with mesh samples t, d (R, N)
     (the first count (R,) of each row), the probe's residual r0 (R, 1), β and the shell
@@ -30,7 +36,7 @@ def knot_columns(t, d, count, r0, beta: float, cap: float, spread: float) -> tor
     cols = np.empty((len(t), 3), np.int64)
     q = np.array([spread, 0.5, 1.0 - spread])
     n = count.numpy().astype(np.int64)
-    quadrature_columns(_f64(t), _f64(d), n, _f64(r0).reshape(-1), beta, cap, q, cols)
+    quadrature_columns(_f64(t), _f64(d), n, _f64(r0).reshape(-1), beta, _cap(cap), q, cols)
     return torch.from_numpy(cols)
 
 
@@ -52,7 +58,7 @@ def resolve_rays(t, d, count, cols, knots, sdf3, rgb3, r0, beta, settings: March
         _f64(rgb3),
         _f64(r0).reshape(-1),
         beta_value(beta),
-        float(settings.shell.width),
+        _cap(settings.shell.width),
         float(settings.residual.tolerance),
         acc,
         color,
