@@ -12,7 +12,7 @@ running). Prints tables (per render, their spread, frames, panels) and a last li
              first_level_ms=… dragging_frame_ms=… renders=… first_level_p75_ms=…
              first_within_target=k/N full_within_target=k/N preview_in_pose_frame=k/N
              drag_preview_age_frames_p95=… drag_frames_within_1=k/N drag_frame_ms_p95=…
-             after_drag_full_s=…
+             after_drag_full_s=… after_drag_each_s=…
 
 (medians over the renders, for the first worker run; issue targets: idle share <= 0.10
 of a core, window / shot <= 1.5, first level <= 50 ms, full level <= 0.5 s, UI frames
@@ -57,6 +57,7 @@ def run_window(
     worker: str,
     renders: int,
     preview_wait: float | None = None,
+    rest_levels: str = "",
 ) -> dict:
     xvfb = shutil.which("xvfb-run")
     if xvfb is None:
@@ -75,7 +76,7 @@ def run_window(
             "--size",
             size,
             "--script",
-            f"bench:{seconds}:{res}:{renders}",
+            f"bench:{seconds}:{res}:{renders}:{rest_levels.replace(',', '-')}",
             "--report",
             str(report),
             "--neural-worker",
@@ -219,11 +220,13 @@ def _drag_keys(rep: dict) -> str:
     """The dragging phase's summary keys (texvocab_viewer.testing.bench.drag_stats)."""
     d = drag_stats(rep)
     full = d["after_drag_full_s"]
+    every = ",".join("none" if x is None else f"{x:.2f}" for x in d["after_drag_full_all_s"])
     return (
         f"drag_preview_age_frames_p95={d['drag_preview_age_frames_p95']:.1f} "
         f"drag_frames_within_1={d['drag_frames_within_1'][0]}/{d['drag_frames_within_1'][1]} "
         f"drag_frame_ms_p95={d['drag_frame_ms_p95']:.1f} "
-        f"after_drag_full_s={'none' if full is None else f'{full:.2f}'}"
+        f"after_drag_full_s={'none' if full is None else f'{full:.2f}'} "
+        f"after_drag_each_s={every or 'none'}"
     )
 
 
@@ -263,6 +266,13 @@ def main() -> int:
         "of the UI's interpreter (the previous default), or both, one after "
         "the other (default both; the summary line is the process's)",
     )
+    p.add_argument(
+        "--rest-levels",
+        default="",
+        metavar="L,L,...",
+        help="the levels of a dragged pose's full render once the drag stops (default: the "
+        "viewer's, the full level at once; 8,4,2,1 renders every level, as before)",
+    )
     p.add_argument("--json", default=None, help="also write the raw reports here")
     p.add_argument(
         "--no-baseline",
@@ -284,6 +294,7 @@ def main() -> int:
             worker,
             args.renders,
             args.preview_wait,
+            args.rest_levels,
         )
         if not rep.get("ok"):
             sys.exit(f"error: {worker} worker: {rep.get('error', 'the bench did not finish')}")

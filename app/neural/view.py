@@ -27,6 +27,10 @@ PLAYBACK_SECONDS = 0.5
 #: DRAG_FRAME_MS); the first frame without a change submits the full render of the pose
 #: it rests at.
 PREVIEW_PAUSE = 0.25
+#: the levels of a dragged pose's full render once it rests: its preview level, then the
+#: full one (each level after the preview is a pass of its own over the field, with the
+#: per-call cost that carries: levels 4 and 2 between would delay the full level)
+REST_LEVELS = (8, 1)
 
 
 class NeuralView:
@@ -58,6 +62,10 @@ class NeuralView:
         self.preset = "checkpoint"  # or a texvocab.pipeline.settings.PRESETS name
         self.march = None  # MarchSettings of the chosen preset (None: the checkpoint's)
         self.image_scale = 1.0
+        #: a dragged pose's full render once it rests: None, its preview (if it is not
+        #: shown yet) and the full level; or the levels to render (bench/viewer_ui.py's
+        #: --rest-levels 8,4,2,1 times the former behaviour)
+        self.rest_levels: tuple[int, ...] | None = None
         self.live = True
         self.resolution = 256  # long side of the full-resolution level, pixels
         self.version = 0
@@ -183,7 +191,11 @@ class NeuralView:
             return
         if last[0] != self._current:
             return  # the view moved on without a submission
-        self._submit(last[0], replace(last[1], preview_only=False, finish_preview=False), None)
+        # the pose's preview is on screen (or on its way: then a preview first): the full
+        # level at once, one pass over the rest of the pixels, not the levels between
+        shown = self.frame is not None and self.frame.version == last[1].version
+        levels = self.rest_levels or ((1,) if shown else REST_LEVELS)
+        self._submit(last[0], replace(last[1], preview_only=False, finish_preview=False, levels=levels), None)
 
     def _take(self, frame: RenderFrame | None) -> None:
         if frame is not None:

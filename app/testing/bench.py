@@ -23,8 +23,9 @@ Phases, in order:
   from before the drag counts as older than its first frame).
 - ``settle``: the drag has stopped (the pose no longer changes); measured: seconds from
   the swap of the last dragged frame to the swap of the first frame that shows the full
-  level of its pose (``after_drag_full_s``; None if it did not come within
-  ``SETTLE_MAX`` seconds).
+  level of its pose (``after_drag_full_s``, one per drag; None if it did not come within
+  ``SETTLE_MAX`` seconds). ``DRAGS`` drags and settles alternate, the dragging time
+  split evenly between them, so the settle is timed more than once.
 """
 
 from __future__ import annotations
@@ -44,14 +45,24 @@ RENDERS = 12  # default; alternating RENDER_POSES (bench:SECONDS:RES:RENDERS)
 AFTER = 1.5  # seconds watched after the last render ("after" phase)
 SHOT_CAMERA = (0.0, 0.0, 3.2)  # yaw, pitch, distance: texvocab shot's default --camera
 SETTLE_MAX = 10.0  # seconds the "settle" phase waits for the full level
+DRAGS = 5  # drags, each followed by a settle; the dragging seconds are split between them
 
 
 class BenchDriver(Driver):
     """See the module docstring; writes the measurements into the report."""
 
-    def __init__(self, viewer, rp, seconds: float = 8.0, resolution: int = 256, renders: int = RENDERS):
+    def __init__(
+        self,
+        viewer,
+        rp,
+        seconds: float = 8.0,
+        resolution: int = 256,
+        renders: int = RENDERS,
+        rest_levels: tuple[int, ...] | None = None,
+    ):
         super().__init__("bench", viewer)
         self.seconds, self.resolution, self.render_count = seconds, resolution, renders
+        self.rest_levels = rest_levels  # NeuralView.rest_levels (None: the viewer's)
         self.phase, self.t0, self.count = "warmup", time.perf_counter(), 0
         self.drag_ms: list[float] = []
         self.drag_cpu_ms: list[float] = []
@@ -64,7 +75,9 @@ class BenchDriver(Driver):
         self.drag_age: list[int] = []
         self._pose_frame: dict[int, int] = {}  # pose version -> the dragging frame that set it
         self._last_drag_swap = None  # when the last dragged frame was swapped
-        self._drag_seconds = None  # how long the drag lasted
+        self._drag_seconds = 0.0  # how long the drags lasted, in all
+        self.after_drag: list[float | None] = []  # per drag: its stop to the full level, s
+        self.after_drag_render: list[float] = []  # of that, the full render job's own
         self.renders: list[dict] = []
         self._mark = None  # (wall, process CPU, worker CPU) at a phase's start
         self._last = None
@@ -126,6 +139,7 @@ class BenchDriver(Driver):
                     self._done(rp, "no neural render: the source is not a checkpoint")
                     return
                 v.neural.resolution = self.resolution
+                v.neural.rest_levels = self.rest_levels
                 self.phase = "render"
             return
         if self.phase == "render":
@@ -136,14 +150,15 @@ class BenchDriver(Driver):
             return
         if self.phase == "settle":  # the window idles as the viewer lets it (a level wakes it)
             if now - self.t0 > SETTLE_MAX:
-                self.report["after_drag_full_s"] = None
+                self.after_drag.append(None)
                 self._done(rp)
             return
         rp.fps_idling.enable_idling = False  # "dragging": input keeps the window awake
         if not self._nudge:  # the drag starts in this frame
             self.t0 = now
-        if now - self.t0 > self.seconds:  # the drag stops: the pose set last frame stays
-            self.phase, self.t0, self._drag_seconds = "settle", now, now - self.t0
+        if now - self.t0 > self.seconds / DRAGS:  # the drag stops: the pose set last frame stays
+            self.phase, self._drag_seconds = "settle", self._drag_seconds + now - self.t0
+            self.t0 = now
             return
         shown = v.neural.frame
         if shown is not None and shown is not self._drag_shown:
@@ -216,9 +231,14 @@ class BenchDriver(Driver):
         key = None if shown is None else nv.keys.get(shown.version)
         if self.phase == "settle":
             if shown is not None and shown.level == 1 and key is not None and key[0] == pose:
-                self.report["after_drag_full_s"] = now - self._last_drag_swap
-                self.report["after_drag_render_s"] = shown.elapsed  # of that, the job's own
-                self._done(hello_imgui.get_runner_params())
+                self.after_drag.append(now - self._last_drag_swap)
+                self.after_drag_render.append(shown.elapsed)  # of that, the job's own
+                if len(self.after_drag) < DRAGS:  # the next drag starts with the next frame
+                    self.phase, self.t0, self._nudge = "dragging", now, 0
+                    self._last = self._last_process = None
+                    self._drag_shown = nv.frame  # the settle's full level is not a drag's
+                else:
+                    self._done(hello_imgui.get_runner_params())
             return
         if not self._nudge:  # the pose has not moved yet
             return
@@ -279,6 +299,8 @@ class BenchDriver(Driver):
             "panel_cpu_ms": self.drag_panels,
             "seconds": self._drag_seconds or time.perf_counter() - self.t0,
         }
+        self.report["after_drag_full_s"] = self.after_drag
+        self.report["after_drag_render_s"] = self.after_drag_render
         self.report["window"] = list(v.size)
         if v.neural is not None:
             self.report["resolution"] = self.resolution
@@ -295,12 +317,17 @@ class BenchDriver(Driver):
 def drag_stats(report: dict) -> dict:
     """The dragging measurement's summary: p95 of the shown pose's age in UI frames, how
     many dragging frames showed a pose at most one frame old, p95 of the frame times (ms),
-    and seconds from the drag's stop to the full level on screen (None: it did not come)."""
+    and seconds from a drag's stop to the full level on screen: the median over the drags
+    (None: one did not come) and the list of them (``after_drag_full_all_s``)."""
     age = np.asarray(report["dragging"].get("preview_age_frames", []))
     ms = np.asarray(report["dragging"]["frame_ms"])
+    settles = report.get("after_drag_full_s") or []
+    if not isinstance(settles, list):  # a report from before several drags
+        settles = [settles]
     return {
         "drag_preview_age_frames_p95": float(np.percentile(age, 95)) if len(age) else float("nan"),
         "drag_frames_within_1": (int((age <= 1).sum()), len(age)),
         "drag_frame_ms_p95": float(np.percentile(ms, 95)) if len(ms) else float("nan"),
-        "after_drag_full_s": report.get("after_drag_full_s"),
+        "after_drag_full_s": None if not settles or None in settles else float(np.median(settles)),
+        "after_drag_full_all_s": settles,
     }

@@ -34,13 +34,15 @@ AFTER_REOPEN = {"open-checkpoint": "reopened"}
 
 def make_driver(name: str, viewer, rp) -> Driver:
     """The driver for ``--script NAME``: an engine script or
-    ``bench[:SECONDS[:RES[:RENDERS]]]``."""
+    ``bench[:SECONDS[:RES[:RENDERS[:REST_LEVELS]]]]`` (REST_LEVELS: the levels of a
+    dragged pose's full render once it rests, as ``8-4-2-1``; default the viewer's)."""
     if name.startswith("bench"):
         parts = name.split(":")
         seconds = float(parts[1]) if len(parts) > 1 else 8.0
         res = int(parts[2]) if len(parts) > 2 else 256
         renders = int(parts[3]) if len(parts) > 3 else RENDERS
-        return BenchDriver(viewer, rp, seconds, res, renders)
+        rest = tuple(int(x) for x in parts[4].split("-")) if len(parts) > 4 and parts[4] else None
+        return BenchDriver(viewer, rp, seconds, res, renders, rest)
     check_script(name)
     return EngineDriver(name, SCRIPTS[name], viewer, rp)
 

@@ -393,7 +393,8 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     nv.late_poll()  # a frame that changes nothing: the resting pose's full render
     rest = worker.jobs[-1]
     assert len(worker.jobs) == 5 and rest.version == nv.version and not nv.awaiting
-    assert not rest.preview_only and not rest.finish_preview and rest.levels is None
+    assert not rest.preview_only and not rest.finish_preview
+    assert rest.levels == (1,)  # its preview is on screen: the full level at once
     np.testing.assert_array_equal(rest.pose, worker.jobs[-2].pose)
     assert nv.keys[nv.version] == nv.keys[nv.version - 1]
     nv.late_poll()
@@ -424,6 +425,21 @@ def test_the_pose_frame_waits_for_the_preview_only_after_a_pause(monkeypatch):
     v.submit_neural()
     assert not nv.awaiting and not nv.wait_preview()
     assert len(worker.waits) == 5 and len(worker.jobs) == 9
+    for z in (32.0, 34.0):  # a drag whose last preview is not on screen yet when it rests
+        clock[0] += 0.02
+        v.state.set_joint(16, (0.0, 0.0, z))
+        v.submit_neural()
+        nv.late_poll()
+    assert worker.jobs[-1].preview_only and nv.frame.version < nv.version
+    nv.late_poll()
+    assert worker.jobs[-1].levels == pn.REST_LEVELS and not worker.jobs[-1].preview_only
+    nv.rest_levels = (8, 4, 2, 1)  # or the levels a caller names (bench/viewer_ui.py --rest-levels)
+    clock[0] += 0.02
+    v.state.set_joint(16, (0.0, 0.0, 36.0))
+    v.submit_neural()
+    nv.late_poll()
+    nv.late_poll()
+    assert worker.jobs[-1].levels == (8, 4, 2, 1)
 
 
 def test_the_preview_blit_rectangles():
