@@ -54,7 +54,7 @@ def gemm_gflops(m: int, k: int, n: int, dtype: torch.dtype, seconds: float = 0.6
 def machine_limits(seconds: float = 0.6) -> dict[str, float]:
     """GFLOP/s: square 2048³ products and the field's shape (23k × 128 by 128 × 128),
     each the best over ``seconds`` of repeats."""
-    from texvocab.method.field import native_bfloat16
+    from texvocab.method.field_precision import native_bfloat16
 
     # where the CPU has no bf16 units torch emulates them at a few GFLOP/s (a 2048³
     # product then takes minutes): not a limit the field would run at (render.precision

@@ -71,7 +71,7 @@ def test_bf16_rates_are_not_measured_where_the_cpu_emulates_bf16(monkeypatch):
     then takes minutes): the limits leave them out (nan) and measure float32."""
     import math
 
-    from texvocab.method import field
+    from texvocab.method import field_precision as field
 
     monkeypatch.setattr(field, "native_bfloat16", lambda: False)
     limits = frame_limits.machine_limits(0.01)

@@ -17,7 +17,6 @@ density (Yariv et al. 2021).
 
 from __future__ import annotations
 
-import functools
 from dataclasses import asdict, dataclass
 from typing import ClassVar
 
@@ -28,34 +27,10 @@ from torch import nn
 from texvocab.geometry.rotations import rotvec_to_quat
 from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
+from texvocab.method.field_precision import PRECISIONS, resolve_precision  # noqa: F401 (PRECISIONS: re-exported)
+from texvocab.method.frozen_mlps import FrozenMLPs
 
 VIEW_FRAMES = ("world", "body")
-#: the number formats the field's MLPs can be evaluated in at render time (name -> dtype;
-#: "auto": bfloat16 where the CPU multiplies it natively, else float32)
-PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16, "auto": None}
-
-
-@functools.cache
-def native_bfloat16() -> bool:
-    """Whether this CPU multiplies bfloat16 natively (AMX or AVX512-BF16, from Linux's
-    /proc/cpuinfo, read once; False where it cannot be read): elsewhere bf16 products are
-    emulated and slower than float32."""
-    try:
-        with open("/proc/cpuinfo") as f:
-            flags = set(f.read().split())
-    except OSError:
-        return False
-    return bool(flags & {"amx_bf16", "avx512_bf16"})
-
-
-def resolve_precision(name: str) -> torch.dtype:
-    """The dtype of a :data:`PRECISIONS` name; ValueError naming the choices otherwise."""
-    if name not in PRECISIONS:
-        raise ValueError(f"precision {name!r}: expected one of {', '.join(PRECISIONS)}")
-    dtype = PRECISIONS[name]
-    if dtype is None:
-        return torch.bfloat16 if native_bfloat16() else torch.float32
-    return dtype
 
 
 @dataclass
@@ -222,12 +197,18 @@ class AvatarField(nn.Module):
         bias once per call (one (hidden, 4J) mat-vec) instead of a (N, 4J) block per
         point. Same function and gradients as ``sdf_net(cat([x, q]))`` up to float
         rounding; returns (N, 1 + hidden)."""
+        weight, bias = self.first_sdf_layer(ctx, x.shape[1])
+        return self.sdf_net[1:](F.linear(x, weight, bias))
+
+    def first_sdf_layer(self, ctx: PoseContext, d: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """sdf_net's first layer for per-point inputs of width ``d`` at ``ctx``'s pose:
+        (weight (hidden, d), bias (hidden,)), the pose's quaternion columns folded into
+        the bias."""
         first = self.sdf_net[0]
-        d = x.shape[1]
-        pose = pose_input(ctx.condition.to(x.dtype)).reshape(-1)
+        pose = pose_input(ctx.condition.to(first.weight.dtype)).reshape(-1)
         bias = first.bias + first.weight[:, d:].contiguous() @ pose
         # contiguous copies: row-aligned operands keep BLAS results bitwise reproducible
-        return self.sdf_net[1:](F.linear(x, first.weight[:, :d].contiguous(), bias))
+        return first.weight[:, :d].contiguous(), bias
 
     def sdf_and_color(
         self,
@@ -236,6 +217,7 @@ class AvatarField(nn.Module):
         dirs: torch.Tensor,
         precision: str = "float32",
         known: torch.Tensor | None = None,
+        frozen: FrozenMLPs | None = None,
     ):
         """SDF (N,), RGB (N, 3), valid (N,) for world points (N, 3) and unit dirs (N, 3).
         ``known`` (N,) long: the points' closest faces where the caller knows them (-1
@@ -246,6 +228,8 @@ class AvatarField(nn.Module):
         number format of the MLPs' products and activations (:data:`PRECISIONS`); the
         body distance, the projection and the inputs' encodings stay float32, and so do
         the outputs. "bfloat16" is for rendering (AMX matrix units on CPUs that have them).
+        ``frozen``: the MLPs at this pose in ``precision``, cast once (rendering; used
+        only with autograd off): the same numbers without autocast's per-call casts.
         """
         s = self.settings
         out = self.pose_feature(ctx, points, max_distance=s.shell_width, known=known)
@@ -266,6 +250,13 @@ class AvatarField(nn.Module):
             x_c, d = self.canonicalize(ctx, x, out.skin_weights, d)
         else:
             x_c = self.canonicalize(ctx, x, out.skin_weights)
+        if frozen is not None and not torch.is_grad_enabled():
+            feat = frozen.project(out.features)
+            h = frozen.sdf_hidden(torch.cat([positional_encoding(x_c, s.pos_freqs).to(feat), feat], -1))
+            color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs).to(h), feat.to(h)], -1)
+            rgb = torch.sigmoid(frozen.color(color_in).to(points.dtype))
+            sdf = d_body + h[:, 0].to(points.dtype) * valid
+            return sdf, rgb, valid
         dtype = resolve_precision(precision)
         with torch.autocast("cpu", dtype=dtype, enabled=dtype != torch.float32):
             feat = self.feature_proj(out.features.to(points.dtype))
@@ -301,12 +292,27 @@ class PoseField:
     def __init__(self, model: AvatarField, ctx: PoseContext, precision: str = "float32"):
         resolve_precision(precision)  # a ValueError for an unknown name, here
         self.model, self.ctx, self.precision = model, ctx, precision
+        self._frozen: FrozenMLPs | None = None
+
+    def frozen(self) -> FrozenMLPs | None:
+        """The MLPs at this pose cast once (:class:`FrozenMLPs`), made on the first call
+        with autograd off and again if the weights changed since; None with autograd on
+        (training takes the autocast path, whose gradients reach the weights)."""
+        if torch.is_grad_enabled() or self.ctx.warp is not None:
+            return None
+        if self._frozen is None or not self._frozen.current():
+            self._frozen = FrozenMLPs(self.model, self.ctx, self.precision)
+        return self._frozen
 
     def __call__(self, points: torch.Tensor, dirs: torch.Tensor):
-        return self.model(self.ctx, points, dirs, self.precision)
+        frozen = self.frozen()
+        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs, self.precision, frozen=frozen)
+        return laplace_density(sdf, self.model.beta) * valid, rgb
 
     def sdf_rgb(self, points: torch.Tensor, dirs: torch.Tensor, known: torch.Tensor | None = None):
-        sdf, rgb, valid = self.model.sdf_and_color(self.ctx, points, dirs, self.precision, known)
+        sdf, rgb, valid = self.model.sdf_and_color(
+            self.ctx, points, dirs, self.precision, known, frozen=self.frozen()
+        )
         return torch.where(valid, sdf, self.model.settings.shell_width), rgb
 
     @property
