@@ -24,6 +24,7 @@ from texvocab.body.parts import part_membership
 from texvocab.body.pose_condition import condition_pose
 from texvocab.geometry.surface import SurfaceIndex
 from texvocab.method.feature_maps import FeatureMaps, sample_maps
+from texvocab.torch_threads import one_torch_thread
 
 __all__ = ["FeatureMaps", "FeatureOutput", "PoseContext", "PoseFeature", "naive_pose_feature", "sample_maps"]
 
@@ -146,7 +147,13 @@ class PoseFeature(nn.Module):
     def context(self, pose, trans=None, like=None) -> PoseContext:
         """Per-pose work: posed body, its surface index, the vocabulary query, features.
         ``like``: a surface index of another pose whose slot layout the new index borrows
-        (:class:`~texvocab.geometry.surface.SurfaceIndex`; same answers, a cheaper build)."""
+        (:class:`~texvocab.geometry.surface.SurfaceIndex`; same answers, a cheaper build).
+        With autograd off its small operations run on one torch thread
+        (:mod:`texvocab.torch_threads`)."""
+        with one_torch_thread(not torch.is_grad_enabled()):
+            return self._context(pose, trans, like)
+
+    def _context(self, pose, trans, like) -> PoseContext:
         pose = torch.as_tensor(np.asarray(pose), dtype=torch.float32).reshape(24, 3)
         trans = torch.zeros(3) if trans is None else torch.as_tensor(np.asarray(trans), dtype=torch.float32)
         posed = self.body.forward(pose[None], trans.reshape(1, 3), self.betas)

@@ -15,6 +15,14 @@ from texvocab.render.results import RayResult, RenderResult, RenderStats, count_
 from texvocab.render.settings import MarchSettings
 from texvocab.render.shell.geometry import ShellGeometry
 from texvocab.render.shell.march import march_chunks
+from texvocab.torch_threads import one_torch_thread
+
+#: an image (or pixel subset) with fewer rays to triage renders with torch on one thread:
+#: at 256² (about 17,000 such rays) one thread is faster, at 320² (about 26,000) the two
+#: are even, from 384² two are faster (:mod:`texvocab.torch_threads`)
+ONE_THREAD_RAYS = 24_000
+#: and an image of fewer pixels makes its plan (the raster) on one thread
+ONE_THREAD_PIXELS = 100_000
 
 
 def render_image_guided(
@@ -83,7 +91,8 @@ class GuidedImage:
         # nothing; "margin" assumes it lies on the mesh outside the silhouette, so that a
         # ray farther than miss_margin β sees < e^-miss_margin / 2β density
         reach = delta if s.band.miss_reach == "shell" else min(delta, s.band.miss_margin * self.beta)
-        self.plan = plan_surface(self.verts, self.faces, camera, self.dirs, delta, reach, s.band.min_cos)
+        with one_torch_thread(H * W < ONE_THREAD_PIXELS):
+            self.plan = plan_surface(self.verts, self.faces, camera, self.dirs, delta, reach, s.band.min_cos)
         self.rgb = self.bg.repeat(H * W, 1)
         self.alpha, self.depth = torch.zeros(H * W), torch.zeros(H * W)
         self.kind = torch.zeros(H * W, dtype=torch.uint8)  # RayKind per pixel
@@ -110,17 +119,20 @@ class GuidedImage:
         def march(idx: torch.Tensor) -> RayResult:
             return self._fallback(pix[idx], cancelled)
 
-        out = triage_rays(
-            self.field,
-            self.beta,
-            rays,
-            self.settings,
-            march=None if preview else march,
-            bounds=lambda idx: self._shell_interval(pix[idx]),
-            index=self._index,
-            background=self.bg,
-            cancelled=cancelled,
-        )
+        # a few tens of thousands of rays: their operations are too small for a second
+        # torch thread (texvocab.torch_threads: 256² frames 0.112 s on one, 0.125 s on two)
+        with one_torch_thread(len(pix) < ONE_THREAD_RAYS):
+            out = triage_rays(
+                self.field,
+                self.beta,
+                rays,
+                self.settings,
+                march=None if preview else march,
+                bounds=lambda idx: self._shell_interval(pix[idx]),
+                index=self._index,
+                background=self.bg,
+                cancelled=cancelled,
+            )
         self.rgb[pix], self.alpha[pix], self.depth[pix] = out.rgb, out.opacity, out.depth
         self.kind[pix] = out.kind
         self.evals += out.field_evals
