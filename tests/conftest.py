@@ -118,3 +118,15 @@ def capture(tmp_path_factory):
         progress=False,
     )
     return root
+
+
+@pytest.fixture
+def one_thread():
+    """Bit-exact comparisons need one thread: with several, oneDNN's convolution backward
+    reduces partial sums in an order that depends on thread timing (seen under load)."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

@@ -85,16 +85,6 @@ def test_beta_learns_at_its_own_rate_when_scaled(capture, tmp_path):
     assert 5 * moves[1.0] < moves[10.0] < 20 * moves[1.0]
 
 
-@pytest.fixture
-def one_thread():
-    """Bit-exact comparisons need one thread: with several, oneDNN's convolution backward
-    reduces partial sums in an order that depends on thread timing (seen under load)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 @pytest.mark.parametrize("lr_decay", [1.0, 0.1])
 def test_resume_after_kill_gives_the_same_weights(capture, tmp_path, one_thread, lr_decay):
     s = tiny_settings(iterations=6, checkpoint_every=3, lr_decay=lr_decay)

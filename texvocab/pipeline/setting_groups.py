@@ -276,6 +276,12 @@ class TrainSettings:
     lambda_pose: float = knob(
         0.01, at_least(0), doc="weight of the corrections' prior Σδθ² + (δT / 10 cm)² (per step, its frame's)"
     )
+    weight_average: float = knob(
+        0.0,
+        within(0, 1, open_high=True),
+        doc="decay of a moving average of the weights, which checkpoints hold for evaluation "
+        "and rendering (training steps the raw weights; 0: off, 0.995: about the last 200 steps)",
+    )
     checkpoint_every: int = knob(250, at_least(1), doc="steps between checkpoints")
     max_minutes: float | None = knob(
         None, above(0), doc="stop (with a checkpoint) after this much training time"

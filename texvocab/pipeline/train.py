@@ -43,6 +43,7 @@ from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.shell_fit import fit_shell
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
+from texvocab.pipeline.weight_average import TRAINED_KEY, WeightAverage
 from texvocab.render import render_rays_banded
 
 log = logging.getLogger("texvocab")
@@ -122,6 +123,8 @@ class Trainer:
             groups.append({"params": list(self.refine.parameters()), "lr": settings.train.pose_lr})
         self.optim = torch.optim.Adam(groups, lr=settings.train.lr)
         self.schedule = LearningRateSchedule(self.optim, settings.train.lr_decay)
+        decay = settings.train.weight_average
+        self.average = None if decay == 0 else WeightAverage(self.model, decay)
         self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
         self.saved_step: int | None = None  # the step the checkpoint on disk holds
@@ -251,6 +254,8 @@ class Trainer:
         if self.sync is not None:
             self.sync()
         self.optim.step()
+        if self.average is not None:
+            self.average.update()
         if getattr(self.model.pose_feature.encoder, "trainable", False):
             # a trainable encoder's maps are recomputed whenever a frame is drawn again
             # (loss_terms), so the frame cache keeps none: kept for every training frame
@@ -270,13 +275,17 @@ class Trainer:
         }
 
     def state(self) -> dict:
+        weights, trained = self.model.state_dict(), None
+        if self.average is not None:  # evaluation reads the average, --resume the raw weights
+            weights, trained = self.average.checkpoint_weights(weights)
         return {
             "step": self.step,
             "settings": self.s.to_dict(),
             "capture": str(Path(self.capture.root).resolve()),
             "num_train": self.capture.num_train,
             IDENTITY_KEY: capture_identity(self.capture),
-            "model": self.model.state_dict(),
+            "model": weights,
+            **({} if trained is None else {TRAINED_KEY: trained}),
             "optimizer": self.optim.state_dict(),
             "vocab": self.model.pose_feature.vocab.to_dict(),
             "rng": {"torch": self.gen.get_state()},
@@ -338,7 +347,10 @@ class Trainer:
                 f"train.iterations={self.s.train.iterations}; pass --iterations N > "
                 f"{ck['step']} to extend it"
             )
-        self.model.load_state_dict(load_stored_textures(self.model, ck["model"], self.checkpoint_path))
+        weights = load_stored_textures(self.model, ck["model"], self.checkpoint_path)
+        self.model.load_state_dict(weights)
+        if self.average is not None:
+            self.average.load(weights, ck[TRAINED_KEY], self.model)
         apply_stored_girth(self.model, ck, self.checkpoint_path)
         if self.refine is not None:
             self.refine.load(ck["pose_refinement"])
