@@ -11,7 +11,8 @@ Groups (each varies one knob from the common base; the first variant is its refe
 ``strategies`` (part/joint/global/none, Table 4 of the paper), ``encoders`` (pyramid,
 small, inception, resnet34-scratch), ``perceptual`` (off, inception; lpips-vgg only when its
 weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, cosine),
-``keys`` (M = 20, 5, 10, 40; K = 3, 1, 5; adaptive M), ``unseen`` (unseen texels: mean,
+``keys`` (M = 20, 5, 10, 40, every training frame with Eq. 6's or 1/d weights; K = 3, 1,
+5; adaptive M), ``unseen`` (unseen texels: mean,
 nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_m 0.1, 0.5),
 ``beta`` (VolSDF β at the start of training: 5, 2 mm), ``texture`` (texture maps of
 256² or 512² texels), ``lr`` (the learning rate constant, or decayed to 0.1 of it over
@@ -131,6 +132,9 @@ GROUPS: dict[str, dict[str, list[str]]] = {
         "K1": ["k=1"],
         "K5": ["k=5"],
         "adaptive": ["min_key_distance=0.05"],
+        # M = T: a key per training frame, its weights by Eq. 6 or by 1/d (its own map alone)
+        "every frame": ["num_keys=0"],
+        "every frame, 1/d": ["num_keys=0", "weighting=inverse"],
     },
 }
 

@@ -104,3 +104,24 @@ def test_format_query_prints_every_part():
     text = vocab.format_query(np.zeros((24, 3)))
     for name in ("main_body", "left_leg", "right_leg", "left_arm", "right_arm"):
         assert name in text
+
+
+def test_every_training_frame_a_key_when_num_keys_is_zero():
+    """``vocab.num_keys=0``: M = T, each training frame a key of every part once, so a
+    training frame's nearest key is itself (distance 0, and weight 1 with ``inverse``)."""
+    from texvocab.errors import TexvocabError
+    from texvocab.pipeline.settings import Settings
+
+    rng = np.random.default_rng(1)
+    poses = rng.normal(0, 0.4, (12, 24, 3))
+    vocab = Vocabulary.build(poses, "part", num_keys=0, k=3, weighting="inverse")
+    for kf in vocab.key_frames:
+        assert sorted(kf.tolist()) == list(range(12))
+    for q in vocab.query(poses[7]):
+        assert q.frames[0] == 7 and q.weights[0] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="num_keys must be >= 0"):
+        Vocabulary.build(poses, "part", num_keys=-1, k=3)
+    # the setting: 0 takes any K; otherwise K is one of the M keys
+    assert Settings().with_overrides(["vocab.num_keys=0", "vocab.k=5"]).vocab.num_keys == 0
+    with pytest.raises(TexvocabError, match="vocab.k"):
+        Settings().with_overrides(["vocab.num_keys=2", "vocab.k=3"])

@@ -193,3 +193,14 @@ def test_time_budget_progress_bar_counts_the_budget(capture, tmp_path, capsys):
     assert "s of the time budget" in err and "/2 s of" in err
     assert "100000" not in err
     assert (tmp_path / "run" / "checkpoint.pt").is_file()
+
+
+def test_a_key_per_training_frame_trains(capture, tmp_path):
+    """``vocab.num_keys=0``: every training frame is a key; the model holds them all and
+    a few steps train to finite losses."""
+    cap = open_capture(capture)
+    trainer = Trainer(cap, tiny_settings(num_keys=0, k=3, iterations=2), tmp_path / "run", progress=False)
+    vocab = trainer.model.pose_feature.vocab
+    assert all(sorted(kf.tolist()) == list(range(cap.num_train)) for kf in vocab.key_frames)
+    logs = trainer.run()
+    assert len(logs) == 2 and all(np.isfinite(r["loss"]) for r in logs)

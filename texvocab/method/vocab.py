@@ -157,13 +157,14 @@ class Vocabulary:
         pose_condition: str = "root-relative",
     ) -> Vocabulary:
         """Farthest-point-sample ``num_keys`` keys per part from training poses (T, 24, 3)
-        (fewer for a part whose poses all lie within ``min_distance`` of its keys), read
-        under ``pose_condition``."""
+        (fewer for a part whose poses all lie within ``min_distance`` of its keys; 0: every
+        training frame is a key), read under ``pose_condition``."""
         poses = torch.as_tensor(np.asarray(poses), dtype=torch.float64)
         if poses.ndim != 3 or poses.shape[1:] != (24, 3) or len(poses) == 0:
             raise ValueError(f"poses must be (T, 24, 3) with T >= 1, got {tuple(poses.shape)}")
-        if num_keys < 1 or k < 1:
-            raise ValueError(f"num_keys and k must be >= 1, got M={num_keys}, K={k}")
+        if num_keys < 0 or k < 1:
+            raise ValueError(f"num_keys must be >= 0 and k >= 1, got M={num_keys}, K={k}")
+        num_keys = num_keys or len(poses)  # 0: a key per training frame
         if weighting not in WEIGHTINGS:
             raise ValueError(f"unknown weighting {weighting!r}; expected one of {WEIGHTINGS}")
         quats = rotvec_to_quat(condition_pose(poses, pose_condition))

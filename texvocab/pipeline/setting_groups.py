@@ -82,7 +82,11 @@ class VocabSettings:
     GROUP: ClassVar[str] = "vocab"
 
     strategy: Strategy = knob("part", doc="part | joint | global (the paper's ablation) | none (no texture)")
-    num_keys: int = knob(20, at_least(1), doc="(S/A) M keys per part (the most, when min_key_distance > 0)")
+    num_keys: int = knob(
+        20,
+        at_least(0),
+        doc="(S/A) M keys per part (the most, when min_key_distance > 0); 0: every training frame a key",
+    )
     min_key_distance: float = knob(
         0.0,
         at_least(0),
@@ -93,7 +97,10 @@ class VocabSettings:
     k: int = knob(
         3,
         at_least(1),
-        Check(lambda v, g: v <= g.num_keys, lambda g: f"<= num_keys ({g.num_keys}): K of the M keys"),
+        Check(
+            lambda v, g: g.num_keys == 0 or v <= g.num_keys,
+            lambda g: f"<= num_keys ({g.num_keys}): K of the M keys",
+        ),
         doc="(S/A) K nearest keys blended per part",
     )
     weighting: Weighting = knob("paper", doc="paper (J_p - d, Eq. 6) | inverse (1/d)")
