@@ -60,24 +60,23 @@ def train_and_score(capture: Path, run: Path, minutes: float, sets: list[str], a
             log,
         )
         done.write_text(f"{minutes}\n")
-    report = run / "eval"
+    return {"minutes": minutes, "steps": int(load_checkpoint(ckpt)["step"]), "sets": sets} | score(
+        ckpt, capture, run / "eval", args, log
+    )
+
+
+def score(ckpt: Path, capture: Path, report: Path, args, log: Path) -> dict:
+    """``texvocab eval`` of ``ckpt`` into ``report`` (reused when there; ``--per-set`` and
+    ``--preset`` from ``args``): the novel set's row and its per-image bbox PSNR by
+    (frame, view) or index."""
     if not (report / "metrics.json").is_file():
         per_set = [] if args.per_set is None else ["--per-set", str(args.per_set)]
         preset = [] if args.preset is None else ["--preset", args.preset]
         _run([*TEXVOCAB, "eval", str(ckpt), str(capture), "--out", str(report), *per_set, *preset], log)
     metrics = json.loads((report / "metrics.json").read_text())
-    per_image = {
-        (r.get("frame", r["index"]), r.get("view", 0)): r["psnr_bbox"]
-        for r in metrics["images"]
-        if r["set"] == SET
-    }
-    return {
-        "minutes": minutes,
-        "steps": int(load_checkpoint(ckpt)["step"]),
-        "sets": sets,
-        "row": metrics["table"][SET],
-        "per_image": per_image,
-    }
+    images = [r for r in metrics["images"] if r["set"] == SET]
+    per_image = {(r.get("frame", r["index"]), r.get("view", 0)): r["psnr_bbox"] for r in images}
+    return {"row": metrics["table"][SET], "per_image": per_image}
 
 
 def paired(short: dict, reference: dict) -> dict:

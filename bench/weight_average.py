@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from train_budget import SET, TEXVOCAB, _run
+from train_budget import TEXVOCAB, _run, score
 
 from texvocab.io.checkpoint import load_checkpoint, save_checkpoint
 from texvocab.io.images import atomic_write_bytes
@@ -40,19 +40,6 @@ def raw_checkpoint(ckpt: Path, dest: Path) -> None:
     del ck[TRAINED_KEY]
     ck["settings"]["train"]["weight_average"] = 0.0
     save_checkpoint(dest, ck)
-
-
-def score(ckpt: Path, capture: Path, report: Path, args, log: Path) -> dict:
-    """``texvocab eval`` of ``ckpt`` into ``report`` (reused when there): the novel set's
-    row and its per-image bbox PSNR by (frame, view) or index."""
-    if not (report / "metrics.json").is_file():
-        per_set = [] if args.per_set is None else ["--per-set", str(args.per_set)]
-        preset = [] if args.preset is None else ["--preset", args.preset]
-        _run([*TEXVOCAB, "eval", str(ckpt), str(capture), "--out", str(report), *per_set, *preset], log)
-    metrics = json.loads((report / "metrics.json").read_text())
-    images = [r for r in metrics["images"] if r["set"] == SET]
-    per_image = {(r.get("frame", r["index"]), r.get("view", 0)): r["psnr_bbox"] for r in images}
-    return {"row": metrics["table"][SET], "per_image": per_image}
 
 
 def main(argv: list[str] | None = None) -> int:
