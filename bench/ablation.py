@@ -102,6 +102,8 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "lr": {"constant": [], "decay to 0.1": ["lr_decay=0.1"]},
     "beta_lr": {"β at the rate": [], "β at 10× the rate": ["beta_lr_scale=10"]},
     "shell": {"base shell": [], "8 cm": ["field.shell_width=0.08"]},
+    # how x_c enters the SDF network: γ(x_c), or γ(x_c) and learned planes over the body
+    "position": {"γ(x_c)": [], "tri-planes": ["field.position_encoding=triplane"]},
     # the body's surface as fitted, or moved out to the training masks (clothes off the body)
     "girth": {"body as fitted": [], "girth from the masks": ["data.body_girth=masks"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},

@@ -29,9 +29,14 @@ from texvocab.knobs import Check, at_least, check_group, count_in, knob, within
 from texvocab.method.feature import PoseContext, PoseFeature
 from texvocab.method.field_precision import PRECISIONS, resolve_precision  # noqa: F401 (PRECISIONS: re-exported)
 from texvocab.method.frozen_mlps import FrozenMLPs
+from texvocab.method.triplane import CanonicalTriplane, canonical_box
 from texvocab.torch_threads import one_torch_thread
 
 VIEW_FRAMES = ("world", "body")
+POSITION_ENCODINGS = ("frequencies", "triplane")
+#: the tri-plane's box: the canonical body's vertices widened by this on every side (m),
+#: more than the widest shell (12 cm) with room for a fitted body's rest shape
+TRIPLANE_MARGIN = 0.15
 
 
 @dataclass
@@ -74,6 +79,15 @@ class FieldSettings:
         doc="γ(d) reads the viewing direction in the world, or in the body's frame at the point "
         "(d_c = R⁻¹d, R the blended bone rotation): how the body faces the camera and lights",
     )
+
+    position_encoding: str = knob(
+        "frequencies",
+        Check(lambda v, g: v in POSITION_ENCODINGS, "one of " + ", ".join(POSITION_ENCODINGS)),
+        doc="how x_c enters the SDF network: γ(x_c) alone, or γ(x_c) and learned feature "
+        "planes over the canonical body (texvocab.method.triplane)",
+    )
+    triplane_resolution: int = knob(256, at_least(2), doc="texels on each side of a tri-plane")
+    triplane_channels: int = knob(8, at_least(1), doc="features of each of the three planes")
 
     def __post_init__(self) -> None:
         check_group(self)
@@ -150,7 +164,11 @@ class AvatarField(nn.Module):
         self.pose_feature = pose_feature
         self.body = pose_feature.body
         self.feature_proj = nn.Linear(pose_feature.feature_dim, s.feature_proj)
-        d_x = 3 * (1 + 2 * s.pos_freqs)
+        self.triplane = None
+        if s.position_encoding == "triplane":
+            lo, hi = canonical_box(self.body.v_template, TRIPLANE_MARGIN)
+            self.triplane = CanonicalTriplane(lo, hi, s.triplane_resolution, s.triplane_channels)
+        d_x = self.position_dim
         d_pose = 4 * self.body.num_joints
         self.sdf_net = _mlp(d_x + s.feature_proj + d_pose, s.hidden, s.sdf_layers, 1 + s.hidden)
         last = self.sdf_net[-1]
@@ -171,6 +189,18 @@ class AvatarField(nn.Module):
         if o.shape != self.girth.shape or not torch.isfinite(o).all():
             raise ValueError(f"girth: expected {self.girth.numel()} finite offsets (m), got {tuple(o.shape)}")
         self.girth.copy_(o)
+
+    @property
+    def position_dim(self) -> int:
+        """Width of the SDF network's position input :meth:`position_input`."""
+        width = 3 * (1 + 2 * self.settings.pos_freqs)
+        return width + (0 if self.triplane is None else self.triplane.out_dim)
+
+    def position_input(self, x_c: torch.Tensor) -> torch.Tensor:
+        """The SDF network's position input for canonical points (N, 3): γ(x_c), then the
+        tri-plane's features where the field has them; (N, position_dim)."""
+        enc = positional_encoding(x_c, self.settings.pos_freqs)
+        return enc if self.triplane is None else torch.cat([enc, self.triplane(x_c)], -1)
 
     @property
     def beta(self) -> torch.Tensor:
@@ -253,7 +283,7 @@ class AvatarField(nn.Module):
             x_c = self.canonicalize(ctx, x, out.skin_weights)
         if frozen is not None and not torch.is_grad_enabled():
             feat = frozen.project(out.features)
-            h = frozen.sdf_hidden(torch.cat([positional_encoding(x_c, s.pos_freqs).to(feat), feat], -1))
+            h = frozen.sdf_hidden(torch.cat([self.position_input(x_c).to(feat), feat], -1))
             color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs).to(h), feat.to(h)], -1)
             rgb = torch.sigmoid(frozen.color(color_in).to(points.dtype))
             sdf = d_body + h[:, 0].to(points.dtype) * valid
@@ -261,7 +291,7 @@ class AvatarField(nn.Module):
         dtype = resolve_precision(precision)
         with torch.autocast("cpu", dtype=dtype, enabled=dtype != torch.float32):
             feat = self.feature_proj(out.features.to(points.dtype))
-            h = self._sdf_hidden(ctx, torch.cat([positional_encoding(x_c, s.pos_freqs), feat.to(x_c)], -1))
+            h = self._sdf_hidden(ctx, torch.cat([self.position_input(x_c), feat.to(x_c)], -1))
             color_in = torch.cat([h[:, 1:], positional_encoding(d, s.dir_freqs).to(h), feat.to(h)], -1)
             rgb = torch.sigmoid(self.color_net(color_in).to(points.dtype))
         sdf = d_body + h[:, 0].to(points.dtype) * valid

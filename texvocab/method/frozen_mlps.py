@@ -34,7 +34,7 @@ class FrozenMLPs:
         self.params = list(field.parameters())
         self.versions = self._versions()
         s = field.settings
-        d_x = 3 * (1 + 2 * s.pos_freqs) + s.feature_proj
+        d_x = field.position_dim + s.feature_proj
         with torch.no_grad(), torch.autocast("cpu", dtype=self.dtype, enabled=self.dtype != torch.float32):
             first_w, first_b = field.first_sdf_layer(ctx, d_x)  # the bias as the field folds it
         self._proj = self._layers(nn.Sequential(field.feature_proj))

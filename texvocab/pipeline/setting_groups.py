@@ -241,6 +241,11 @@ class TrainSettings:
         doc="VolSDF's β learns at this multiple of train.lr (its own optimiser group when not 1): "
         "how fast the surface sharpens",
     )
+    triplane_lr_scale: float = knob(
+        20.0,
+        above(0),
+        doc="the tri-plane's features (field.position_encoding=triplane) learn at this multiple of train.lr",
+    )
     lr_decay: float = knob(
         1.0,
         within(0, 1, open_low=True),

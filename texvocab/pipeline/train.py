@@ -37,6 +37,7 @@ from texvocab.pipeline.girth_fit import CHECKPOINT_KEY as GIRTH_KEY
 from texvocab.pipeline.girth_fit import apply_stored_girth, fit_girth
 from texvocab.pipeline.lr_schedule import LearningRateSchedule
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures, train_views
+from texvocab.pipeline.param_groups import optimizer_groups
 from texvocab.pipeline.perceptual_term import perceptual_term
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
@@ -78,17 +79,7 @@ class Trainer:
             self.model = build_model(capture, settings, self.textures)
         if self.girth_fit is not None:
             self.model.set_girth(self.girth_fit.offsets)
-        beta = self.model.log_beta
-        scale = settings.train.beta_lr_scale
-        groups = [
-            {
-                "params": [
-                    p for p in self.model.parameters() if p.requires_grad and (p is not beta or scale == 1)
-                ]
-            }
-        ]
-        if scale != 1:  # β in a group of its own (a checkpoint's group layout follows the setting)
-            groups.append({"params": [beta], "lr": settings.train.lr * scale})
+        groups = optimizer_groups(self.model, settings.train)
         self.refine = None  # per-frame pose corrections (train.pose_refinement)
         if settings.train.pose_refinement != "off":
             self.refine = PoseRefinement(
