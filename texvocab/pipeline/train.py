@@ -42,6 +42,7 @@ from texvocab.pipeline.perceptual_term import perceptual_term
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
 from texvocab.pipeline.shell_fit import fit_shell
+from texvocab.pipeline.train_log import TrainLog
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
 from texvocab.pipeline.weight_average import TRAINED_KEY, WeightAverage
 from texvocab.render import render_rays_banded
@@ -96,6 +97,7 @@ class Trainer:
         self.gen = torch.Generator().manual_seed(settings.train.seed)
         self.step = 0
         self.saved_step: int | None = None  # the step the checkpoint on disk holds
+        self.log_rows = TrainLog(self.out)  # RUN/train_log.csv, written with each checkpoint
         self.march = march_settings(settings, training=True)
         self.rays = TrainingRays(capture, settings, self.model, self.march)
         self.progress = progress
@@ -274,6 +276,12 @@ class Trainer:
                 raise
             raise disk_full_error(self.checkpoint_path, e, self._kept()) from None
         self.saved_step = self.step
+        try:
+            self.log_rows.write()
+        except OSError as e:
+            if not is_disk_full(e):
+                raise
+            raise disk_full_error(self.log_rows.path, e, self._kept()) from None
         return self.checkpoint_path
 
     def _kept(self) -> str:
@@ -326,6 +334,7 @@ class Trainer:
         self.schedule.load(ck.get("lr_schedule"))
         self.gen.set_state(ck["rng"]["torch"])
         self.step = self.saved_step = int(ck["step"])
+        self.log_rows.resume(self.step)
         return True
 
     def run(self, until: int | None = None) -> list[dict]:
@@ -351,7 +360,7 @@ class Trainer:
                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s of "
                 "the time budget [{elapsed}<{remaining}{postfix}]",
             )
-        t0 = time.perf_counter()
+        t0, before = time.perf_counter(), self.log_rows.seconds
         self.schedule.begin(self.step, end, budget)
         try:  # the bar ends its line before any error line
             while self.step < end:
@@ -366,6 +375,7 @@ class Trainer:
                 lr = self.schedule.update(self.step, elapsed)
                 rec = self.train_step()
                 logs.append({**rec, "lr": lr})
+                self.log_rows.add(self.step, before + time.perf_counter() - t0, rec, lr)
                 if bar is not None:
                     if budget is None:
                         bar.update(1)
