@@ -134,3 +134,16 @@ def test_planes_and_beta_learn_at_their_own_rates():
     assert groups[2]["params"] == [field.triplane.planes] and groups[1]["params"] == [field.log_beta]
     plain = optimizer_groups(field, SimpleNamespace(lr=1e-3, beta_lr_scale=1.0, triplane_lr_scale=1.0))
     assert len(plain) == 1  # every part at the plain rate: one group, as before the planes
+
+
+def test_the_settings_are_checked():
+    from texvocab.errors import TexvocabError
+    from texvocab.pipeline.settings import Settings
+
+    s = Settings().with_overrides(["field.position_encoding=triplane", "train.triplane_lr_scale=5"])
+    assert s.field.position_encoding == "triplane" and s.train.triplane_lr_scale == 5
+    assert Settings().field.position_encoding == "frequencies"  # old checkpoints' meaning
+    with pytest.raises(TexvocabError, match="position_encoding"):
+        Settings().with_overrides(["field.position_encoding=hashgrid"])
+    with pytest.raises(TexvocabError, match="triplane_resolution"):
+        Settings().with_overrides(["field.triplane_resolution=1"])
