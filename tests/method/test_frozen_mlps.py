@@ -15,13 +15,14 @@ from texvocab.method.field import AvatarField, FieldSettings, NormalSoftplus
 from texvocab.method.vocab import Vocabulary
 
 
-@pytest.fixture(scope="module")
-def field():
+@pytest.fixture(scope="module", params=["frequencies", "triplane"])
+def field(request):
     body = default_body()
     vocab = Vocabulary.build(np.random.default_rng(0).normal(0, 0.2, (4, 24, 3)), num_keys=4, k=2)
     pf = PoseFeature(body, vocab, torch.rand(4, 3, 32, 32), build_encoder("small"))
     torch.manual_seed(0)
-    f = AvatarField(pf, FieldSettings(hidden=32))
+    # both position encodings: γ(x_c) alone, and with tri-plane features (texvocab.method.triplane)
+    f = AvatarField(pf, FieldSettings(hidden=32, position_encoding=request.param, triplane_resolution=16))
     with torch.no_grad():  # a trained-looking field: the residual's last layer away from zero
         for p in f.parameters():
             p.add_(0.3 * torch.randn_like(p))

@@ -1,6 +1,7 @@
 """Tri-plane position features (texvocab.method.triplane, field.position_encoding=triplane):
 bilinear in each plane, exact first and second derivatives in x_c, a new field that starts
-as the plain one, the render path's numbers, and the planes' own learning rate."""
+as the plain one, and the planes' own learning rate (the render path's numbers:
+test_frozen_mlps.py)."""
 
 from types import SimpleNamespace
 
@@ -105,23 +106,6 @@ def test_a_new_triplane_field_starts_as_the_plain_one():
     with torch.no_grad():
         tri.triplane.planes.normal_(0, 1)
     assert not torch.allclose(tri.sdf_and_color(ctx, pts, dirs)[0], a[0], atol=1e-3)  # the planes count
-
-
-@pytest.mark.parametrize("precision", ["bfloat16", "float32"])
-def test_the_render_path_gives_the_triplane_fields_numbers(precision):
-    field = _field(FieldSettings(hidden=32, position_encoding="triplane", triplane_resolution=16)).eval()
-    with torch.no_grad():
-        for p in field.parameters():
-            p.add_(0.3 * torch.randn_like(p))
-    ctx = field.pose_feature.context(*preset("squat"))
-    pts, dirs = _points(ctx)
-    pose_field = field.for_pose(ctx, precision)
-    with torch.no_grad():
-        assert pose_field.frozen() is not None
-        sdf, rgb = pose_field.sdf_rgb(pts, dirs)
-        ref_sdf, ref_rgb, valid = field.sdf_and_color(ctx, pts, dirs, precision)
-    assert valid.sum() > 100
-    assert torch.equal(sdf[valid], ref_sdf[valid]) and torch.equal(rgb, ref_rgb)
 
 
 def test_planes_and_beta_learn_at_their_own_rates():
