@@ -25,8 +25,9 @@ knobs, with the field's MLPs in ``--new-precision`` (by default ``auto``: bfloat
 CPU has bf16 units, float32 where torch would emulate them), activations free
 of subnormal numbers, ``NormalSoftplus``, and ``surface_reuse``: the field's projection
 takes the closest faces the raster and the residual rays' mesh queries found);
-``previous``: the default path as it was before any of that, the yardstick for the
-frame's speed (float32 MLPs with torch's nn.Softplus, and ``BEFORE``:
+``previous``: the default path as it was before any of that, switched back inside
+today's code (``bench/render_against.py`` times an older checkout's own code instead)
+(float32 MLPs with torch's nn.Softplus, and ``BEFORE``:
 ``surface_reuse=false``, every point searched; ``residual_groups=1``, the residual rays'
 quadrature in one padded array; ``fallback_segment=8``; and the closest-face search's
 kernel as it was, ``nearest_faces_plain``, and the residual rays' mesh samples in padded torch
