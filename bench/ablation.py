@@ -16,7 +16,8 @@ weights exist), ``weighting`` (paper, inverse), ``views`` (texture maps: mean, c
 nearest), ``view_frame`` (γ(d) in the world or the body's frame), ``mask`` (λ_m 0.1, 0.5),
 ``beta`` (VolSDF β at the start of training: 5, 2 mm), ``texture`` (texture maps of
 256² or 512² texels), ``lr`` (the learning rate constant, or decayed to 0.1 of it over
-the run), ``shell`` (the base's shell, or 8 cm wide),
+the run), ``shell`` (the base's shell, or 8 cm wide), ``coverage`` (the shell fitted to 97 % or 99 % of
+the training masks' pixels),
 ``refinement`` (pose refinement: off, root, joints), ``training`` (train_guide: shell,
 raster; its report adds the training PSNR curve per 100 steps, paired by seed). The base
 is ``--base`` on top of the defaults (by default ``encoder=pyramid perceptual=off
@@ -102,6 +103,8 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "lr": {"constant": [], "decay to 0.1": ["lr_decay=0.1"]},
     "beta_lr": {"β at the rate": [], "β at 10× the rate": ["beta_lr_scale=10"]},
     "shell": {"base shell": [], "8 cm": ["field.shell_width=0.08"]},
+    # the shell fitted to reach 97 % of the training masks' pixels (the default) or 99 %
+    "coverage": {"97 % of the masks": [], "99 % of the masks": ["field.shell_coverage=0.99"]},
     # how x_c enters the SDF network: γ(x_c), or γ(x_c) and learned planes over the body
     "position": {"γ(x_c)": [], "tri-planes": ["field.position_encoding=triplane"]},
     # the body's surface as fitted, or moved out to the training masks (clothes off the body)
