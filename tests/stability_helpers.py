@@ -4,7 +4,7 @@ field), cameras around a posed body, and finiteness checks for values and gradie
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -20,7 +20,16 @@ from texvocab.render import MarchSettings, ShellGeometry, render_rays
 
 NUM_FRAMES = 6
 TEXTURE_SIZE = 32
-FIELD = FieldSettings(hidden=32, sdf_layers=2, color_layers=1, pos_freqs=4, dir_freqs=2, feature_proj=16)
+FIELD = FieldSettings(
+    hidden=32,
+    sdf_layers=2,
+    color_layers=1,
+    pos_freqs=4,
+    dir_freqs=2,
+    feature_proj=16,
+    position_encoding="frequencies",
+    triplane_resolution=16,
+)
 #: the trainer's march (all coarse samples in one call), small enough for tests
 MARCH = MarchSettings.from_flat(coarse_samples=8, fine_samples=4, segment=512, scout_threshold=None)
 
@@ -48,11 +57,13 @@ def make_field(
     textures: torch.Tensor | None = None,
     encoder: nn.Module | str = "small",
     seed: int = 0,
+    position_encoding: str = "frequencies",
 ) -> AvatarField:
     """An AvatarField over ``vocab`` with random (seeded) 32² textures unless given.
 
     The SDF net's last layer, zero at initialisation, is randomised like a trained one's,
-    so the SDF residual and the pose conditioning take part in every value and gradient.
+    so the SDF residual and the pose conditioning take part in every value and gradient;
+    so are the tri-plane features with ``position_encoding="triplane"`` (16² planes).
     """
     gen = torch.Generator().manual_seed(seed)
     if textures is None:
@@ -64,6 +75,28 @@ def make_field(
         with torch.no_grad():
             field.sdf_net[-1].weight.normal_(0.0, 0.05, generator=gen)
             field.sdf_net[-1].bias.normal_(0.0, 0.01, generator=gen)
+    if position_encoding == "frequencies":
+        return field
+    return with_triplane(field, position_encoding, gen)
+
+
+def with_triplane(plain: AvatarField, position_encoding: str, gen: torch.Generator) -> AvatarField:
+    """``plain`` with tri-plane features added: the same weights (the SDF network's first
+    layer gains the planes' input columns), the planes random (σ 0.01), so the field is the
+    plain one's geometry plus features that take part in every value and gradient."""
+    settings = replace(FIELD, position_encoding=position_encoding)
+    field = AvatarField(plain.pose_feature, settings)
+    d = plain.position_dim
+    with torch.no_grad():
+        source = dict(plain.named_parameters())
+        for name, p in field.named_parameters():
+            if name.startswith("triplane"):
+                p.normal_(0.0, 0.01, generator=gen)
+            elif name == "sdf_net.0.weight":  # the planes' columns keep their initial values
+                p[:, :d] = source[name][:, :d]
+                p[:, field.position_dim :] = source[name][:, d:]
+            else:
+                p.copy_(source[name])
     return field
 
 

@@ -79,7 +79,7 @@ def _points(ctx, n=500):
 
 
 def test_a_new_triplane_field_starts_as_the_plain_one():
-    plain = _field(FieldSettings(hidden=32))
+    plain = _field(FieldSettings(hidden=32, position_encoding="frequencies"))
     tri = _field(FieldSettings(hidden=32, position_encoding="triplane", triplane_resolution=16))
     lo, hi = canonical_box(plain.body.v_template, 0.15)
     assert torch.equal(tri.triplane.lo, lo) and torch.equal(tri.triplane.hi, hi)
@@ -131,3 +131,13 @@ def test_the_settings_are_checked():
         Settings().with_overrides(["field.position_encoding=hashgrid"])
     with pytest.raises(TexvocabError, match="triplane_resolution"):
         Settings().with_overrides(["field.triplane_resolution=1"])
+
+
+def test_a_non_finite_point_reads_a_finite_feature_and_the_lookup_stays_in_the_table():
+    tri = CanonicalTriplane(torch.zeros(3), torch.ones(3), 4, 2)
+    with torch.no_grad():
+        tri.planes.normal_()
+    x = torch.tensor([[float("nan"), 0.5, 0.5], [float("inf"), -float("inf"), 0.5], [0.5, 0.5, 0.5]])
+    out = tri(x)
+    assert out.shape == (3, 6) and torch.isfinite(out).all()
+    assert torch.equal(out[1], tri(torch.tensor([[1.0, 0.0, 0.5]]))[0])  # ±inf: the box's edge

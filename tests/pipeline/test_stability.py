@@ -62,11 +62,12 @@ def vocab():
     return Vocabulary.build(training_poses(), "part", num_keys=4, k=3)
 
 
-@pytest.fixture(scope="module")
-def avatar(body, vocab):
-    """The avatar with the default no-weights encoder (frozen texture pyramid); trainable
-    encoders are exercised by the texture tests."""
-    return make_field(body, vocab, encoder="pyramid")
+@pytest.fixture(scope="module", params=["frequencies", "triplane"])
+def avatar(body, vocab, request):
+    """The avatar with the default no-weights encoder (frozen texture pyramid), with either
+    position encoding (γ(x_c) alone, or with tri-plane features); trainable encoders are
+    exercised by the texture tests."""
+    return make_field(body, vocab, encoder="pyramid", position_encoding=request.param)
 
 
 def uniform_pose(angle: float) -> np.ndarray:

@@ -54,6 +54,9 @@ class CanonicalTriplane(nn.Module):
         """Features of canonical points x_c (N, 3): (N, 3 * channels), in x_c's dtype."""
         r = self.resolution
         u = ((x_c - self.lo.to(x_c)) / (self.hi - self.lo).to(x_c)).clamp(0.0, 1.0) * (r - 1)
+        # a non-finite x_c (a diverged run) reads the box's corner here, so that the lookup
+        # stays in the table; γ(x_c) still carries the NaN to the SDF, and the loss reads it
+        u = torch.nan_to_num(u, nan=0.0)
         cell = u.detach().floor().clamp(max=r - 2)
         frac = u - cell  # (N, 3), differentiable in x_c
         cell = cell.long()
