@@ -106,7 +106,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     # the shell fitted to reach 97 % of the training masks' pixels (the default) or 99 %
     "coverage": {"97 % of the masks": [], "99 % of the masks": ["field.shell_coverage=0.99"]},
     # how x_c enters the SDF network: γ(x_c), or γ(x_c) and learned planes over the body
-    "position": {"γ(x_c)": [], "tri-planes": ["field.position_encoding=triplane"]},
+    "position": {"tri-planes": [], "γ(x_c) alone": ["field.position_encoding=frequencies"]},
     # the body's surface as fitted, or moved out to the training masks (clothes off the body)
     "girth": {"body as fitted": [], "girth from the masks": ["data.body_girth=masks"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},

@@ -126,11 +126,19 @@ def test_the_settings_are_checked():
 
     s = Settings().with_overrides(["field.position_encoding=triplane", "train.triplane_lr_scale=5"])
     assert s.field.position_encoding == "triplane" and s.train.triplane_lr_scale == 5
-    assert Settings().field.position_encoding == "frequencies"  # old checkpoints' meaning
+    assert Settings().field.position_encoding == "triplane"
     with pytest.raises(TexvocabError, match="position_encoding"):
         Settings().with_overrides(["field.position_encoding=hashgrid"])
     with pytest.raises(TexvocabError, match="triplane_resolution"):
         Settings().with_overrides(["field.triplane_resolution=1"])
+
+
+def test_a_checkpoint_from_before_the_planes_keeps_its_plain_field():
+    from texvocab.pipeline.settings import Settings
+
+    d = Settings().to_dict()
+    del d["field"]["position_encoding"]
+    assert Settings.from_dict(d).field.position_encoding == "frequencies"
 
 
 def test_a_non_finite_point_reads_a_finite_feature_and_the_lookup_stays_in_the_table():

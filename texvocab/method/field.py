@@ -81,7 +81,7 @@ class FieldSettings:
     )
 
     position_encoding: str = knob(
-        "frequencies",
+        "triplane",
         Check(lambda v, g: v in POSITION_ENCODINGS, "one of " + ", ".join(POSITION_ENCODINGS)),
         doc="how x_c enters the SDF network: γ(x_c) alone, or γ(x_c) and learned feature "
         "planes over the canonical body (texvocab.method.triplane)",

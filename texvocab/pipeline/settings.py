@@ -132,6 +132,7 @@ LEGACY: dict[str, object] = {
     "field.shell_coverage": None,
     "train.lr_decay": 1.0,
     "data.body_girth": "none",
+    "field.position_encoding": "frequencies",
 }
 
 
