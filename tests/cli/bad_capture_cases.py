@@ -130,7 +130,7 @@ CAPTURE_CASES = [
     # calibration that cannot be a camera, named by annots.npy's field
     ("calib-K-last-row-zero", _vocab("k_row", _set("K", 2, 0.0)), "cams['K'][0]: last row"),
     ("calib-K-lower-triangle", _vocab("k_low", _set("K", (1, 0), 3.0)), "upper-triangular"),
-    ("calib-focal-negative", _vocab("k_neg", _set("K", (0, 0), -50.0)), "expected both > 0"),
+    ("calib-focal-negative", _vocab("k_neg", _set("K", (0, 0), -50.0)), "expected both between"),
     ("calib-skew-1e6", _vocab("skew", _set("K", (0, 1), 1e6)), "skew K[0][1] = 1e+06 px"),
     ("calib-distortion-1e6", _vocab("dist", _set("D", 0, 1e6)), "cams['D'][0]: "),
     ("calib-R-not-rotation", _vocab("r_scaled", _set("R", (0, 0), 3.0)), "cams['R'][0]: is not a rotation"),

@@ -26,6 +26,9 @@ MAX_SKEW = 0.1
 #: fx and fy at most this many times the image's longest side (a 1000 mm lens on a
 #: full-frame 8K sensor is about 28 times).
 MAX_FOCAL_SIDES = 100.0
+#: ... and at least this fraction of it (a pinhole seeing 180° has fx near 0; below this,
+#: rays are numerically degenerate: fx = 1e-308 gave NaN directions).
+MIN_FOCAL_SIDES = 0.01
 #: The lens model may move no pixel of the image by more than this fraction of its diagonal.
 MAX_DISTORTION_SHIFT = 0.25
 #: The subject's centre must be this far in front of a camera, in metres.
@@ -90,13 +93,14 @@ def _check_intrinsics(cam: Camera, source: str, field: str) -> None:
     if abs(K[1, 0]) > K_TOL * max(1.0, abs(fy)):
         raise _fail(source, cam, field, f"K[1][0] is {K[1, 0]:g}; expected 0 (K is upper-triangular)")
     side = max(cam.width, cam.height)
-    if not (0 < fx <= MAX_FOCAL_SIDES * side and 0 < fy <= MAX_FOCAL_SIDES * side):
+    lo, hi = MIN_FOCAL_SIDES * side, MAX_FOCAL_SIDES * side
+    if not (lo <= fx <= hi and lo <= fy <= hi):
         raise _fail(
             source,
             cam,
             field,
-            f"focal lengths {fx:g}, {fy:g} px; expected both > 0 and at most "
-            f"{MAX_FOCAL_SIDES:g} x the image's longest side ({MAX_FOCAL_SIDES * side:g} px)",
+            f"focal lengths {fx:g}, {fy:g} px; expected both between {MIN_FOCAL_SIDES:g} and "
+            f"{MAX_FOCAL_SIDES:g} x the image's longest side ({lo:g} to {hi:g} px)",
         )
     if abs(skew) > MAX_SKEW * fx:
         raise _fail(
