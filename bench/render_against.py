@@ -136,7 +136,7 @@ def main(argv=None) -> int:
         (s_new, e_new), (s_old, e_old) = best["new"][i], best["baseline"][i]
         rows.append((s_new, s_old, e_new, e_old, p_new, p_old))
         print(
-            f"| {label} | {rows[-1][0]:.3f} | {rows[-1][1]:.3f} | {rows[-1][2]:,} | {rows[-1][3]:,} | "
+            f"| {label} | {s_new:.3f} | {s_old:.3f} | {e_new:,} | {e_old:,} | "
             f"{p_new:.3f} | {p_old:.3f} | {min(p_pair, 99.0):.2f} dB |"
         )
     m = np.mean(np.array(rows, np.float64), 0)
