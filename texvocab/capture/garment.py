@@ -16,7 +16,8 @@ import numpy as np
 import torch
 
 from texvocab.body.poses import J
-from texvocab.geometry.rotations import quat_multiply, quat_to_rotmat, rotvec_to_quat
+from texvocab.capture.cloth_slide import slide_offsets
+from texvocab.geometry.rotations import bend_twist
 from texvocab.geometry.uv import texel_map
 
 SKIN = np.array([0.86, 0.66, 0.53])
@@ -141,16 +142,8 @@ def fold_intensity(
     total = np.zeros(local["_count"][0])
     for s in local["_sources"]:
         near, bone, along, rad, azim = local[s.name]
-        q = rotvec_to_quat(pose[list(s.joints)])
-        qc = q[0]
-        for k in range(1, len(q)):
-            qc = quat_multiply(qc, q[k])
-        R = quat_to_rotmat(qc).numpy()
-        moved = R @ bone
+        bend, twist, moved = bend_twist(pose[list(s.joints)], bone)
         cos_b = float(np.clip(moved @ bone, -1, 1))
-        bend = np.arccos(cos_b)
-        twist = 2 * np.arctan2(float(qc[1:].numpy() @ bone), float(qc[0]))
-        twist = (twist + np.pi) % (2 * np.pi) - np.pi
         fold = np.zeros(len(near))
         if bend > 1e-3:
             n = moved - cos_b * bone
@@ -205,8 +198,10 @@ class Garment:
         """Per texel: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""
         return regions(self.points, self.weights, self.joints)
 
-    def _paint_albedo(self) -> np.ndarray:
-        p, jnt = self.points, self.joints
+    def _paint_albedo(self, pattern_points: np.ndarray | None = None) -> np.ndarray:
+        """(size, size, 3) the static albedo; ``pattern_points`` (N, 3), where each
+        texel's pattern is read (default its rest point; regions stay at the rest points)."""
+        p, jnt = (self.points if pattern_points is None else pattern_points), self.joints
         region = self._regions()
         col = np.zeros((len(p), 3))
         x, y, z = p.T
@@ -243,12 +238,22 @@ class Garment:
         col[shoe & sole] = SOLE
         return self._to_image(np.clip(col, 0, 1)).astype(np.float32)
 
+    def albedo_at(self, pose, slide: float) -> np.ndarray:
+        """(size, size, 3) the albedo with the cloth slid ``slide`` metres at full bend
+        for a pose (24, 3) (:mod:`texvocab.capture.cloth_slide`); the static albedo at 0."""
+        if slide == 0:
+            return self.albedo
+        region = self._regions()
+        offsets = slide_offsets(self.points, region, self.joints, np.asarray(pose, np.float64), slide)
+        return self._paint_albedo(self.points - offsets)
+
     # -- pose-dependent folds ----------------------------------------------------------
     def fold_map(self, pose) -> np.ndarray:
         """(size, size) crease intensity in [0, 1] for a pose (24, 3) axis-angle."""
         return self._to_image(np.clip(fold_intensity(self._local, pose), 0, 1)).astype(np.float32)
 
-    def texture(self, pose) -> np.ndarray:
-        """(size, size, 3) float32 albedo with the pose's folds (row 0 = v = 1)."""
+    def texture(self, pose, slide: float = 0.0) -> np.ndarray:
+        """(size, size, 3) float32 albedo with the pose's folds (row 0 = v = 1), its
+        pattern slid ``slide`` metres at full bend (:meth:`albedo_at`)."""
         folds = self.fold_map(pose)[..., None]
-        return np.clip(self.albedo * (1.0 - 0.75 * folds), 0, 1)
+        return np.clip(self.albedo_at(pose, slide) * (1.0 - 0.75 * folds), 0, 1)

@@ -51,6 +51,7 @@ class SynthSettings:
     target_y: float = -0.3
     lighting: bool = True  # False: unlit albedo (tests compare texture maps to it)
     garment: str = DEFAULT_GARMENT  # texvocab.capture.garment_sets
+    cloth_slide: float = 0.0  # metres at full bend (texvocab.capture.cloth_slide); 0: cloth stays put
     # texvocab.capture.synth_realism (all 0: the truth, clean images)
     fit_noise_deg: float = 0.0
     fit_noise_trans: float = 0.0
@@ -133,11 +134,12 @@ class SynthRenderer:
             out = self.body.forward(torch.as_tensor(pose)[None], torch.as_tensor(trans)[None])
             verts = out.vertices[0].double().numpy()
             normals = trimesh.Trimesh(verts, self.body.faces.numpy(), process=False).vertex_normals
-            tex = self.garment.texture(fold_pose)
+            tex = self.garment.texture(fold_pose, self.settings.cloth_slide)
             positions, normals, uv, faces = verts[self.vidx], normals[self.vidx], self.uv, self.rfaces
         else:  # cloth geometry: folds are ridges of the surface, the albedo is static
             positions, normals = self.cloth.posed(pose, trans, fold_pose)
-            tex, uv, faces = self.garment.albedo, self.cloth.uv, self.cloth.faces
+            tex = self.garment.albedo_at(fold_pose, self.settings.cloth_slide)
+            uv, faces = self.cloth.uv, self.cloth.faces
         # pyrender samples row 0 at v = 1, the project's convention (texvocab.geometry.uv).
         texture = pr.Texture(source=(tex * 255 + 0.5).astype(np.uint8), source_channels="RGB")
         material = pr.MetallicRoughnessMaterial(

@@ -73,6 +73,15 @@ def add_synth_parser(sub, add_smpl) -> None:
         "docs/data.md, 'Garments')",
     )
     p.add_argument(
+        "--cloth-slide",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="the garment's pattern slides over the body with each part's bend, up to M "
+        "metres at the cuffs and hems (default 0: the cloth stays put; docs/data.md, "
+        "'Garments')",
+    )
+    p.add_argument(
         "--fit-noise-deg",
         type=float,
         default=0.0,
@@ -119,9 +128,17 @@ def cmd_synth(args: argparse.Namespace) -> int:
         raise TexvocabError("--raised-views and --train-frames must not be negative")
     realism = {
         k: getattr(args, k, 0.0)
-        for k in ("fit_noise_deg", "fit_noise_trans", "exposure_sd", "white_balance_sd", "sensor_noise")
+        for k in (
+            "fit_noise_deg",
+            "fit_noise_trans",
+            "exposure_sd",
+            "white_balance_sd",
+            "sensor_noise",
+            "cloth_slide",
+        )
     }
-    bad = [k for k, v in realism.items() if not 0.0 <= v <= (1.0 if k == "sensor_noise" else 90.0)]
+    limits = {"sensor_noise": 1.0, "cloth_slide": 0.2}
+    bad = [k for k, v in realism.items() if not 0.0 <= v <= limits.get(k, 90.0)]
     if bad:
         flag = "--" + bad[0].replace("_", "-")
         raise TexvocabError(f"{flag} {realism[bad[0]]}: expected a value >= 0 (and a sensible size)")

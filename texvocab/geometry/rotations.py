@@ -231,3 +231,19 @@ def rotvec_distance(r1: ArrayLike, r2: ArrayLike) -> Tensor:
     """:func:`quat_distance` between axis-angle rotations ``(..., 3)`` (broadcast)."""
     r1, r2, batch = _flatten_pair(r1, r2, ("r1", "r2"), (3,))
     return _quat_distance(_rotvec_to_quat(r1), _rotvec_to_quat(r2)).reshape(batch)
+
+
+def bend_twist(rotvecs: ArrayLike, bone: ArrayLike) -> tuple[float, float, np.ndarray]:
+    """How a bone turns under a chain of rotations: ``rotvecs`` (K, 3) axis-angle composed
+    in order (``q_0 q_1 ... q_K-1``), ``bone`` (3,) a unit vector. Returns (bend, twist,
+    moved): the angle in radians between the bone and its image, the signed rotation about
+    the bone in (-pi, pi], and the image (3,)."""
+    q = rotvec_to_quat(as_tensor(rotvecs, torch.float64).reshape(-1, 3))
+    qc = q[0]
+    for k in range(1, len(q)):
+        qc = quat_multiply(qc, q[k])
+    bone = np.asarray(bone, np.float64)
+    moved = quat_to_rotmat(qc).numpy() @ bone
+    bend = float(np.arccos(np.clip(moved @ bone, -1.0, 1.0)))
+    twist = 2 * np.arctan2(float(qc[1:].numpy() @ bone), float(qc[0]))
+    return bend, float((twist + np.pi) % (2 * np.pi) - np.pi), moved
