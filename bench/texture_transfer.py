@@ -68,6 +68,15 @@ def format_table(table: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def training_maps(cap, s: Settings) -> tuple[torch.Tensor, torch.Tensor]:
+    """The training frames' texture maps (T, 3, S, S) as back-projected (unseen texels 0)
+    and their coverage (T, S, S), built into the capture's texture cache if need be."""
+    paths = prepare_texture_maps(cap, texmap_settings(cap, s), progress=True)
+    maps = [load_texture_map(p) for p in paths]
+    raw = torch.stack([torch.from_numpy(t).permute(2, 0, 1) for t, _ in maps])
+    return raw, torch.stack([torch.from_numpy(c) for _, c in maps])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("capture", type=Path)
@@ -82,10 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     cap = open_capture(args.capture)
     if cap.body.vt is None:
         sys.exit(f"error: {args.capture}: its body has no UV layout")
-    paths = prepare_texture_maps(cap, texmap_settings(cap, s), progress=True)
-    maps = [load_texture_map(p) for p in paths]
-    raw = torch.stack([torch.from_numpy(t).permute(2, 0, 1) for t, _ in maps])
-    coverage = torch.stack([torch.from_numpy(c) for _, c in maps])
+    raw, coverage = training_maps(cap, s)
     filled = fill_unseen_texels(raw, coverage, s.data.unseen_texels).permute(0, 2, 3, 1).numpy()
     mean = mean_texture(raw, coverage).permute(1, 2, 0).numpy()
     vocab = build_vocabulary(cap, s)
