@@ -20,11 +20,9 @@ t's mask and rasterised body, inside frame t − d's mask, on texels frame t −
 - ``own map``: frame t's own map laid on its body (what back-projection keeps).
 
 Rows per offset, and per body region (the rasterised face's dominant joint: head, trunk,
-arms, legs); a last row per offset scores ``still`` on the static background (pixels 20 px
-or more outside both masks), the agreement noise alone leaves. Writes
-OUT/frame_motion.json; the last line printed is ``summary: d=… still=… fitted=… matched=…
-own=… frames=…`` for the largest offset, all regions. Nothing is written
-into CAPTURE except texvocab's texture cache.
+arms, legs). Writes OUT/frame_motion.json; the last line printed is ``summary: d=…
+still=… fitted=… matched=… own=… frames=…`` for the largest offset, all regions. Nothing
+is written into CAPTURE except texvocab's texture cache.
 """
 
 from __future__ import annotations
@@ -35,7 +33,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 from texture_transfer import training_maps
 
 from texvocab.capture import open as open_capture
@@ -49,7 +46,6 @@ COLUMNS = ("still", "fitted body", "block-matched", "own map")
 REGIONS = {"head": (12, 15), "trunk": (0, 3, 6, 9, 13, 14), "arms": tuple(range(16, 24))}
 REGIONS["legs"] = tuple(j for j in range(24) if not any(j in v for v in REGIONS.values()))
 MIN_PIXELS = 64
-BACKGROUND_MARGIN = 20  # px between the static background row's pixels and either mask
 
 
 def block_matched(
@@ -122,7 +118,7 @@ def measure(
     ``maps`` (T, S, S, 3) the training frames' maps (unseen texels filled), ``coverage``
     (T, S, S)."""
     size = maps.shape[1]
-    names = ("all", *REGIONS, "background")
+    names = ("all", *REGIONS)
     table: dict = {d: {name: {c: [] for c in COLUMNS} for name in names} for d in offsets}
     for t in frames:
         bv = body_view(capture, t, view, size)
@@ -134,10 +130,6 @@ def measure(
             mask_s = capture.mask(view, s) > 0.5
             sel = bv.interior & mask_s & seen
             source = capture.image(view, s)
-            either = (capture.mask(view, t) > 0.5) | mask_s
-            far = ~ndimage.binary_dilation(either, iterations=BACKGROUND_MARGIN)
-            if far.sum() >= MIN_PIXELS:  # the static scene: what noise alone leaves
-                table[d]["background"]["still"].append(_psnr(source[far], bv.image[far]))
             images = {
                 "still": source,
                 "fitted body": laid_on(bv, maps[s]),
