@@ -87,7 +87,12 @@ def test_synth_records_the_slide_and_the_truth_renders_it(tmp_path):
     assert np.abs(slid - rest)[mask].mean() > 0.01
 
 
-def test_command_line_refuses_a_slide_out_of_range(tmp_path, capsys):
+def test_command_line_sets_the_slide_and_refuses_one_out_of_range(tmp_path, capsys):
+    small = ["--frames", "2", "--size", "32", "--ring-views", "1", "--raised-views", "0"]
+    assert cli(["synth", str(tmp_path / "ok"), "--cloth-slide", "0.05", *small, "--texture-size", "64"]) == 0
+    meta = json.loads((tmp_path / "ok" / "texvocab_synth.json").read_text())
+    assert meta["settings"]["cloth_slide"] == 0.05
+    capsys.readouterr()
     assert cli(["synth", str(tmp_path / "cap"), "--cloth-slide", "0.5", "--frames", "1"]) != 0
     err = capsys.readouterr().err
     assert "error: --cloth-slide 0.5" in err and not (tmp_path / "cap").exists()
