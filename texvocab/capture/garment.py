@@ -185,6 +185,7 @@ class Garment:
         faces = body.faces.numpy()
         self.points = self.texels.points(body.v_template.double().numpy(), faces)
         self.weights = self.texels.interpolate(body.weights.double().numpy(), faces)
+        self.region = regions(self.points, self.weights, self.joints)  # fixed at rest
         self.albedo = self._paint_albedo()
         self._local = fold_localities(self.points, self.joints)
 
@@ -196,7 +197,7 @@ class Garment:
 
     def _regions(self) -> np.ndarray:
         """Per texel: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""
-        return regions(self.points, self.weights, self.joints)
+        return self.region
 
     def _paint_albedo(self, pattern_points: np.ndarray | None = None) -> np.ndarray:
         """(size, size, 3) the static albedo; ``pattern_points`` (N, 3), where each
@@ -243,8 +244,7 @@ class Garment:
         for a pose (24, 3) (:mod:`texvocab.capture.cloth_slide`); the static albedo at 0."""
         if slide == 0:
             return self.albedo
-        region = self._regions()
-        offsets = slide_offsets(self.points, region, self.joints, np.asarray(pose, np.float64), slide)
+        offsets = slide_offsets(self.points, self.region, self.joints, np.asarray(pose, np.float64), slide)
         return self._paint_albedo(self.points - offsets)
 
     # -- pose-dependent folds ----------------------------------------------------------
