@@ -2,7 +2,7 @@
 part a texture vocabulary can explain: each held-out image re-rendered (same geometry,
 same camera) with the clothing's folds of other poses, against the true image.
 
-    .venv/bin/python bench/pose_signal.py CAPTURE [--views 1 5]
+    .venv/bin/python bench/pose_signal.py CAPTURE [--views 1 5] [--avatar RUN/eval/metrics.json]
 
 Columns (PSNR in the mask's bounding box, dB, mean ± sem over novel frames x views):
 folds of the rest pose (no folds: the whole pose-dependent signal), folds of the nearest
@@ -12,7 +12,11 @@ can give; equal to the true pose when every part was seen). A model whose error 
 larger than the first column cannot show a difference between vocabularies at all. On a
 capture with fold regions (``texvocab synth`` stores them) a second row scores the same
 images on those pixels alone (PSNR, dB; texvocab.metrics.fold_region), over the images
-that have one.
+that have one. With ``--avatar``, a trained avatar's ``texvocab eval`` report on the same
+capture (its novel_poses set) is paired with each column image by image (same frame and
+view): the avatar's PSNR minus the column's, mean ± sem and the share of images where the
+avatar is ahead. The first column's difference is how far the avatar's whole error is
+below the pose-dependent signal.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("capture")
     ap.add_argument("--views", type=int, nargs="+", default=[1, 5])
+    ap.add_argument("--avatar", help="a texvocab eval metrics.json of an avatar trained on CAPTURE")
     args = ap.parse_args(argv)
 
     from texvocab.body.parts import BODY_PARTS
@@ -42,9 +47,16 @@ def main(argv=None) -> int:
     novel = list(cap.novel_frames)
     whole = sum(pairwise_part_distance(cap.poses[novel], train, j) for j in BODY_PARTS.values())
     nearest_whole = whole.argmin(1)
+    avatar = None if args.avatar is None else _avatar_images(args.avatar)
+    missing = [(t, v) for t in novel for v in args.views if avatar is not None and (t, v) not in avatar]
+    if missing:
+        raise SystemExit(
+            f"error: {args.avatar}: no novel_poses image for frame {missing[0][0]}, view {missing[0][1]}"
+        )
     rows = {"rest-pose folds": [], "nearest training frame's folds": [], "part-wise nearest folds": []}
     folds = FoldRegions.load(args.capture)
     on_folds = {name: [] for name in rows}
+    keys, fold_keys = [], []
     for i, t in enumerate(novel):
         assembled = np.zeros_like(cap.poses[t])
         for joints in BODY_PARTS.values():
@@ -66,6 +78,9 @@ def main(argv=None) -> int:
                 m = None if region is None else fold_region_metrics(img, gt, region)
                 if m is not None:
                     on_folds[name].append(m["psnr_fold"])
+                    if name == "rest-pose folds":
+                        fold_keys.append((t, v))
+        keys += [(t, v) for v in args.views]
     renderer.close()
     n = len(rows["rest-pose folds"])
     print(
@@ -81,7 +96,42 @@ def main(argv=None) -> int:
     n_fold = len(on_folds["rest-pose folds"])
     if n_fold:
         print(f"| fold regions ({n_fold} images) | " + " | ".join(cell(v) for v in on_folds.values()) + " |")
+    if avatar is not None:
+        _print_paired(avatar, rows, keys, on_folds, fold_keys)
     return 0
+
+
+def _avatar_images(path: str) -> dict:
+    """(frame, view) -> the novel_poses image row of a texvocab eval metrics.json."""
+    import json
+    from pathlib import Path
+
+    try:
+        images = json.loads(Path(path).read_text())["images"]
+    except (OSError, ValueError, KeyError) as e:
+        raise SystemExit(f"error: {path}: expected a texvocab eval metrics.json ({e})") from None
+    return {(r["frame"], r["view"]): r for r in images if r.get("set") == "novel_poses"}
+
+
+def _print_paired(avatar: dict, rows: dict, keys: list, on_folds: dict, fold_keys: list) -> None:
+    """Avatar minus each column, per image, on the bbox and on the fold pixels."""
+
+    def cell(diff) -> str:
+        d = np.asarray(diff)
+        return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f} ({(d > 0).mean():.0%})"
+
+    head = "| avatar − column, paired (ahead) | " + " | ".join(rows) + " |"
+    print("\n" + head + "\n" + "|---" * (len(rows) + 1) + "|")
+    ours = [avatar[k]["psnr_bbox"] for k in keys]
+    cells = " | ".join(cell(np.subtract(ours, v)) for v in rows.values())
+    print(f"| bbox ({len(keys)} images) | {cells} |")
+    fold = [avatar[k].get("psnr_fold") for k in fold_keys]
+    if fold_keys and None not in fold:
+        print(
+            f"| fold regions ({len(fold_keys)} images) | "
+            + " | ".join(cell(np.subtract(fold, v)) for v in on_folds.values())
+            + " |"
+        )
 
 
 if __name__ == "__main__":
