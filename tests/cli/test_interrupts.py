@@ -197,6 +197,31 @@ def test_an_interrupt_wrapped_by_an_extension_is_still_one_line(monkeypatch, cap
         cli.main(["synth", "x"])
 
 
+def test_a_stop_that_ctypes_wrapped_without_a_chain_is_still_one_line(monkeypatch, capsys):
+    """SIGTERM landing in ctypes' argument conversion (OSMesa's make-current) comes out
+    as a ctypes.ArgumentError with no cause: the recorded signal makes it one line and
+    status 143; the same error with no signal recorded is not swallowed."""
+    import ctypes
+
+    import texvocab.cli.main as cli
+    from texvocab.io.stop_flag import Terminated, note_stop
+
+    def wrapped(argv):
+        note_stop(Terminated)
+        raise ctypes.ArgumentError("argument 1: Terminated: ")
+
+    monkeypatch.setattr(cli, "run", wrapped)
+    assert cli.main(["synth", "x"]) == 143
+    assert capsys.readouterr().err.strip().splitlines() == ["error: terminated"]
+
+    def broken(argv):
+        raise ctypes.ArgumentError("argument 1: wrong type")
+
+    monkeypatch.setattr(cli, "run", broken)
+    with pytest.raises(ctypes.ArgumentError, match="wrong type"):
+        cli.main(["synth", "x"])
+
+
 @pytest.mark.parametrize("sig, kind", [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, "Terminated")])
 def test_a_swallowed_stop_signal_still_stops_the_next_write(tmp_path, sig, kind):
     """A library that catches every exception (trimesh's vertex normals do) swallows the

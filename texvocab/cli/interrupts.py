@@ -11,7 +11,7 @@ import sys
 import threading
 from collections.abc import Iterator
 
-from texvocab.io.stop_flag import Terminated, clear_stop, note_stop
+from texvocab.io.stop_flag import Terminated, clear_stop, note_stop, recorded_stop
 
 __all__ = ["Terminated", "interrupt_cause", "report_interrupt", "stop_signals"]
 
@@ -62,11 +62,13 @@ def report_interrupt(exc: KeyboardInterrupt) -> int:
 def interrupt_cause(exc: BaseException) -> KeyboardInterrupt | None:
     """The KeyboardInterrupt behind ``exc``, if one is in its chain of causes: a signal
     that lands inside a compiled extension (numba's dispatcher, for one) comes out as a
-    SystemError raised from the KeyboardInterrupt."""
+    SystemError raised from the KeyboardInterrupt. One that lands in ctypes' argument
+    conversion comes out as a ``ctypes.ArgumentError`` naming it, with no chain at all:
+    then the stop signal the handlers recorded is the cause."""
     seen: set[int] = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, KeyboardInterrupt):
             return exc
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
-    return None
+    return recorded_stop()

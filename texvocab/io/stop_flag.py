@@ -33,3 +33,8 @@ def raise_if_stopped() -> None:
     writer renames its output into place."""
     if _stopped:
         raise _stopped[0]()
+
+
+def recorded_stop() -> KeyboardInterrupt | None:
+    """The interrupt of the first stop signal recorded, or None."""
+    return _stopped[0]() if _stopped else None
