@@ -185,7 +185,8 @@ class Garment:
         faces = body.faces.numpy()
         self.points = self.texels.points(body.v_template.double().numpy(), faces)
         self.weights = self.texels.interpolate(body.weights.double().numpy(), faces)
-        self.region = regions(self.points, self.weights, self.joints)  # fixed at rest
+        # per texel, fixed at rest: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe
+        self.region = regions(self.points, self.weights, self.joints)
         self.albedo = self._paint_albedo()
         self._local = fold_localities(self.points, self.joints)
 
@@ -195,15 +196,11 @@ class Garment:
         # never blend in a background colour.
         return self.texels.to_image(values.astype(np.float64))
 
-    def _regions(self) -> np.ndarray:
-        """Per texel: 0 skin, 1 hair, 2 shirt, 3 pants, 4 shoe."""
-        return self.region
-
     def _paint_albedo(self, pattern_points: np.ndarray | None = None) -> np.ndarray:
         """(size, size, 3) the static albedo; ``pattern_points`` (N, 3), where each
         texel's pattern is read (default its rest point; regions stay at the rest points)."""
         p, jnt = (self.points if pattern_points is None else pattern_points), self.joints
-        region = self._regions()
+        region = self.region
         col = np.zeros((len(p), 3))
         x, y, z = p.T
         # skin with faint mottling; hair with strands

@@ -31,8 +31,9 @@ def clear_stop() -> None:
 def raise_if_stopped() -> None:
     """Raise the interrupt of the first stop signal recorded, if any: called before a
     writer renames its output into place."""
-    if _stopped:
-        raise _stopped[0]()
+    stop = recorded_stop()
+    if stop is not None:
+        raise stop
 
 
 def recorded_stop() -> KeyboardInterrupt | None:
