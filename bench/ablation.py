@@ -107,6 +107,15 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "coverage": {"97 % of the masks": [], "99 % of the masks": ["field.shell_coverage=0.99"]},
     # how x_c enters the SDF network: γ(x_c), or γ(x_c) and learned planes over the body
     "position": {"tri-planes": [], "γ(x_c) alone": ["field.position_encoding=frequencies"]},
+    # the shell fitted to the masks with one width, or one per body part
+    "shell_shape": {"one width": [], "per part": ["field.shell_shape=joints"]},
+    # finer position detail for cloth whose folds are geometry: twice the tri-planes' texels
+    # a side, or two more octaves of γ(x_c) (finest period 1.5 cm instead of 6)
+    "detail": {
+        "tri-planes 256, 6 frequencies": [],
+        "tri-planes 512": ["field.triplane_resolution=512"],
+        "8 frequencies": ["field.pos_freqs=8"],
+    },
     # the body's surface as fitted, or moved out to the training masks (clothes off the body)
     "girth": {"body as fitted": [], "girth from the masks": ["data.body_girth=masks"]},
     "refinement": {"off": [], "root": ["pose_refinement=root"], "joints": ["pose_refinement=joints"]},

@@ -130,21 +130,63 @@ def ray_surface_distances(
         silhouette = body_silhouette(verts, faces, camera)
     out = np.where(silhouette[pix[:, 1], pix[:, 0]], 0.0, np.inf)
     miss = np.nonzero(np.isinf(out))[0]
-    if not len(miss):
-        return out
-    origins, dirs = (t.double().numpy() for t in camera.pixel_rays(pix[miss]))
+    out[miss] = _closest_approach(verts, faces, camera, pix[miss], max_distance, step)[0]
+    return out
+
+
+def _closest_approach(
+    verts: np.ndarray, faces, camera: Camera, pix: np.ndarray, max_distance: float, step: float
+):
+    """For the rays through pixels pix (M, 2): the smallest sampled distance to the mesh
+    (M,) (inf beyond ``max_distance``) and the sample where it is reached (M, 3) (NaN
+    there), as :func:`ray_surface_distances` samples them."""
+    dist, where = np.full(len(pix), np.inf), np.full((len(pix), 3), np.nan)
+    if not len(pix):
+        return dist, where
+    origins, dirs = (t.double().numpy() for t in camera.pixel_rays(pix))
     near, far = _box_span(origins, dirs, verts.min(0) - max_distance, verts.max(0) + max_distance)
     hit = np.nonzero(far > near)[0]
     if not len(hit):
-        return out
+        return dist, where
     count = int(np.ceil((far[hit] - near[hit]).max() / step)) + 1
     ts = near[hit, None] + step * np.arange(count)[None]  # (R, K); samples past the exit clamp
     ts = np.minimum(ts, far[hit, None])
     points = origins[hit, None] + ts[..., None] * dirs[hit, None]
     index = SurfaceIndex(verts, np.asarray(torch.as_tensor(faces)))
-    dist = np.abs(index.project(points.reshape(-1, 3), max_distance=max_distance).distance)
-    out[miss[hit]] = dist.reshape(len(hit), count).min(1)
-    return out
+    d = np.abs(index.project(points.reshape(-1, 3), max_distance=max_distance).distance).reshape(
+        len(hit), count
+    )
+    best = d.argmin(1)
+    dist[hit] = d[np.arange(len(hit)), best]
+    where[hit] = points[np.arange(len(hit)), best]
+    return dist, where
+
+
+def ray_surface_reach(
+    vertices, faces, weights, camera: Camera, pixels, max_distance: float = 0.1, step: float = 0.0025
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`ray_surface_distances` of pixels (N, 2) and the body joint each ray comes
+    closest to: (distance (N,), joint (N,) long), the joint with the largest skinning
+    weight (``weights`` (V, J)) at the ray's closest surface point (the face a ray through
+    the silhouette hits first); -1 beyond ``max_distance``."""
+    verts = torch.as_tensor(vertices).detach().double().numpy()
+    f = np.asarray(torch.as_tensor(faces), np.int64)
+    w = np.asarray(torch.as_tensor(weights).detach().double())
+    pix = np.asarray(pixels, dtype=np.int64).reshape(-1, 2)
+    raster = rasterize_mesh(torch.as_tensor(verts), torch.as_tensor(f), camera)
+    face = raster.face.numpy()[pix[:, 1], pix[:, 0]]
+    inside = raster.mask.numpy()[pix[:, 1], pix[:, 0]]
+    dist = np.where(inside, 0.0, np.inf)
+    joint = np.full(len(pix), -1, np.int64)
+    joint[inside] = w[f[face[inside]]].sum(1).argmax(1)
+    miss = np.nonzero(~inside)[0]
+    d, where = _closest_approach(verts, f, camera, pix[miss], max_distance, step)
+    dist[miss] = d
+    near = np.isfinite(d)
+    if near.any():
+        proj = SurfaceIndex(verts, f).project(where[near], weights=w, max_distance=max_distance + step)
+        joint[miss[near]] = np.where(proj.face >= 0, np.nan_to_num(proj.weights, nan=-1.0).argmax(1), -1)
+    return dist, joint
 
 
 def shell_coverage(

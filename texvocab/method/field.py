@@ -33,6 +33,7 @@ from texvocab.method.triplane import CanonicalTriplane, canonical_box
 from texvocab.torch_threads import one_torch_thread
 
 VIEW_FRAMES = ("world", "body")
+SHELL_SHAPES = ("uniform", "joints")
 POSITION_ENCODINGS = ("frequencies", "triplane")
 #: the tri-plane's box: the canonical body's vertices widened by this on every side (m),
 #: more than the widest shell (12 cm) with room for a fitted body's rest shape
@@ -72,6 +73,13 @@ class FieldSettings:
         "the training masks' pixels see the posed body within it, so clothing and hair off "
         "the body (or a fit centimetres off) stay inside the field; none: shell_width as "
         "given (texvocab.pipeline.shell_fit)",
+    )
+    shell_shape: str = knob(
+        "uniform",
+        Check(lambda v, g: v in SHELL_SHAPES, "one of " + ", ".join(SHELL_SHAPES)),
+        doc="with shell_coverage, one width for the whole body, or one per body part (a "
+        "joint and its mirror twin): each part's narrowest width that reaches the share of "
+        "the mask pixels whose rays come closest to it; shell_width is then the widest",
     )
     view_frame: str = knob(
         "world",
@@ -180,6 +188,10 @@ class AvatarField(nn.Module):
         # per-joint girth (m): the SDF starts at d_body - g (texvocab.body.girth); stored in
         # the checkpoint beside the weights (``body_girth``), zero for older ones
         self.register_buffer("girth", torch.zeros(self.body.num_joints), persistent=False)
+        # per-joint shell widths (m; texvocab.pipeline.shell_fit, field.shell_shape=joints):
+        # outside the body a point is in the shell within sum_j w_j widths_j of it; zero
+        # (one width, shell_width, for the whole body) unless fitted, and for older runs
+        self.register_buffer("shell_joints", torch.zeros(self.body.num_joints), persistent=False)
 
     def set_girth(self, offsets) -> None:
         """Start the SDF at ``d_body - sum_j w_j offsets_j`` (offsets (J,) m; w the skinning
@@ -189,6 +201,31 @@ class AvatarField(nn.Module):
         if o.shape != self.girth.shape or not torch.isfinite(o).all():
             raise ValueError(f"girth: expected {self.girth.numel()} finite offsets (m), got {tuple(o.shape)}")
         self.girth.copy_(o)
+
+    def set_shell_joints(self, widths) -> None:
+        """Give each body part its own shell: outside the body, a point farther than
+        ``sum_j w_j widths_j`` (widths (J,) m, at most ``shell_width``; w the skinning weights
+        of its closest body point) is empty space. Zeros: ``shell_width`` everywhere."""
+        w = torch.as_tensor(widths, dtype=self.shell_joints.dtype).reshape(-1)
+        cap = self.settings.shell_width
+        if w.shape != self.shell_joints.shape or not torch.isfinite(w).all() or (w < 0).any():
+            raise ValueError(
+                f"shell widths: expected {self.shell_joints.numel()} widths >= 0 (m), got {tuple(w.shape)}"
+            )
+        if bool((w > cap + 1e-6).any()):
+            raise ValueError(
+                f"shell widths: at most field.shell_width ({cap:g} m), got up to {float(w.max()):g}"
+            )
+        self.shell_joints.copy_(w)
+
+    def in_shell(self, out) -> torch.Tensor:
+        """(N,) bool: the projected points (a :class:`FeatureOutput`) that lie in the shell:
+        within ``shell_width`` of the body, and outside it within their part's width where
+        the shell is fitted part by part (:meth:`set_shell_joints`)."""
+        if not bool(self.shell_joints.any()):
+            return out.valid
+        local = out.skin_weights.to(self.shell_joints.dtype) @ self.shell_joints
+        return out.valid & ((out.distance <= local.to(out.distance)) | (out.distance <= 0))
 
     @property
     def position_dim(self) -> int:
@@ -264,7 +301,7 @@ class AvatarField(nn.Module):
         """
         s = self.settings
         out = self.pose_feature(ctx, points, max_distance=s.shell_width, known=known)
-        valid = out.valid
+        valid = self.in_shell(out)
         # d_body with its analytic gradient: value from the projection, slope = ∇d
         diff = points - out.closest
         norm = diff.norm(dim=-1, keepdim=True)

@@ -25,6 +25,7 @@ from texvocab.method.vocab import Vocabulary
 from texvocab.pipeline.girth_fit import apply_stored_girth
 from texvocab.pipeline.model import build_model, load_stored_textures, load_textures
 from texvocab.pipeline.settings import Settings
+from texvocab.pipeline.shell_fit import apply_stored_shell
 
 
 @dataclass
@@ -136,5 +137,6 @@ def load_avatar(
             f"{missing[:3]}, unexpected {unexpected[:3]})"
         )
     apply_stored_girth(model, ck, checkpoint)
+    apply_stored_shell(model, ck, checkpoint)
     model.eval()
     return Avatar(model, settings, ck, capture)

@@ -130,6 +130,7 @@ LEGACY: dict[str, object] = {
     "train.shell_voxel": 0.01,
     "vocab.pose_condition": "global",
     "field.shell_coverage": None,
+    "field.shell_shape": "uniform",
     "train.lr_decay": 1.0,
     "data.body_girth": "none",
     "field.position_encoding": "frequencies",

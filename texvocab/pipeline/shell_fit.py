@@ -24,12 +24,16 @@ import logging
 
 import numpy as np
 
-from texvocab.capture.silhouette import shell_coverage
+from texvocab.body.girth import symmetric_groups
+from texvocab.body.parts import JOINT_NAMES
+from texvocab.capture.silhouette import posed_vertices, ray_surface_reach, shell_coverage
+from texvocab.errors import TexvocabError
 from texvocab.pipeline.evaluate import spread
 from texvocab.pipeline.settings import Settings
 
 log = logging.getLogger("texvocab")
 
+CHECKPOINT_KEY = "shell_joints"  #: the per-joint widths (m) in a checkpoint, when fitted
 SHELL_STEP = 0.01  #: candidate widths are field.shell_width + k · SHELL_STEP (m)
 SHELL_MAX = 0.12  #: the widest shell a run is given (m)
 SAMPLE_IMAGES = 12  #: training images measured (frames spread, views dealt round)
@@ -90,17 +94,91 @@ def measure_shell(capture, views: list[int], narrowest: float) -> tuple[np.ndarr
     return widths, cov.mean(0), len(cov)
 
 
+def _narrowest(widths: np.ndarray, cov: np.ndarray, target: float) -> float:
+    """The first of widths (D,) whose share cov (D,) reaches target (else the widest)."""
+    reached = np.nonzero(cov >= target)[0]
+    return round(float(widths[reached[0]] if len(reached) else widths[-1]), 6)  # 0.06, not 0.0600…01
+
+
 def fit_shell(capture, settings: Settings, views: list[int]) -> tuple[Settings, ShellFit | None]:
     """``settings`` with ``field.shell_width`` widened to reach ``field.shell_coverage`` of
-    the training masks (unchanged, and None, when the knob is none)."""
+    the training masks (unchanged, and None, when the knob is none). With
+    ``field.shell_shape=joints`` the fit's ``joint_widths`` (J,) give each part its own
+    width (:func:`fit_joint_widths`) and ``shell_width`` is the widest of them."""
     target = settings.field.shell_coverage
     if target is None:
         return settings, None
-    widths, cov, images = measure_shell(capture, views, settings.field.shell_width)
-    reached = np.nonzero(cov >= target)[0]
-    width = float(widths[reached[0]] if len(reached) else widths[-1])
-    width = round(width, 6)  # 0.04 + 2 * 0.01 stored as 0.06
-    fit = ShellFit(widths, cov, images, width)
+    if settings.field.shell_shape == "joints":
+        fit = fit_joint_widths(capture, views, settings.field.shell_width, target)
+    else:
+        widths, cov, images = measure_shell(capture, views, settings.field.shell_width)
+        fit = ShellFit(widths, cov, images, _narrowest(widths, cov, target))
     log.info(fit.line(target))
-    field = dataclasses.replace(settings.field, shell_width=width)
+    field = dataclasses.replace(settings.field, shell_width=fit.width)
     return dataclasses.replace(settings, field=field), fit
+
+
+#: a part whose rays make fewer of the measured mask pixels than this takes the whole
+#: body's width (too few to read a share from)
+MIN_PART_PIXELS = 40
+
+
+@dataclasses.dataclass(frozen=True)
+class JointShellFit(ShellFit):
+    """A :class:`ShellFit` of the whole body (``coverage``: the share each width reaches
+    over all measured pixels) with ``joint_widths`` (J,) m, each joint's part's width, and
+    ``width`` the widest."""
+
+    joint_widths: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+
+    def line(self, target: float) -> str:
+        cm = sorted({round(float(w) * 100) for w in self.joint_widths})
+        return super().line(target) + f"; per part {min(cm)}-{max(cm)} cm (field.shell_shape=joints)"
+
+
+def fit_joint_widths(capture, views: list[int], narrowest: float, target: float) -> JointShellFit:
+    """Per body part (a joint with its mirror twin), the narrowest width from ``narrowest``
+    up that reaches ``target`` of the measured mask pixels whose rays come closest to that
+    part (a ray through the body's silhouette belongs to the part it hits); a part with
+    fewer than :data:`MIN_PART_PIXELS` of them takes the whole body's width. The same
+    :data:`SAMPLE_IMAGES` training images as :func:`measure_shell`."""
+    widths = candidate_widths(narrowest)
+    body = capture.body
+    frames = spread(list(capture.train_frames), SAMPLE_IMAGES)
+    dist, joint = [], []
+    for i, t in enumerate(frames):
+        v = views[i % len(views)]
+        mask = np.asarray(capture.mask(v, t), bool)
+        grid = np.zeros_like(mask)
+        grid[::PIXEL_STRIDE, ::PIXEL_STRIDE] = True
+        ys, xs = np.nonzero(mask & grid)
+        if not len(ys):
+            continue
+        verts = next(posed_vertices(body, capture.poses[[t]], capture.trans[[t]], capture.shape()))
+        d, j = ray_surface_reach(
+            verts, body.faces, body.weights, capture.cameras[v], np.stack([xs, ys], 1), float(widths[-1])
+        )
+        dist.append(d)
+        joint.append(j)
+    d, j = (np.concatenate(a) if a else np.zeros(0) for a in (dist, joint))
+    within = d[:, None] <= widths[None] + 1e-9  # (N, D)
+    cov = within.mean(0) if len(d) else np.ones(len(widths))
+    whole = _narrowest(widths, cov, target)
+    names = JOINT_NAMES if body.num_joints == len(JOINT_NAMES) else [str(k) for k in range(body.num_joints)]
+    per_joint = np.full(body.num_joints, whole)
+    for group in symmetric_groups(names):
+        rows = np.isin(j, group)
+        if rows.sum() >= MIN_PART_PIXELS:
+            per_joint[group] = _narrowest(widths, within[rows].mean(0), target)
+    return JointShellFit(widths, cov, len(frames), float(per_joint.max()), per_joint)
+
+
+def apply_stored_shell(model, ck: dict, where) -> None:
+    """Set the per-joint shell widths a checkpoint stores on its field (none: one width)."""
+    widths = ck.get(CHECKPOINT_KEY)
+    if widths is None:
+        return
+    try:
+        model.set_shell_joints(np.asarray(widths, np.float32))
+    except (ValueError, TypeError) as e:
+        raise TexvocabError(f"{where}: {CHECKPOINT_KEY}: {e}") from None

@@ -41,7 +41,8 @@ from texvocab.pipeline.param_groups import optimizer_groups
 from texvocab.pipeline.perceptual_term import perceptual_term
 from texvocab.pipeline.run_folder import RunLock
 from texvocab.pipeline.settings import Settings, march_settings
-from texvocab.pipeline.shell_fit import fit_shell
+from texvocab.pipeline.shell_fit import CHECKPOINT_KEY as SHELL_KEY
+from texvocab.pipeline.shell_fit import apply_stored_shell, fit_shell
 from texvocab.pipeline.train_log import TrainLog
 from texvocab.pipeline.training_rays import FrameData, TrainingRays
 from texvocab.pipeline.weight_average import TRAINED_KEY, WeightAverage
@@ -80,6 +81,9 @@ class Trainer:
             self.model = build_model(capture, settings, self.textures)
         if self.girth_fit is not None:
             self.model.set_girth(self.girth_fit.offsets)
+        widths = getattr(self.shell_fit, "joint_widths", None)  # field.shell_shape=joints
+        if widths is not None:
+            self.model.set_shell_joints(widths)
         groups = optimizer_groups(self.model, settings.train)
         self.refine = None  # per-frame pose corrections (train.pose_refinement)
         if settings.train.pose_refinement != "off":
@@ -262,6 +266,7 @@ class Trainer:
             "lr_schedule": self.schedule.state(self.step),
             **({} if self.refine is None else {"pose_refinement": self.refine.state()}),
             **({GIRTH_KEY: self.model.girth.tolist()} if bool(self.model.girth.any()) else {}),
+            **({SHELL_KEY: self.model.shell_joints.tolist()} if bool(self.model.shell_joints.any()) else {}),
         }
 
     def save(self) -> Path:
@@ -328,6 +333,7 @@ class Trainer:
         if self.average is not None:
             self.average.load(weights, ck[TRAINED_KEY], self.model)
         apply_stored_girth(self.model, ck, self.checkpoint_path)
+        apply_stored_shell(self.model, ck, self.checkpoint_path)
         if self.refine is not None:
             self.refine.load(ck["pose_refinement"])
         self.optim.load_state_dict(ck["optimizer"])
