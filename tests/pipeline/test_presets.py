@@ -59,13 +59,15 @@ def test_render_overrides_touch_only_render_knobs(knob):
             render_overrides(trained, None, [item])
     assert RENDER_KNOBS == tuple(f.name for f in fields(RenderSettings))
     in_presets = {k for p in PRESETS.values() for k in p}
-    # knobs no preset sets: the resolution, the path and the shell (presets keep all of it)
+    # knobs no preset sets: the resolution, the path and the shell (presets keep all of it),
+    # and the residual rays' mesh step
     assert set(RENDER_KNOBS) == in_presets | {
         "image_scale",
         "guide",
         "shell_width",
         "shell_scale",
         "miss_reach",
+        "residual_step",
     }
 
 

@@ -232,3 +232,19 @@ def test_foreign_or_newer_checkpoints(tmp_path):
         load_checkpoint(path)
     with pytest.raises(AssetError, match="checkpoint not found"):
         load_checkpoint(tmp_path / "missing.pt")
+
+
+def test_the_residual_step_is_a_render_knob_that_training_does_not_follow():
+    from texvocab.pipeline.settings import TRAIN_RESIDUAL_STEP, march_settings, render_overrides
+
+    s = Settings().with_overrides(["render.residual_step=3"])
+    assert march_settings(s).residual.step == 3.0
+    assert march_settings(Settings()).residual.step == 1.5
+    assert march_settings(s, training=True).residual.step == TRAIN_RESIDUAL_STEP == 1.5
+    # a trained checkpoint's render may change it; written before the knob, it reads 1.5
+    assert render_overrides(Settings(), None, ["render.residual_step=3"]).render.residual_step == 3.0
+    d = Settings().to_dict()
+    del d["render"]["residual_step"]
+    assert Settings.from_dict(d).render.residual_step == 1.5
+    with pytest.raises(TexvocabError, match="render.residual_step=0.0: expected in"):
+        Settings().with_overrides(["render.residual_step=0"])

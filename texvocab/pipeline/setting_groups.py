@@ -159,6 +159,13 @@ class RenderSettings:
         "mesh distance + the field's residual at 3 evaluations "
         "(false: marched)",
     )
+    residual_step: float = knob(
+        1.5,
+        within(0, 100, open_low=True),
+        doc="guide raster: the residual rays sample the mesh's distance every this many β; "
+        "3 renders a 512² frame of a ZJU-MoCap 387 avatar 1.21x as fast at the same PSNR, "
+        "and a sharp synthetic avatar's at -0.06 to +0.02 dB (docs/results.md)",
+    )
     band_newton: bool = knob(
         True,
         doc="guide raster: band rays from the probe, the Newton "

@@ -250,6 +250,9 @@ def render_overrides(settings: Settings, preset: str | None, items: list[str]) -
 
 # Training marches every coarse sample of a ray (at most this many) in one field call.
 TRAIN_MAX_COARSE = 512
+# Training's residual rays sample the mesh every this many β (render.residual_step, which a
+# trained checkpoint may change, does not reach them)
+TRAIN_RESIDUAL_STEP = 1.5
 
 
 def march_settings(s: Settings, training: bool = False) -> MarchSettings:
@@ -270,6 +273,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
         guide=r.guide,
         precision=r.precision,
         residual_rays=r.residual_rays,
+        residual_step=r.residual_step,
         band_newton=r.band_newton,
         miss_reach=r.miss_reach,
     )
@@ -285,6 +289,7 @@ def march_settings(s: Settings, training: bool = False) -> MarchSettings:
             band_newton=t.band_newton,
             shell_voxel=t.shell_voxel,
             band_retries=0,  # measured for rendering only; training's rays as before
+            residual_step=TRAIN_RESIDUAL_STEP,  # render.residual_step is a render knob only
         )
     elif r.guide == "raster":
         # the shell serves only the guided marcher's fallback rays: a coarser, inexact
