@@ -102,7 +102,7 @@ GROUPS: dict[str, dict[str, list[str]]] = {
     "texture": {"256 texels": [], "512 texels": ["texture_size=512"]},
     "lr": {"constant": [], "decay to 0.1": ["lr_decay=0.1"]},
     "beta_lr": {"β at the rate": [], "β at 10× the rate": ["beta_lr_scale=10"]},
-    "shell": {"base shell": [], "8 cm": ["field.shell_width=0.08"]},
+    "shell": {"base shell": [], "8 cm": ["field.shell_width=0.08"], "12 cm": ["field.shell_width=0.12"]},
     # the shell fitted to reach 97 % of the training masks' pixels (the default) or 99 %
     "coverage": {"97 % of the masks": [], "99 % of the masks": ["field.shell_coverage=0.99"]},
     # how x_c enters the SDF network: γ(x_c), or γ(x_c) and learned planes over the body
