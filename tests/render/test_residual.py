@@ -15,6 +15,21 @@ DENSE = SHELL.replace(coarse_samples=96, fine_samples=48, early_stop_eps=0.0)
 MARCHED = GUIDED.replace(residual_rays=False, band_newton=False)
 
 
+def count_mesh_queries(monkeypatch) -> dict:
+    """{"points": n}, n counting the points the residual rays' mesh queries take from now."""
+    import texvocab.render.guided.residual as residual
+
+    queried = {"points": 0}
+    faces_of = residual.mesh_distance_faces
+
+    def counted(index, points, cap, known=None):
+        queried["points"] += len(points)
+        return faces_of(index, points, cap, known)
+
+    monkeypatch.setattr(residual, "mesh_distance_faces", counted)
+    return queried
+
+
 def renders(body, field, *settings):
     with torch.no_grad():
         return [
@@ -44,16 +59,7 @@ def test_a_longer_step_trades_mesh_queries_for_little_accuracy(body, monkeypatch
     """Mesh samples every 3 β (``render.residual_step=3``) instead of 1.5 β: at least a
     fifth fewer mesh queries on this field, and the image as close to a dense march (50 dB),
     its fringe's opacity within 1 % on average."""
-    import texvocab.render.guided.residual as residual
-
-    queried = {"points": 0}
-    faces_of = residual.mesh_distance_faces
-
-    def counted(index, points, cap, known=None):
-        queried["points"] += len(points)
-        return faces_of(index, points, cap, known)
-
-    monkeypatch.setattr(residual, "mesh_distance_faces", counted)
+    queried = count_mesh_queries(monkeypatch)
     field = MeshResidualField(body["v"], body["f"], beta=0.003, amplitude=0.002, wavenumber=20.0)
     (dense,) = renders(body, field, DENSE)
     counts, images = [], []
@@ -156,16 +162,7 @@ def test_coarser_passes_narrow_the_residual_rays_to_the_same_image(body, monkeyp
     the body crosses 20-30 cm of shell: passes at 16 and 64 ``residual_step`` β keep only
     the part around where the ray enters, so the residual rays query the mesh far less
     often and render the image of the pass over the whole interval."""
-    import texvocab.render.guided.residual as residual
-
-    queried = {"points": 0}
-    faces_of = residual.mesh_distance_faces
-
-    def counted(index, points, cap, known=None):
-        queried["points"] += len(points)
-        return faces_of(index, points, cap, known)
-
-    monkeypatch.setattr(residual, "mesh_distance_faces", counted)
+    queried = count_mesh_queries(monkeypatch)
     field = MeshResidualField(body["v"], body["f"], beta=0.0005, amplitude=0.0002, wavenumber=20.0)
     camera = body["camera"].scaled(2.0)  # 128²: the residual rays are a pixel's fringe
     images, counts = [], []

@@ -135,11 +135,12 @@ def ray_surface_distances(
 
 
 def _closest_approach(
-    verts: np.ndarray, faces, camera: Camera, pix: np.ndarray, max_distance: float, step: float
+    verts: np.ndarray, faces, camera: Camera, pix: np.ndarray, max_distance: float, step: float, index=None
 ):
     """For the rays through pixels pix (M, 2): the smallest sampled distance to the mesh
     (M,) (inf beyond ``max_distance``) and the sample where it is reached (M, 3) (NaN
-    there), as :func:`ray_surface_distances` samples them."""
+    there), as :func:`ray_surface_distances` samples them; ``index``: the mesh's
+    SurfaceIndex (None: built here)."""
     dist, where = np.full(len(pix), np.inf), np.full((len(pix), 3), np.nan)
     if not len(pix):
         return dist, where
@@ -152,7 +153,8 @@ def _closest_approach(
     ts = near[hit, None] + step * np.arange(count)[None]  # (R, K); samples past the exit clamp
     ts = np.minimum(ts, far[hit, None])
     points = origins[hit, None] + ts[..., None] * dirs[hit, None]
-    index = SurfaceIndex(verts, np.asarray(torch.as_tensor(faces)))
+    if index is None:
+        index = SurfaceIndex(verts, np.asarray(torch.as_tensor(faces)))
     d = np.abs(index.project(points.reshape(-1, 3), max_distance=max_distance).distance).reshape(
         len(hit), count
     )
@@ -180,11 +182,12 @@ def ray_surface_reach(
     joint = np.full(len(pix), -1, np.int64)
     joint[inside] = w[f[face[inside]]].sum(1).argmax(1)
     miss = np.nonzero(~inside)[0]
-    d, where = _closest_approach(verts, f, camera, pix[miss], max_distance, step)
+    index = SurfaceIndex(verts, f)
+    d, where = _closest_approach(verts, f, camera, pix[miss], max_distance, step, index)
     dist[miss] = d
     near = np.isfinite(d)
     if near.any():
-        proj = SurfaceIndex(verts, f).project(where[near], weights=w, max_distance=max_distance + step)
+        proj = index.project(where[near], weights=w, max_distance=max_distance + step)
         joint[miss[near]] = np.where(proj.face >= 0, np.nan_to_num(proj.weights, nan=-1.0).argmax(1), -1)
     return dist, joint
 

@@ -150,10 +150,17 @@ def fit_girth(capture, settings: Settings, views: list[int]) -> GirthFit | None:
 
 def apply_stored_girth(model, ck: dict, where) -> None:
     """Set the girth a checkpoint stores on its field (none: zero, as it trained)."""
-    offsets = ck.get(CHECKPOINT_KEY)
-    if offsets is None:
+    apply_stored_joint_values(model.set_girth, ck, CHECKPOINT_KEY, where)
+
+
+def apply_stored_joint_values(setter, ck: dict, key: str, where) -> None:
+    """``setter(values (J,) float32)`` with the per-joint values checkpoint ``ck`` stores
+    under ``key`` (nothing when it stores none); a bad value is an error naming ``where``
+    and the key."""
+    values = ck.get(key)
+    if values is None:
         return
     try:
-        model.set_girth(np.asarray(offsets, np.float32))
+        setter(np.asarray(values, np.float32))
     except (ValueError, TypeError) as e:
-        raise TexvocabError(f"{where}: {CHECKPOINT_KEY}: {e}") from None
+        raise TexvocabError(f"{where}: {key}: {e}") from None

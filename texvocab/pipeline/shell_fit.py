@@ -27,8 +27,8 @@ import numpy as np
 from texvocab.body.girth import symmetric_groups
 from texvocab.body.parts import JOINT_NAMES
 from texvocab.capture.silhouette import posed_vertices, ray_surface_reach, shell_coverage
-from texvocab.errors import TexvocabError
 from texvocab.pipeline.evaluate import spread
+from texvocab.pipeline.girth_fit import apply_stored_joint_values
 from texvocab.pipeline.settings import Settings
 
 log = logging.getLogger("texvocab")
@@ -175,10 +175,4 @@ def fit_joint_widths(capture, views: list[int], narrowest: float, target: float)
 
 def apply_stored_shell(model, ck: dict, where) -> None:
     """Set the per-joint shell widths a checkpoint stores on its field (none: one width)."""
-    widths = ck.get(CHECKPOINT_KEY)
-    if widths is None:
-        return
-    try:
-        model.set_shell_joints(np.asarray(widths, np.float32))
-    except (ValueError, TypeError) as e:
-        raise TexvocabError(f"{where}: {CHECKPOINT_KEY}: {e}") from None
+    apply_stored_joint_values(model.set_shell_joints, ck, CHECKPOINT_KEY, where)
